@@ -1,0 +1,62 @@
+"""twin: a PyBullet digital twin of a UR5e sorting cell, for comparing motion planners side by side.
+
+Importing twin is cheap and has no side effects: heavy modules (pybullet, fcl, planners) load on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from twin.config import Settings, load_config
+from twin.errors import (
+    ConfigError,
+    DependencyMissing,
+    DuplicateNameError,
+    InvalidRequestError,
+    PlanningError,
+    TwinError,
+    UnknownNameError,
+    WorldError,
+)
+from twin.hookspecs import hookimpl
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "hookimpl",
+    "load_config",
+    "Settings",
+    "World",
+    "PlanningScene",
+    "UR5e",
+    "plan",
+    "TwinError",
+    "ConfigError",
+    "UnknownNameError",
+    "DuplicateNameError",
+    "DependencyMissing",
+    "InvalidRequestError",
+    "PlanningError",
+    "WorldError",
+]
+
+_LAZY = {
+    "World": "twin.world",
+    "PlanningScene": "twin.collision",
+    "UR5e": "twin.kinematics",
+    "plan": "twin.planning",
+}
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.kinematics import UR5e
+    from twin.planning import plan
+    from twin.world import World
+
+
+def __getattr__(name: str) -> Any:
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'twin' has no attribute {name!r}")
+    return getattr(importlib.import_module(mod), name)

@@ -1,0 +1,166 @@
+"""UR5e kinematics: forward kinematics, every analytic IK branch, Jacobian, manipulability.
+
+Frames: `base` is the robot base (DH frame 0, z up, at the world origin); `flange` is tool0 (DH frame 6);
+`tcp` is the point between the gripper's fingertips, `tcp_offset_m` along the flange z axis. IK uses the
+closed form of `ur_analytic_ik` (8 branches), then adds every 2*pi wrap that stays inside the joint limits.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import ur_analytic_ik
+
+from twin.errors import InvalidRequestError
+
+__all__ = ["UR5e", "DH_D", "DH_A", "DH_ALPHA", "JOINT_NAMES", "JOINT_LIMITS", "TCP_OFFSET_M", "wrap_to_pi"]
+
+JOINT_NAMES = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+DH_D = np.array([0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996])
+DH_A = np.array([0.0, -0.425, -0.3922, 0.0, 0.0, 0.0])
+DH_ALPHA = np.array([math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0])
+_TWO_PI = 2.0 * math.pi
+JOINT_LIMITS = np.array([[-_TWO_PI, _TWO_PI]] * 6)
+JOINT_LIMITS[2] = [-math.pi, math.pi]
+TCP_OFFSET_M = 0.135  # tcp frame of urdf/ur5e.urdf, along tool0 z
+_FRAMES = ("tcp", "flange")
+
+
+def wrap_to_pi(a: np.ndarray | float) -> np.ndarray | float:
+    """Angles mapped to [-pi, pi): the shortest angular difference for continuous joints."""
+    return (np.asarray(a) + math.pi) % _TWO_PI - math.pi
+
+
+def _tool(frame: str, tcp_offset_m: float) -> np.ndarray:
+    if frame not in _FRAMES:
+        raise InvalidRequestError(f"unknown frame {frame!r}; allowed: {', '.join(_FRAMES)}")
+    T = np.eye(4)
+    if frame == "tcp":
+        T[2, 3] = tcp_offset_m
+    return T
+
+
+class UR5e:
+    """Analytic kinematics of the UR5e with our gripper.
+
+    `q`: (6,) joint angles in rad, order shoulder_pan .. wrist_3. Poses are (4, 4) homogeneous
+    transforms of the named frame in the base frame, metres.
+    """
+
+    def __init__(self, *, tcp_offset_m: float = TCP_OFFSET_M, joint_limits: np.ndarray | None = None):
+        self.tcp_offset_m = float(tcp_offset_m)
+        self.joint_limits = np.array(JOINT_LIMITS if joint_limits is None else joint_limits, dtype=float)
+        self._tool = {f: _tool(f, self.tcp_offset_m) for f in _FRAMES}
+        self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
+
+    # ---- forward kinematics -------------------------------------------------------------------
+    def fk(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """(4, 4) pose of `frame` ('tcp' or 'flange') in the base frame."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (6,):
+            raise InvalidRequestError(f"q must have shape (6,), got {q.shape}")
+        tool = self._tool.get(frame)
+        if tool is None:
+            _tool(frame, self.tcp_offset_m)  # raises with the allowed names
+        return ur_analytic_ik.ur5e.forward_kinematics(*q) @ tool
+
+    def fk_batch(self, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """(n, 4, 4) poses for (n, 6) configurations (vectorised DH)."""
+        return self.dh_frames(qs)[:, 6] @ self._tool[frame] if frame in self._tool else _tool(frame, 0)
+
+    def dh_frames(self, qs: np.ndarray) -> np.ndarray:
+        """(n, 7, 4, 4) DH frames 0..6 in the base frame for (n, 6) configurations."""
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        n = qs.shape[0]
+        out = np.empty((n, 7, 4, 4))
+        out[:, 0] = np.eye(4)
+        ca, sa = np.cos(DH_ALPHA), np.sin(DH_ALPHA)
+        for i in range(6):
+            ct, st = np.cos(qs[:, i]), np.sin(qs[:, i])
+            A = np.zeros((n, 4, 4))
+            A[:, 0, 0] = ct
+            A[:, 0, 1] = -st * ca[i]
+            A[:, 0, 2] = st * sa[i]
+            A[:, 0, 3] = DH_A[i] * ct
+            A[:, 1, 0] = st
+            A[:, 1, 1] = ct * ca[i]
+            A[:, 1, 2] = -ct * sa[i]
+            A[:, 1, 3] = DH_A[i] * st
+            A[:, 2, 1] = sa[i]
+            A[:, 2, 2] = ca[i]
+            A[:, 2, 3] = DH_D[i]
+            A[:, 3, 3] = 1.0
+            out[:, i + 1] = out[:, i] @ A
+        return out
+
+    # ---- inverse kinematics -------------------------------------------------------------------
+    def ik(self, T: np.ndarray, frame: str = "tcp", *, tol: float = 1e-6) -> np.ndarray:
+        """(k, 6) every analytic solution for pose `T` of `frame`, with all 2*pi wraps inside the limits.
+
+        Solutions that do not reproduce `T` within `tol` (m and rad, near singular branches) are dropped.
+        k = 0 when the pose is out of reach.
+        """
+        T = np.asarray(T, dtype=float)
+        if T.shape != (4, 4):
+            raise InvalidRequestError(f"T must be a (4, 4) homogeneous transform, got shape {T.shape}")
+        if frame not in self._tool:
+            _tool(frame, self.tcp_offset_m)
+        T_flange = T @ self._tool_inv[frame]
+        branches = [np.asarray(s, dtype=float) for s in ur_analytic_ik.ur5e.inverse_kinematics(T_flange)]
+        sols: list[np.ndarray] = []
+        for s in branches:
+            if not np.all(np.isfinite(s)):
+                continue
+            s = wrap_to_pi(s)
+            F = ur_analytic_ik.ur5e.forward_kinematics(*s)
+            if np.abs(F[:3, 3] - T_flange[:3, 3]).max() > tol or np.abs(F[:3, :3] - T_flange[:3, :3]).max() > tol:
+                continue
+            sols.extend(self._wraps(s))
+        if not sols:
+            return np.zeros((0, 6))
+        arr = np.array(sols)
+        # branches can coincide at singular poses: keep one of each
+        _, idx = np.unique(np.round(arr, 9), axis=0, return_index=True)
+        return arr[np.sort(idx)]
+
+    def _wraps(self, s: np.ndarray) -> list[np.ndarray]:
+        options = []
+        for j in range(6):
+            lo, hi = self.joint_limits[j]
+            vals = [v for v in (s[j] - _TWO_PI, s[j], s[j] + _TWO_PI) if lo - 1e-12 <= v <= hi + 1e-12]
+            options.append(vals)
+        return [np.array(c) for c in itertools.product(*options)]
+
+    def within_limits(self, q: np.ndarray) -> bool:
+        q = np.asarray(q, dtype=float)
+        return bool(np.all(q >= self.joint_limits[:, 0] - 1e-12) and np.all(q <= self.joint_limits[:, 1] + 1e-12))
+
+    # ---- differential kinematics --------------------------------------------------------------
+    def jacobian(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """(6, 6) geometric Jacobian in the base frame: rows vx, vy, vz, wx, wy, wz."""
+        F = self.dh_frames(np.asarray(q, dtype=float)[None])[0]
+        p = (F[6] @ self._tool[frame])[:3, 3] if frame in self._tool else _tool(frame, 0)
+        J = np.empty((6, 6))
+        for i in range(6):
+            z = F[i][:3, 2]
+            J[:3, i] = np.cross(z, p - F[i][:3, 3])
+            J[3:, i] = z
+        return J
+
+    def manipulability(self, q: np.ndarray, frame: str = "tcp") -> float:
+        """Yoshikawa's measure sqrt(det(J J^T)); zero at a singularity."""
+        J = self.jacobian(q, frame)
+        return float(math.sqrt(max(np.linalg.det(J @ J.T), 0.0)))
+
+    def condition_number(self, q: np.ndarray, frame: str = "tcp") -> float:
+        """cond(J); the seed's defensive IK penalises values above 500."""
+        return float(np.linalg.cond(self.jacobian(q, frame)))

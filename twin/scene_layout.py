@@ -1,0 +1,179 @@
+"""Nominal scene geometry, without PyBullet: object templates, colours and the ArUco marker pose.
+
+Perception, planning and tests need to know what the world builds (object dimensions, where the base
+marker is) without importing the simulator; `twin.world` builds the scene from these same numbers, so
+the two cannot drift apart.
+
+Frames: the world frame is the robot base frame (z up, table top at z = 0). Every object's frame has
+its origin at the object's geometric centre; cylinders have their axis along the object's z axis.
+
+The ArUco base plate is a fixture whose URDF is `urdf/aruco_plate.urdf` (`ARUCO_PLATE_URDF`). Its
+frame is the centre of the plate's underside; the marker lies flat on its top face. The marker frame is
+OpenCV's (`SOLVEPNP_IPPE_SQUARE` object points): origin at the marker centre, x towards the marker
+image's right edge, y towards its top edge, z out of the plate. With the plate's rpy = 0 these axes are
+the world's x, y, z, i.e. the image's top edge faces +y and its right edge faces +x.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import PurePosixPath
+from typing import Literal
+
+import numpy as np
+
+from twin.config import FixtureSettings, Settings
+from twin.errors import ConfigError
+
+__all__ = [
+    "ObjectTemplate",
+    "OBJECT_TEMPLATES",
+    "COLORS",
+    "ARUCO_PLATE_URDF",
+    "PLATE_SIZE_M",
+    "PLATE_THICKNESS_M",
+    "MARKER_LIFT_M",
+    "MARKER_MARGIN_FRACTION",
+    "color_rgba",
+    "rpy_matrix",
+    "pose_matrix",
+    "is_marker_plate",
+    "find_marker_plate",
+    "marker_pose_in_base",
+    "marker_corners_in_base",
+    "marker_quad_size_m",
+]
+
+
+@dataclass(frozen=True)
+class ObjectTemplate:
+    """One object class: primitive shape, size in its own frame (m), URDF, mass (kg).
+
+    `size` is (x, y, z) extents standing upright; for cylinders (diameter, diameter, height).
+    `lying_rpy` turns the upright object onto the face/side it lies on ("lying" in the SPEC's sense).
+    """
+
+    cls: str
+    shape: Literal["box", "cylinder"]
+    size: tuple[float, float, float]
+    urdf: str
+    mass_kg: float
+    lying_rpy: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)
+
+    def extents(self, lying: bool) -> tuple[float, float, float]:
+        """(x, y, z) extents of the axis-aligned box around the object in its yawed placement frame."""
+        sx, sy, sz = self.size
+        return (sx, sz, sy) if lying else (sx, sy, sz)  # lying = +90 deg about x: y and z swap
+
+    def height(self, lying: bool) -> float:
+        """Height of the object's top above the table when resting (m)."""
+        return self.extents(lying)[2]
+
+    def footprint_radius(self, lying: bool) -> float:
+        """Radius of a circle around the object's footprint on the table (m), any yaw."""
+        ex, ey, _ = self.extents(lying)
+        if self.shape == "cylinder" and not lying:
+            return ex / 2.0
+        return math.hypot(ex, ey) / 2.0
+
+
+# SPEC dimensions (mm): bottle d68 x 197, can d66 x 117, spam 102 x 60 x 83, cube 75, marker d21 x 121;
+# warehouse cubes 50 mm; the warehouse obstacle is a blue box.
+OBJECT_TEMPLATES: dict[str, ObjectTemplate] = {
+    "bottle": ObjectTemplate("bottle", "cylinder", (0.068, 0.068, 0.197), "urdf/objects/bottle.urdf", 0.30),
+    "can": ObjectTemplate("can", "cylinder", (0.066, 0.066, 0.117), "urdf/objects/can.urdf", 0.35),
+    "spam": ObjectTemplate("spam", "box", (0.102, 0.060, 0.083), "urdf/objects/spam.urdf", 0.34),
+    "cube": ObjectTemplate("cube", "box", (0.075, 0.075, 0.075), "urdf/objects/cube75.urdf", 0.20),
+    "marker": ObjectTemplate("marker", "cylinder", (0.021, 0.021, 0.121), "urdf/objects/marker.urdf", 0.015),
+    "warehouse_cube": ObjectTemplate(
+        "warehouse_cube", "box", (0.05, 0.05, 0.05), "urdf/objects/warehouse_cube.urdf", 0.06
+    ),
+    "obstacle": ObjectTemplate("obstacle", "box", (0.12, 0.30, 0.20), "urdf/objects/obstacle.urdf", 3.0),
+}
+
+# Saturated colours, easy to tell apart by average RGB (the warehouse perception labels by colour).
+COLORS: dict[str, tuple[float, float, float, float]] = {
+    "red": (0.85, 0.08, 0.08, 1.0),
+    "green": (0.08, 0.65, 0.15, 1.0),
+    "blue": (0.08, 0.20, 0.85, 1.0),
+    "yellow": (0.95, 0.85, 0.08, 1.0),
+    "black": (0.04, 0.04, 0.04, 1.0),
+    "white": (0.95, 0.95, 0.95, 1.0),
+    "orange": (0.95, 0.50, 0.05, 1.0),
+    "purple": (0.50, 0.12, 0.65, 1.0),
+    "grey": (0.50, 0.50, 0.50, 1.0),
+}
+
+ARUCO_PLATE_URDF = "urdf/aruco_plate.urdf"
+PLATE_SIZE_M = 0.16  # square plate side, must match urdf/aruco_plate.urdf
+PLATE_THICKNESS_M = 0.004  # must match urdf/aruco_plate.urdf
+MARKER_LIFT_M = 0.0005  # the textured quad floats this far above the plate top (no z-fighting)
+MARKER_MARGIN_FRACTION = 0.2  # white quiet zone on each side, as a fraction of the marker side
+
+
+def color_rgba(name: str) -> tuple[float, float, float, float]:
+    """RGBA of a colour name from the config; ConfigError listing the known names otherwise."""
+    try:
+        return COLORS[name.lower()]
+    except KeyError:
+        raise ConfigError(f"unknown colour {name!r}; known colours: {', '.join(sorted(COLORS))}") from None
+
+
+def rpy_matrix(rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of URDF roll-pitch-yaw (fixed axes x, y, z: R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    r, p, y = (float(a) for a in rpy)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def pose_matrix(position: tuple[float, float, float] | np.ndarray, rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:
+    """(4, 4) homogeneous transform from a position (m) and URDF rpy (rad)."""
+    T = np.eye(4)
+    T[:3, :3] = rpy_matrix(rpy)
+    T[:3, 3] = np.asarray(position, dtype=float)
+    return T
+
+
+def is_marker_plate(fixture: FixtureSettings) -> bool:
+    """True for the fixture that carries the ArUco marker (its URDF is the plate's)."""
+    return PurePosixPath(fixture.urdf.replace("\\", "/")).name == PurePosixPath(ARUCO_PLATE_URDF).name
+
+
+def find_marker_plate(settings: Settings) -> FixtureSettings | None:
+    """The marker plate fixture of the config, or None when the scene has no marker."""
+    plates = [f for f in settings.world.fixtures if is_marker_plate(f)]
+    if len(plates) > 1:
+        raise ConfigError(f"only one ArUco plate fixture is supported, found {[f.name for f in plates]}")
+    return plates[0] if plates else None
+
+
+def marker_pose_in_base(settings: Settings) -> np.ndarray:
+    """(4, 4) nominal pose of the ArUco marker frame (OpenCV convention) in the base frame.
+
+    Raises ConfigError when the config has no fixture with `urdf: urdf/aruco_plate.urdf`.
+    """
+    plate = find_marker_plate(settings)
+    if plate is None:
+        raise ConfigError(f"the config has no ArUco plate fixture (a fixture with urdf: {ARUCO_PLATE_URDF})")
+    lift = np.eye(4)
+    lift[2, 3] = PLATE_THICKNESS_M + MARKER_LIFT_M
+    return pose_matrix(plate.position, plate.rpy) @ lift
+
+
+def marker_corners_in_base(settings: Settings) -> np.ndarray:
+    """(4, 3) nominal marker corners (black square) in the base frame, OpenCV order TL, TR, BR, BL."""
+    s = settings.aruco.size_m / 2.0
+    local = np.array([[-s, s, 0.0, 1.0], [s, s, 0.0, 1.0], [s, -s, 0.0, 1.0], [-s, -s, 0.0, 1.0]])
+    return (marker_pose_in_base(settings) @ local.T).T[:, :3]
+
+
+def marker_quad_size_m(marker_size_m: float) -> float:
+    """Side of the textured quad: the marker plus its white quiet zone on both sides (m)."""
+    return marker_size_m * (1.0 + 2.0 * MARKER_MARGIN_FRACTION)

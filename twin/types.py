@@ -1,0 +1,286 @@
+"""Small immutable data types shared by planners, the executor and the comparison runner.
+
+Units: metres, radians, seconds; quaternions x-y-z-w (PyBullet's order); poses are in the robot base frame.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from twin.errors import InvalidRequestError
+
+__all__ = [
+    "Pose",
+    "JointGoal",
+    "PoseGoal",
+    "Goal",
+    "Limits",
+    "MotionRequest",
+    "Status",
+    "MotionResult",
+    "Trajectory",
+    "BoxBounds",
+    "as_q",
+]
+
+
+def as_q(q: Any, what: str = "q") -> np.ndarray:
+    """A (6,) float array of joint angles, or InvalidRequestError naming `what`."""
+    try:
+        arr = np.array(q, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InvalidRequestError(f"{what} must be 6 joint angles in rad, got {q!r}") from None
+    if arr.shape != (6,):
+        raise InvalidRequestError(f"{what} must be 6 joint angles in rad, got {arr.size} values")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidRequestError(f"{what} must be finite, got {arr.tolist()}")
+    arr.setflags(write=False)
+    return arr
+
+
+def _rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _matrix_to_quat(R: np.ndarray) -> np.ndarray:
+    """x-y-z-w quaternion of a rotation matrix (Shepperd's method)."""
+    t = np.trace(R)
+    if t > 0:
+        s = math.sqrt(t + 1.0) * 2
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
+    else:
+        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
+    v = np.array(q)
+    return v / np.linalg.norm(v)
+
+
+def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A rigid pose: position (3,) m and quaternion (4,) x-y-z-w, in the base frame unless named."""
+
+    position: np.ndarray
+    quat_xyzw: np.ndarray
+
+    @classmethod
+    def from_matrix(cls, T: np.ndarray) -> "Pose":
+        T = np.asarray(T, dtype=float)
+        return cls(T[:3, 3].copy(), _matrix_to_quat(T[:3, :3]))
+
+    @classmethod
+    def from_xyz_rpy(cls, xyz: Any, rpy: Any) -> "Pose":
+        """Position and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+        R = _rpy_to_matrix(*[float(a) for a in rpy])
+        return cls(np.array(xyz, dtype=float), _matrix_to_quat(R))
+
+    def matrix(self) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = _quat_to_matrix(np.asarray(self.quat_xyzw, dtype=float))
+        T[:3, 3] = self.position
+        return T
+
+
+@dataclass(frozen=True)
+class JointGoal:
+    """Reach these joint angles, (6,) rad."""
+
+    q: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q", as_q(self.q, "goal"))
+
+
+@dataclass(frozen=True)
+class PoseGoal:
+    """Reach this pose of `frame` ('tcp' or 'flange') in the base frame."""
+
+    pose: Pose
+    frame: str = "tcp"
+
+
+Goal = JointGoal | PoseGoal
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Joint limits for time parameterisation, per joint (6,): rad/s, rad/s^2, rad/s^3; optional TCP m/s."""
+
+    max_joint_vel: np.ndarray
+    max_joint_acc: np.ndarray
+    max_joint_jerk: np.ndarray
+    max_tcp_speed: float | None = None
+
+    @classmethod
+    def uniform(cls, vel: float, acc: float, jerk: float, tcp_speed: float | None = None) -> "Limits":
+        return cls(np.full(6, float(vel)), np.full(6, float(acc)), np.full(6, float(jerk)), tcp_speed)
+
+    def __post_init__(self) -> None:
+        for name in ("max_joint_vel", "max_joint_acc", "max_joint_jerk"):
+            v = np.broadcast_to(np.asarray(getattr(self, name), dtype=float), (6,)).copy()
+            if not np.all(v > 0):
+                raise InvalidRequestError(f"{name} must be positive, got {v.tolist()}")
+            object.__setattr__(self, name, v)
+        if self.max_tcp_speed is not None and self.max_tcp_speed <= 0:
+            raise InvalidRequestError(f"max_tcp_speed must be positive or None, got {self.max_tcp_speed}")
+
+
+@dataclass(frozen=True)
+class MotionRequest:
+    """One motion query: from `start` (6,) rad to `goal`, under `limits`, within `time_limit_s` of planning."""
+
+    start: np.ndarray
+    goal: Goal
+    limits: Limits
+    time_limit_s: float = 1.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", as_q(self.start, "start"))
+        if not isinstance(self.goal, (JointGoal, PoseGoal)):
+            raise InvalidRequestError(f"goal must be a JointGoal or PoseGoal, got {type(self.goal).__name__}")
+        if self.time_limit_s <= 0:
+            raise InvalidRequestError(f"time_limit_s must be positive, got {self.time_limit_s}")
+
+
+class Status(enum.Enum):
+    """How a planning request ended. Only SUCCESS carries a trajectory."""
+
+    SUCCESS = "success"
+    NO_SOLUTION = "no_solution"  # the planner searched and found nothing
+    TIMEOUT = "timeout"  # the time limit ran out
+    INVALID_START = "invalid_start"  # the start is in collision or outside the limits
+    INVALID_GOAL = "invalid_goal"  # the goal is in collision, unreachable or has no IK
+    COLLISION = "collision"  # the only trajectory found collides (never returned as success)
+    IK_FAILED = "ik_failed"  # a waypoint had no acceptable IK solution
+    LIMIT_VIOLATION = "limit_violation"  # time parameterisation could not keep the limits
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A time-parameterised joint trajectory: t (n,) s from 0; q, qd, qdd (n, 6)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float)
+        n = t.shape[0]
+        for name in ("q", "qd", "qdd"):
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.shape != (n, 6):
+                raise InvalidRequestError(f"Trajectory.{name} must have shape ({n}, 6), got {a.shape}")
+            object.__setattr__(self, name, a)
+        if n < 1 or np.any(np.diff(t) <= 0):
+            raise InvalidRequestError("Trajectory.t must be non-empty and strictly increasing")
+        object.__setattr__(self, "t", t)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def sample(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, qd, qdd at time(s) t: cubic Hermite on q (from q and qd), linear on qd and qdd; clamped at the ends."""
+        ts = np.atleast_1d(np.asarray(t, dtype=float))
+        ts = np.clip(ts, self.t[0], self.t[-1])
+        if self.t.shape[0] == 1:
+            rep = lambda a: np.repeat(a[:1], ts.shape[0], axis=0)  # noqa: E731
+            out = rep(self.q), rep(self.qd), rep(self.qdd)
+        else:
+            i = np.clip(np.searchsorted(self.t, ts, side="right") - 1, 0, self.t.shape[0] - 2)
+            h = (self.t[i + 1] - self.t[i])[:, None]
+            s = (ts[:, None] - self.t[i][:, None]) / h
+            q0, q1, v0, v1 = self.q[i], self.q[i + 1], self.qd[i], self.qd[i + 1]
+            h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+            q = h00 * q0 + h10 * h * v0 + h01 * q1 + h11 * h * v1
+            qd = v0 + s * (v1 - v0)
+            qdd = self.qdd[i] + s * (self.qdd[i + 1] - self.qdd[i])
+            out = q, qd, qdd
+        if np.ndim(t) == 0:
+            return out[0][0], out[1][0], out[2][0]
+        return out
+
+    def resampled(self, dt: float) -> "Trajectory":
+        """The same motion sampled every `dt` seconds (last sample at the end time)."""
+        ts = np.arange(self.t[0], self.t[-1], dt)
+        ts = np.append(ts, self.t[-1]) if ts.size == 0 or ts[-1] < self.t[-1] - 1e-12 else ts
+        q, qd, qdd = self.sample(ts)
+        return Trajectory(ts, q, qd, qdd)
+
+
+@dataclass(frozen=True)
+class MotionResult:
+    """What a planner returns: a status with a reason; a trajectory only on SUCCESS."""
+
+    status: Status
+    reason: str = ""
+    trajectory: Trajectory | None = None
+    planning_time_s: float = 0.0
+    path: np.ndarray | None = None  # (m, 6) geometric waypoints before time parameterisation, if any
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SUCCESS
+
+    def __post_init__(self) -> None:
+        if self.status is Status.SUCCESS and self.trajectory is None:
+            raise InvalidRequestError("a successful MotionResult needs a trajectory")
+
+
+@dataclass(frozen=True)
+class BoxBounds:
+    """An axis-aligned box in the base frame, metres."""
+
+    x_min: float
+    x_max: float
+    y_min: float
+    y_max: float
+    z_min: float
+    z_max: float
+
+    def __post_init__(self) -> None:
+        if not (self.x_min <= self.x_max and self.y_min <= self.y_max and self.z_min <= self.z_max):
+            raise InvalidRequestError(f"BoxBounds needs min <= max on every axis, got {self}")
+
+    @property
+    def lo(self) -> np.ndarray:
+        return np.array([self.x_min, self.y_min, self.z_min])
+
+    @property
+    def hi(self) -> np.ndarray:
+        return np.array([self.x_max, self.y_max, self.z_max])
+
+    def extended_y(self, margin_m: float) -> "BoxBounds":
+        """The box grown by `margin_m` in +y and -y (the warehouse system's trick to force going over)."""
+        return BoxBounds(self.x_min, self.x_max, self.y_min - margin_m, self.y_max + margin_m, self.z_min, self.z_max)
