@@ -26,6 +26,7 @@ __all__ = [
     "ObjectSettings",
     "WorldSettings",
     "ArucoSettings",
+    "CameraSettings",
     "CollisionSettings",
     "PlannerBlock",
     "load_config",
@@ -130,6 +131,31 @@ class ArucoSettings(_Model):
     size_m: float = Field(0.10, gt=0)
 
 
+class CameraSettings(_Model):
+    """RGB-D camera: D435i-like intrinsics at 640x480.
+
+    A fixed mount looks from `position` at `target` (base frame); a wrist mount sits at `wrist_offset_m`
+    in the tool0 frame and looks along tool0's z axis.
+    """
+
+    mount: Literal["fixed", "wrist"] = "fixed"
+    width: int = Field(640, ge=16, le=1920)
+    height: int = Field(480, ge=16, le=1080)
+    fx: float = Field(612.0, gt=0)
+    fy: float = Field(611.0, gt=0)
+    near_m: float = Field(0.05, gt=0)
+    far_m: float = Field(4.0, gt=0)
+    position: Vec3 = (1.25, 0.0, 0.55)
+    target: Vec3 = (0.30, 0.0, 0.0)
+    wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
+
+    @model_validator(mode="after")
+    def _near_far(self) -> "CameraSettings":
+        if self.near_m >= self.far_m:
+            raise ValueError(f"near_m ({self.near_m}) must be less than far_m ({self.far_m})")
+        return self
+
+
 class CollisionSettings(_Model):
     """FCL planning scene options."""
 
@@ -156,6 +182,7 @@ class Settings(_Model):
     gripper: GripperSettings = Field(default_factory=GripperSettings)
     world: WorldSettings = Field(default_factory=WorldSettings)
     aruco: ArucoSettings = Field(default_factory=ArucoSettings)
+    camera: CameraSettings = Field(default_factory=CameraSettings)
     collision: CollisionSettings = Field(default_factory=CollisionSettings)
     planners: dict[str, PlannerBlock] = Field(default_factory=dict)
 

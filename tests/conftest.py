@@ -1,0 +1,65 @@
+"""Shared fixtures: a throwaway third-party plugin distribution, installed on sys.path for one test."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+ACME_PLUGIN = '''
+"""A throwaway third-party twin plugin: a straight joint-space planner with constant velocity."""
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from twin import hookimpl
+from twin.types import JointGoal, MotionResult, Status, Trajectory
+
+
+class StraightLine:
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        speed_fraction: float = Field(0.5, gt=0, le=1)
+
+    def __init__(self, params, context):
+        self.params = params
+        self.context = context
+
+    def plan(self, request, scene):
+        if not isinstance(request.goal, JointGoal):
+            return MotionResult(Status.INVALID_GOAL, "acme.straight takes joint goals only")
+        dq = request.goal.q - request.start
+        vel = request.limits.max_joint_vel * self.params.speed_fraction
+        T = max(float(np.max(np.abs(dq) / vel)), 1e-3)
+        t = np.linspace(0.0, T, 50)
+        q = request.start + np.outer(t / T, dq)
+        qd = np.tile(dq / T, (50, 1))
+        return MotionResult(Status.SUCCESS, "", Trajectory(t, q, qd, np.zeros_like(q)))
+
+
+@hookimpl
+def twin_register_planners(registry):
+    registry.add_planner("acme.straight", "acme_twin_plugin:StraightLine", description="straight joint line (test plugin)")
+'''
+
+
+@pytest.fixture
+def acme_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A temporary distribution `acme-twin-plugin` with a `twin` entry point, put on sys.path."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "acme_twin_plugin.py").write_text(textwrap.dedent(ACME_PLUGIN))
+    info = site / "acme_twin_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: acme-twin-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[twin]\nacme = acme_twin_plugin\n")
+    monkeypatch.syspath_prepend(str(site))
+    from twin.registry import default_registry
+
+    default_registry.cache_clear()
+    yield site
+    sys.modules.pop("acme_twin_plugin", None)
+    default_registry.cache_clear()

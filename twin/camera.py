@@ -1,0 +1,124 @@
+"""Pinhole camera maths shared by the world (rendering) and perception (back-projection).
+
+Camera frame convention is OpenCV's: x right, y down, z forward along the optical axis. PyBullet
+renders with OpenGL matrices; the conversions live here so the world module stays a thin adapter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.config import CameraSettings
+
+__all__ = ["Intrinsics", "RGBDFrame", "camera_pose", "look_at", "gl_view_matrix", "gl_projection_matrix", "depth_from_zbuffer", "point_cloud"]
+
+_CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels; the principal point is the image centre (pixel centres at integers)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+
+    @property
+    def cx(self) -> float:
+        return (self.width - 1) / 2.0
+
+    @property
+    def cy(self) -> float:
+        return (self.height - 1) / 2.0
+
+    @classmethod
+    def from_settings(cls, cam: CameraSettings) -> "Intrinsics":
+        return cls(cam.width, cam.height, cam.fx, cam.fy)
+
+    def matrix(self) -> np.ndarray:
+        """The 3x3 camera matrix K (OpenCV)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class RGBDFrame:
+    """One rendered frame: rgb (H, W, 3) uint8, depth_m (H, W) metric depth along the optical axis
+    (0 where there is no return), and the intrinsics. Perception gets nothing else."""
+
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    intrinsics: Intrinsics
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+    """(4, 4) pose of an OpenCV camera at `eye` looking at `target`, image 'up' towards `up`."""
+    eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:  # looking straight along `up`: pick any perpendicular
+        x = np.cross(z, np.array([1.0, 0.0, 0.0]))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, eye
+    return T
+
+
+def gl_view_matrix(T_world_camera: np.ndarray) -> list[float]:
+    """PyBullet's view matrix (16 floats, column-major) for an OpenCV camera pose."""
+    view = _CV_TO_GL @ np.linalg.inv(T_world_camera)
+    return view.T.reshape(-1).tolist()
+
+
+def gl_projection_matrix(intr: Intrinsics, near_m: float, far_m: float) -> list[float]:
+    """PyBullet's projection matrix (16 floats, column-major) matching the pinhole intrinsics."""
+    W, H, n, f = intr.width, intr.height, near_m, far_m
+    P = np.array(
+        [
+            [2.0 * intr.fx / W, 0.0, 0.0, 0.0],
+            [0.0, 2.0 * intr.fy / H, 0.0, 0.0],
+            [0.0, 0.0, -(f + n) / (f - n), -2.0 * f * n / (f - n)],
+            [0.0, 0.0, -1.0, 0.0],
+        ]
+    )
+    return P.T.reshape(-1).tolist()
+
+
+def depth_from_zbuffer(zbuf: np.ndarray, near_m: float, far_m: float) -> np.ndarray:
+    """Metric depth along the optical axis from PyBullet's non-linear z-buffer; 0 at the far plane."""
+    d = np.asarray(zbuf, dtype=np.float64)
+    z = far_m * near_m / (far_m - (far_m - near_m) * d)
+    z[d >= 1.0 - 1e-7] = 0.0
+    return z
+
+
+def point_cloud(frame: RGBDFrame, *, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) points in the camera frame and (n, 3) colours in [0, 1] for every pixel with depth."""
+    intr = frame.intrinsics
+    d = frame.depth_m[::stride, ::stride]
+    v, u = np.mgrid[0 : intr.height : stride, 0 : intr.width : stride]
+    ok = d > 0
+    z = d[ok]
+    x = (u[ok] - intr.cx) * z / intr.fx
+    y = (v[ok] - intr.cy) * z / intr.fy
+    rgb = frame.rgb[::stride, ::stride][ok].astype(np.float64) / 255.0
+    return np.column_stack([x, y, z]), rgb
+
+
+def camera_pose(cam: CameraSettings, T_world_tool0: np.ndarray | None = None) -> np.ndarray:
+    """(4, 4) pose of the configured camera in the world (= base) frame; a wrist mount needs tool0's pose."""
+    if cam.mount == "fixed":
+        return look_at(np.array(cam.position), np.array(cam.target))
+    if T_world_tool0 is None:
+        raise ValueError("a wrist-mounted camera needs the tool0 pose")
+    T = np.eye(4)
+    T[:3, 3] = cam.wrist_offset_m
+    return np.asarray(T_world_tool0) @ T
+
+
+OVERVIEW_EYE = np.array([1.55, -1.25, 1.15])
+OVERVIEW_TARGET = np.array([0.25, 0.0, 0.05])

@@ -1,0 +1,183 @@
+"""The `twin` command line: a thin layer that parses, calls one library function, and reports.
+
+A user mistake (bad config, unknown name, bad value, missing file) prints one line and exits 2.
+`twin plan` exits 1 when the planner found no solution.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from twin.errors import TwinError
+
+__all__ = ["main", "build_parser"]
+
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (and exit 2), like every other user mistake."""
+
+    def error(self, message: str) -> NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(EXIT_USAGE)
+
+
+def _floats(text: str, n: int, what: str) -> list[float]:
+    parts = [p for p in text.replace(" ", "").split(",") if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n or not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated finite numbers, got {len(vals)} in {text!r}")
+    return vals
+
+
+def _joint_vector(text: str) -> list[float]:
+    return _floats(text, 6, "joint angles (rad)")
+
+
+def _pose_vector(text: str) -> list[float]:
+    return _floats(text, 6, "pose x,y,z,roll,pitch,yaw (m, rad)")
+
+
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", help="YAML config file (see configs/)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value by dotted key, e.g. --set world.objects.lying_probability=0.5")
+    p.add_argument("--seed", type=int, default=None, help="scene seed (default: the config's seed)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="twin", description="A PyBullet digital twin of a UR5e sorting cell: plan, run and compare motion planners.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    p = sub.add_parser("planners", help="list every registered planner, retimer and detector")
+    p.add_argument("--json", dest="json_path", default=None, help="also write the list to this JSON file")
+
+    p = sub.add_parser("scene", help="build a scene and render it from the configured camera and an overview")
+    _add_config_args(p)
+    p.add_argument("--snapshot", required=True, help="output PNG (camera view | overview side by side)")
+
+    p = sub.add_parser("plan", help="plan one motion query with a named planner")
+    _add_config_args(p)
+    p.add_argument("--planner", required=True, help="registered planner name, e.g. ruckig.movej (see `twin planners`)")
+    p.add_argument("--start", required=True, type=_joint_vector, help="six comma-separated joint angles, rad")
+    goal = p.add_mutually_exclusive_group(required=True)
+    goal.add_argument("--goal", type=_joint_vector, help="six comma-separated joint angles, rad")
+    goal.add_argument("--goal-pose", type=_pose_vector, help="tcp pose in the base frame: x,y,z,roll,pitch,yaw (m, rad)")
+    p.add_argument("--time-limit", type=float, default=1.0, help="planning time limit, s (default 1)")
+    p.add_argument("--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here")
+    return parser
+
+
+def _settings(args: argparse.Namespace) -> Any:
+    from twin.config import load_config
+
+    settings = load_config(args.config, args.overrides)
+    if args.seed is not None:
+        settings = settings.model_copy(update={"seed": args.seed})
+    return settings
+
+
+def _write_json(path: str, data: Any) -> None:
+    from twin.errors import ConfigError
+
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(data, indent=1))
+    except OSError as e:
+        raise ConfigError(f"cannot write {path}: {e.strerror}") from None
+
+
+def _cmd_planners(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from twin.registry import default_registry
+
+    entries = default_registry().entries()
+    table = Table(title="registered plugins")
+    for col in ("name", "kind", "provided by", "description"):
+        table.add_column(col)
+    for e in entries:
+        table.add_row(e.name, e.kind.value, e.provider, e.description)
+    Console(width=160).print(table)
+    if args.json_path:
+        _write_json(args.json_path, [{"name": e.name, "kind": e.kind.value, "provider": e.provider, "description": e.description} for e in entries])
+    return EXIT_OK
+
+
+def _cmd_scene(args: argparse.Namespace) -> int:
+    from twin.snapshot import save_snapshot
+
+    settings = _settings(args)
+    out = save_snapshot(settings, args.snapshot)
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from twin.planning import limits_from_settings, plan
+    from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
+
+    settings = _settings(args)
+    if args.goal is not None:
+        goal: Any = JointGoal(args.goal)
+    else:
+        x, y, z, roll, pitch, yaw = args.goal_pose
+        goal = PoseGoal(Pose.from_xyz_rpy((x, y, z), (roll, pitch, yaw)))
+    if not args.time_limit > 0:
+        from twin.errors import InvalidRequestError
+
+        raise InvalidRequestError(f"--time-limit must be positive, got {args.time_limit}")
+    request = MotionRequest(start=args.start, goal=goal, limits=limits_from_settings(settings), time_limit_s=args.time_limit, seed=settings.seed)
+    result = plan(settings, args.planner, request)
+    traj = result.trajectory
+    summary = {
+        "planner": args.planner,
+        "status": result.status.value,
+        "reason": result.reason,
+        "planning_time_s": result.planning_time_s,
+        "duration_s": traj.duration if traj is not None else None,
+        "t": traj.t.tolist() if traj is not None else [],
+        "q": traj.q.tolist() if traj is not None else [],
+        "qd": traj.qd.tolist() if traj is not None else [],
+        "qdd": traj.qdd.tolist() if traj is not None else [],
+    }
+    if args.json_path:
+        _write_json(args.json_path, summary)
+    line = f"{args.planner}: {result.status.value} in {result.planning_time_s * 1e3:.1f} ms"
+    line += f", duration {traj.duration:.3f} s" if traj is not None else f" ({result.reason})"
+    print(line)
+    return EXIT_OK if result.success else EXIT_NO_SOLUTION
+
+
+_COMMANDS = {"planners": _cmd_planners, "scene": _cmd_scene, "plan": _cmd_plan}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return EXIT_USAGE
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return _COMMANDS[args.command](args)
+    except TwinError as e:
+        sys.stderr.write(f"twin {args.command}: error: {e}\n")
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
