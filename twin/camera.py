@@ -120,5 +120,5 @@ def camera_pose(cam: CameraSettings, T_world_tool0: np.ndarray | None = None) ->
     return np.asarray(T_world_tool0) @ T
 
 
-OVERVIEW_EYE = np.array([1.55, -1.25, 1.15])
-OVERVIEW_TARGET = np.array([0.25, 0.0, 0.05])
+OVERVIEW_EYE = np.array([-1.45, -1.35, 1.15])
+OVERVIEW_TARGET = np.array([-0.25, 0.0, 0.05])

@@ -86,7 +86,7 @@ class ObjectSpec(_Model):
 class ObjectSettings(_Model):
     """Where and how objects are placed: seeded, never overlapping, upright or lying."""
 
-    region_x: tuple[float, float] = (0.30, 0.65)
+    region_x: tuple[float, float] = (-0.65, -0.30)
     region_y: tuple[float, float] = (-0.30, 0.30)
     min_gap_m: float = Field(0.03, ge=0)
     lying_probability: float = Field(0.0, ge=0, le=1)
@@ -102,14 +102,18 @@ class ObjectSettings(_Model):
 
 
 class WorldSettings(_Model):
-    """The PyBullet world: rate, gravity, fixtures and objects."""
+    """The PyBullet world: rate, gravity, fixtures and objects.
+
+    The world frame is the robot base frame (UR DH base: with the shoulder pan at 0 the arm reaches
+    towards -x), so the table and the work area lie at negative x, in front of the arm's home posture.
+    """
 
     physics_hz: float = Field(240.0, gt=0)
     gravity: float = -9.81
     gui: bool = False
     fixtures: list[FixtureSettings] = Field(
         default_factory=lambda: [
-            FixtureSettings(name="table", urdf="urdf/table.urdf", position=(0.30, 0.0, 0.0)),
+            FixtureSettings(name="table", urdf="urdf/table.urdf", position=(-0.30, 0.0, 0.0)),
         ]
     )
     objects: ObjectSettings = Field(default_factory=ObjectSettings)
@@ -145,8 +149,8 @@ class CameraSettings(_Model):
     fy: float = Field(611.0, gt=0)
     near_m: float = Field(0.05, gt=0)
     far_m: float = Field(4.0, gt=0)
-    position: Vec3 = (1.25, 0.0, 0.55)
-    target: Vec3 = (0.30, 0.0, 0.0)
+    position: Vec3 = (-1.25, 0.0, 0.55)
+    target: Vec3 = (-0.30, 0.0, 0.0)
     wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
 
     @model_validator(mode="after")

@@ -1,0 +1,808 @@
+"""The simulated cell: the one module of twin that imports PyBullet.
+
+A `World` owns one PyBullet physics client (DIRECT unless a GUI is asked for) and builds the scene of a
+config: the UR5e with its gripper at the origin (the world frame IS the robot base frame), the fixtures
+(table, bins, the ArUco base plate, obstacles) and the objects, scattered by a seeded generator inside
+the spawn region without overlap. It drives the arm by joint position control at the physics rate and
+the gripper by force-limited closing, and it exposes ground truth for metrics and tests only.
+
+Determinism: every PyBullet call passes this world's client id, overlapping pairs are processed in a
+deterministic order, and the scene is built by the same call sequence for the same config and seed, so
+two worlds given the same calls produce bit-identical states. `reset()` rebuilds the scene the same way
+(a restored snapshot would keep solver caches and drift by ~40 um).
+
+Grasping is physical: the fingers squeeze the object and friction holds it; nothing is attached.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+import pybullet as pb
+
+from twin.config import PROJECT_ROOT, Settings
+
+if TYPE_CHECKING:
+    from twin.camera import Intrinsics, RGBDFrame
+from twin.errors import ConfigError, InvalidRequestError, WorldError
+from twin.scene_layout import (
+    MARKER_MARGIN_FRACTION,
+    OBJECT_TEMPLATES,
+    PLATE_SIZE_M,
+    ObjectTemplate,
+    color_rgba,
+    find_marker_plate,
+    is_marker_plate,
+    marker_pose_in_base,
+    marker_quad_size_m,
+    rpy_matrix,
+)
+
+__all__ = [
+    "World",
+    "ObjectState",
+    "ContactPoint",
+    "ARM_JOINT_NAMES",
+    "FINGER_JOINT_NAMES",
+    "FINGER_TRAVEL_M",
+    "marker_pose_in_base",
+]
+
+log = logging.getLogger("twin")
+
+ARM_JOINT_NAMES = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+FINGER_JOINT_NAMES = ("left_finger_joint", "right_finger_joint")
+FINGER_TRAVEL_M = 0.0425  # each finger, along tool0 x; the opening is the sum of both
+
+_FINGER_LINKS = ("left_finger", "right_finger")
+_LAYOUT_ATTEMPTS = 50  # whole-scene restarts before giving up
+_TRIES_PER_OBJECT = 300  # position draws per object within one attempt
+_KEEPOUT_MIN_TOP_M = 0.002  # fixtures whose top is above this are obstacles for spawning (the table is not)
+_MARKER_PX = 600  # texture pixels across the black marker square
+_MARKER_ASSET_VERSION = "v1"  # bump when the generated marker files change shape
+
+
+@dataclass(frozen=True)
+class ObjectState:
+    """Ground truth of one scene object (base frame, metres, quaternion x-y-z-w).
+
+    `size` is the object's (x, y, z) extent in its own frame (cylinders: diameter, diameter, height);
+    `lying` is true when the object's z axis is closer to horizontal than vertical.
+    """
+
+    id: int
+    name: str
+    cls: str
+    color: str | None
+    position: np.ndarray
+    orientation_xyzw: np.ndarray
+    lying: bool
+    size: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """One contact or closest-point pair between body A (link A) and body B (link B).
+
+    Link -1 is a body's base. `distance` < 0 is penetration. `normal_on_b` points from B to A.
+    """
+
+    body_a: int
+    body_b: int
+    link_a: int
+    link_b: int
+    position_on_a: np.ndarray
+    position_on_b: np.ndarray
+    normal_on_b: np.ndarray
+    distance: float
+    normal_force: float
+
+
+@dataclass(frozen=True)
+class _Spawn:
+    name: str
+    template: ObjectTemplate
+    color: str | None
+    position: tuple[float, float, float]
+    yaw: float
+    lying: bool
+
+
+def _as_vec(x: Any, n: int, what: str) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (n,):
+        raise InvalidRequestError(f"{what} must have shape ({n},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InvalidRequestError(f"{what} must be finite, got {a.tolist()}")
+    return a
+
+
+def _circle_hits_rect(cx: float, cy: float, r: float, rect: tuple[float, float, float, float]) -> bool:
+    x0, y0, x1, y1 = rect
+    dx = max(x0 - cx, 0.0, cx - x1)
+    dy = max(y0 - cy, 0.0, cy - y1)
+    return dx * dx + dy * dy < r * r
+
+
+def _flush_c_stdout() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except Exception:  # not on every platform; then some noise may get through
+        pass
+
+
+@contextmanager
+def _quiet_stdout(active: bool = True) -> Iterator[None]:
+    """Silence C-level writes to stdout (fd 1) from PyBullet plugins; library code prints nothing."""
+    if not active:
+        yield
+        return
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 1)
+        yield
+    finally:
+        _flush_c_stdout()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    """Write a cache file so that concurrent workers never read a half-written one."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class World:
+    """A PyBullet world built from `settings` and `seed`; see the module docstring.
+
+    Joint vectors are (6,) arrays in the order shoulder_pan .. wrist_3, radians. Poses are in the base
+    (= world) frame, metres, quaternions x-y-z-w.
+    """
+
+    def __init__(
+        self,
+        settings: Settings,
+        seed: int = 0,
+        *,
+        gui: bool | None = None,
+        renderer: Literal["auto", "egl", "tiny"] = "auto",
+    ) -> None:
+        """Connect, build the scene of `settings` with objects placed from `seed`.
+
+        `gui`: None takes settings.world.gui. `renderer`: "auto" tries the EGL plugin and falls back to
+        TinyRenderer silently; "egl" requires it (WorldError otherwise); "tiny" skips it (faster to
+        build when nothing will be rendered). The choice is in `self.renderer`.
+        """
+        if renderer not in ("auto", "egl", "tiny"):
+            raise InvalidRequestError(f"renderer must be 'auto', 'egl' or 'tiny', got {renderer!r}")
+        self._renderer_request = renderer
+        self.settings = settings
+        self.seed = int(seed)
+        self._gui = settings.world.gui if gui is None else bool(gui)
+        self._cid = -1
+        self._egl = False
+        self._steps = 0
+        self.dt = 1.0 / settings.world.physics_hz
+        try:
+            self._cid = pb.connect(pb.GUI if self._gui else pb.DIRECT)
+        except pb.error:
+            self._cid = -1
+        if self._cid < 0:
+            raise WorldError("could not connect to PyBullet" + (" (GUI needs a display)" if self._gui else ""))
+        try:
+            with _quiet_stdout():  # the EGL plugin prints banners on stdout when it loads and initialises
+                self._build()
+        except BaseException:
+            self.close()
+            raise
+
+    # ---- construction ---------------------------------------------------------------------------
+    def _build(self) -> None:
+        if self._gui:
+            self.renderer = "opengl"
+        elif self._renderer_request == "tiny":
+            self.renderer = "tiny"
+        else:
+            self.renderer = self._load_egl()
+            if self.renderer != "egl" and self._renderer_request == "egl":
+                raise WorldError("the EGL renderer plugin could not be loaded (renderer='egl' was asked for)")
+        find_marker_plate(self.settings)  # ConfigError when there are several plates
+        self._build_scene()
+        log.debug(
+            "world built: %d fixtures, %d objects, renderer %s, seed %d",
+            len(self._fixtures), len(self._objects), self.renderer, self.seed,
+        )
+
+    def _build_scene(self) -> None:
+        """Engine parameters and every body, always by the same call sequence (determinism, reset)."""
+        c = self._cid
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=self.dt, numSubSteps=0, deterministicOverlappingPairs=1, physicsClientId=c
+        )
+        pb.setGravity(0.0, 0.0, self.settings.world.gravity, physicsClientId=c)
+        self._bodies: dict[str, int] = {}
+        self._load_robot()
+        self._fixtures: dict[str, int] = {}
+        self._marker_id: int | None = None
+        for fx in self.settings.world.fixtures:
+            self._load_fixture(fx.name, fx.urdf, fx.position, fx.rpy)
+            if is_marker_plate(fx):
+                self._add_marker_quad()
+        self._objects: dict[int, _Spawn] = {}
+        for sp in self._sample_layout():
+            self._load_object(sp)
+        self._apply_initial_commands()
+        self._steps = 0
+
+    def _load_egl(self) -> str:
+        """Load the EGL renderer before any body exists (bodies created earlier render blank)."""
+        try:
+            spec = importlib.util.find_spec("eglRenderer")
+            if spec is not None and spec.origin:
+                plugin = pb.loadPlugin(spec.origin, "_eglRendererPlugin", physicsClientId=self._cid)
+                if plugin >= 0:
+                    self._egl = True
+                    return "egl"
+        except Exception as e:  # any failure means: use the software TinyRenderer
+            log.debug("EGL renderer unavailable (%s), using TinyRenderer", e)
+        return "tiny"
+
+    def _urdf(self, path: str) -> str:
+        p = self.settings.resolve(path)
+        if not p.is_file():
+            raise ConfigError(f"URDF not found: {path} (resolved to {p})")
+        return str(p)
+
+    def _load_robot(self) -> None:
+        c = self._cid
+        try:
+            self.robot_id = pb.loadURDF(
+                self._urdf(self.settings.robot.urdf), [0, 0, 0], [0, 0, 0, 1],
+                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+            )
+        except pb.error as e:
+            raise WorldError(f"cannot load robot URDF {self.settings.robot.urdf}: {e}") from None
+        self._bodies["robot"] = self.robot_id
+        self._joint_index: dict[str, int] = {}
+        self._link_index: dict[str, int] = {"base_link": -1}
+        for j in range(pb.getNumJoints(self.robot_id, physicsClientId=c)):
+            info = pb.getJointInfo(self.robot_id, j, physicsClientId=c)
+            self._joint_index[info[1].decode()] = j
+            self._link_index[info[12].decode()] = j
+        missing = [n for n in ARM_JOINT_NAMES + FINGER_JOINT_NAMES if n not in self._joint_index]
+        missing += [n for n in ("tool0", "tcp") + _FINGER_LINKS if n not in self._link_index]
+        if missing:
+            raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing}")
+        self._arm = [self._joint_index[n] for n in ARM_JOINT_NAMES]
+        self._fingers = [self._joint_index[n] for n in FINGER_JOINT_NAMES]
+        for link in _FINGER_LINKS:
+            # friction anchors stop the slow creep of a friction grip under gravity
+            pb.changeDynamics(
+                self.robot_id, self._link_index[link], lateralFriction=self.settings.gripper.finger_friction,
+                frictionAnchor=1, physicsClientId=c,
+            )
+
+    def _load_fixture(self, name: str, urdf: str, position: Sequence[float], rpy: Sequence[float]) -> None:
+        c = self._cid
+        try:
+            bid = pb.loadURDF(
+                self._urdf(urdf), list(position), pb.getQuaternionFromEuler(list(rpy)),
+                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+            )
+        except pb.error as e:
+            raise WorldError(f"cannot load fixture {name!r} from {urdf}: {e}") from None
+        if name in self._bodies:
+            raise ConfigError(f"fixture name {name!r} clashes with another body name")
+        self._fixtures[name] = bid
+        self._bodies[name] = bid
+
+    def _marker_assets(self) -> Path:
+        """Generate (once, cached) the marker image and a unit quad OBJ whose MTL names it."""
+        import cv2  # only the world needs OpenCV at build time, and only for the marker texture
+
+        a = self.settings.aruco
+        dict_id = getattr(cv2.aruco, a.dictionary, None)
+        if not isinstance(dict_id, int) or not a.dictionary.startswith("DICT_"):
+            raise ConfigError(f"aruco.dictionary {a.dictionary!r} is not a cv2.aruco dictionary (e.g. DICT_4X4_50)")
+        cache = PROJECT_ROOT / "urdf" / "generated"  # git-ignored
+        try:
+            cache.mkdir(parents=True, exist_ok=True)
+            if not os.access(cache, os.W_OK):
+                raise PermissionError(str(cache))
+        except OSError:  # a read-only install: use a temp dir instead
+            cache = Path(tempfile.gettempdir()) / "twin-generated"
+            cache.mkdir(parents=True, exist_ok=True)
+        stem = f"aruco_{a.dictionary}_{a.id}_{_MARKER_ASSET_VERSION}"
+        png, mtl, obj = (cache / f"{stem}.{ext}" for ext in ("png", "mtl", "obj"))
+        if not (png.is_file() and mtl.is_file() and obj.is_file()):
+            dictionary = cv2.aruco.getPredefinedDictionary(dict_id)
+            try:
+                img = cv2.aruco.generateImageMarker(dictionary, a.id, _MARKER_PX, borderBits=1)
+            except cv2.error as e:
+                raise ConfigError(f"aruco.id {a.id} is not in {a.dictionary}: {e}") from None
+            m = round(_MARKER_PX * MARKER_MARGIN_FRACTION)
+            img = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_CONSTANT, value=255)
+            ok, buf = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
+            if not ok:
+                raise WorldError("could not encode the ArUco marker image")
+            _write_atomic(png, buf.tobytes())
+            _write_atomic(
+                mtl,
+                f"newmtl aruco\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nmap_Kd {png.name}\n".encode(),
+            )
+            # unit quad in z = 0, normal +z; image top-left at (-0.5, +0.5) (OBJ v runs bottom to top)
+            _write_atomic(
+                obj,
+                (
+                    f"mtllib {mtl.name}\no aruco_quad\n"
+                    "v -0.5 -0.5 0\nv 0.5 -0.5 0\nv 0.5 0.5 0\nv -0.5 0.5 0\n"
+                    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+                    "usemtl aruco\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n"
+                ).encode(),
+            )
+        return obj
+
+    def _add_marker_quad(self) -> None:
+        """The marker: a visual-only textured quad on the plate's top face (pose: scene_layout)."""
+        c = self._cid
+        side = marker_quad_size_m(self.settings.aruco.size_m)
+        if side > PLATE_SIZE_M:
+            log.warning("ArUco quad (%.3f m with its white border) is wider than the plate (%.3f m)", side, PLATE_SIZE_M)
+        obj = self._marker_assets()
+        vs = pb.createVisualShape(
+            pb.GEOM_MESH, fileName=str(obj), meshScale=[side, side, 1.0], physicsClientId=c
+        )
+        if vs < 0:
+            raise WorldError(f"could not load the marker quad {obj}")
+        T = marker_pose_in_base(self.settings)
+        quat = _quat_from_matrix(T[:3, :3])
+        self._marker_id = pb.createMultiBody(
+            baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=vs,
+            basePosition=T[:3, 3].tolist(), baseOrientation=quat.tolist(), physicsClientId=c,
+        )
+        self._bodies["aruco_marker"] = self._marker_id
+
+    def _keepouts(self, gap: float) -> list[tuple[float, float, float, float]]:
+        """xy rectangles that objects must not touch: the robot base and every fixture above the table."""
+        c = self._cid
+        rects = []
+        boxes = [pb.getAABB(self.robot_id, -1, physicsClientId=c)]
+        for bid in self._fixtures.values():
+            for link in range(-1, pb.getNumJoints(bid, physicsClientId=c)):
+                boxes.append(pb.getAABB(bid, link, physicsClientId=c))
+        for lo, hi in boxes:
+            if hi[2] > _KEEPOUT_MIN_TOP_M:
+                rects.append((lo[0] - gap, lo[1] - gap, hi[0] + gap, hi[1] + gap))
+        return rects
+
+    def _sample_layout(self) -> list[_Spawn]:
+        """Seeded, non-overlapping placements; raises WorldError when the region is too crowded."""
+        cfg = self.settings.world.objects
+        rng = np.random.default_rng(self.seed)
+        todo: list[tuple[str, ObjectTemplate, str | None, bool, float]] = []
+        used: dict[str, int] = {}
+        for spec in cfg.items:
+            tmpl = OBJECT_TEMPLATES[spec.cls]
+            if spec.color is not None:
+                color_rgba(spec.color)  # ConfigError for an unknown colour, before anything is placed
+            for _ in range(spec.count):
+                base = f"{spec.cls}_{spec.color}" if spec.color else spec.cls
+                name = f"{base}_{used.get(base, 0)}"
+                used[base] = used.get(base, 0) + 1
+                lying = bool(rng.random() < cfg.lying_probability) and spec.cls != "obstacle"
+                yaw = float(rng.uniform(-math.pi, math.pi)) if cfg.random_yaw else 0.0
+                todo.append((name, tmpl, spec.color, lying, yaw))
+        if not todo:
+            return []
+        (x0, x1), (y0, y1) = cfg.region_x, cfg.region_y
+        gap = cfg.min_gap_m
+        keepouts = self._keepouts(gap)
+        radii = [t[1].footprint_radius(t[3]) for t in todo]
+        order = sorted(range(len(todo)), key=lambda i: -radii[i])  # big ones first
+        for _attempt in range(_LAYOUT_ATTEMPTS):
+            placed: dict[int, tuple[float, float]] = {}
+            for i in order:
+                r = radii[i]
+                for _try in range(_TRIES_PER_OBJECT):
+                    x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+                    if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
+                        continue
+                    if all(math.hypot(x - px, y - py) >= r + radii[j] + gap for j, (px, py) in placed.items()):
+                        placed[i] = (x, y)
+                        break
+                else:
+                    break
+            if len(placed) == len(todo):
+                out = []
+                for i, (name, tmpl, color, lying, yaw) in enumerate(todo):
+                    x, y = placed[i]
+                    out.append(_Spawn(name, tmpl, color, (x, y, tmpl.height(lying) / 2.0), yaw, lying))
+                return out
+        worst = max(range(len(todo)), key=lambda i: radii[i])
+        raise WorldError(
+            f"cannot place {len(todo)} objects without overlap in region x={list(cfg.region_x)} "
+            f"y={list(cfg.region_y)} with min_gap_m={gap} after {_LAYOUT_ATTEMPTS} attempts "
+            f"(largest footprint radius {radii[worst]:.3f} m: {todo[worst][0]}); enlarge the region, "
+            "lower the counts, the gap or lying_probability, or move fixtures out of the region"
+        )
+
+    def _load_object(self, sp: _Spawn) -> None:
+        c = self._cid
+        R = rpy_matrix((0.0, 0.0, sp.yaw))
+        if sp.lying:
+            R = R @ rpy_matrix(sp.template.lying_rpy)
+        try:
+            bid = pb.loadURDF(
+                self._urdf(sp.template.urdf), list(sp.position), _quat_from_matrix(R).tolist(),
+                flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+            )
+        except pb.error as e:
+            raise WorldError(f"cannot load object {sp.name!r} from {sp.template.urdf}: {e}") from None
+        if sp.name in self._bodies:
+            raise ConfigError(f"object name {sp.name!r} clashes with a fixture name")
+        if sp.color is not None:
+            pb.changeVisualShape(bid, -1, rgbaColor=list(color_rgba(sp.color)), physicsClientId=c)
+        self._objects[bid] = sp
+        self._bodies[sp.name] = bid
+
+    def _apply_initial_commands(self) -> None:
+        """Robot at home, motors holding home, gripper open: the state `reset()` returns to."""
+        home = np.asarray(self.settings.robot.home, dtype=float)
+        c = self._cid
+        for j, q in zip(self._arm, home):
+            pb.resetJointState(self.robot_id, j, float(q), 0.0, physicsClientId=c)
+        half = self.settings.gripper.max_opening_m / 2.0
+        for j in self._fingers:
+            pb.resetJointState(self.robot_id, j, half, 0.0, physicsClientId=c)
+        self.set_joint_targets(home)
+        self.open_gripper()
+
+    # ---- lifecycle ------------------------------------------------------------------------------
+    @property
+    def client_id(self) -> int:
+        """The PyBullet physics client id (pass it as physicsClientId for reference queries)."""
+        return self._cid
+
+    @property
+    def sim_time(self) -> float:
+        """Seconds simulated since the world was built or last reset."""
+        return self._steps * self.dt
+
+    @property
+    def connected(self) -> bool:
+        """False once `close()` was called."""
+        return self._cid >= 0
+
+    def _check(self) -> int:
+        if self._cid < 0:
+            raise WorldError("the world is closed")
+        return self._cid
+
+    def step(self, n: int = 1) -> None:
+        """Advance the physics by n steps of 1/physics_hz seconds."""
+        c = self._check()
+        if n < 0:
+            raise InvalidRequestError(f"cannot step a negative number of times ({n})")
+        for _ in range(int(n)):
+            pb.stepSimulation(physicsClientId=c)
+        self._steps += int(n)
+
+    def reset(self) -> None:
+        """Back to the state after construction: robot at home, objects at their sampled poses.
+
+        The scene is rebuilt from scratch (same ids, same call sequence), so a reset world evolves
+        bit-identically to a new one; restoring a saved state leaves solver caches behind (~40 um drift).
+        """
+        c = self._check()
+        with _quiet_stdout(self._egl):
+            pb.resetSimulation(physicsClientId=c)
+            self._build_scene()
+
+    def close(self) -> None:
+        """Disconnect from PyBullet (idempotent)."""
+        if self._cid >= 0:
+            try:
+                with _quiet_stdout(self._egl):  # the EGL plugin says goodbye on stdout
+                    pb.disconnect(physicsClientId=self._cid)
+            except pb.error:
+                pass
+            self._cid = -1
+
+    def __enter__(self) -> "World":
+        return self
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # ---- arm ------------------------------------------------------------------------------------
+    def set_joint_targets(self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray | None = None) -> None:
+        """Joint position targets for the arm (held until changed), with optional velocity feed-forward.
+
+        Force-limited by robot.max_joint_force, position gain robot.position_gain, velocity capped at
+        robot.max_joint_vel. `q`, `qd`: (6,) rad, rad/s.
+        """
+        c = self._check()
+        q = _as_vec(q, 6, "q")
+        qd = np.zeros(6) if qd is None else _as_vec(qd, 6, "qd")
+        r = self.settings.robot
+        for k, j in enumerate(self._arm):
+            pb.setJointMotorControl2(
+                self.robot_id, j, pb.POSITION_CONTROL, targetPosition=float(q[k]), targetVelocity=float(qd[k]),
+                force=float(r.max_joint_force[k]), positionGain=r.position_gain, velocityGain=1.0,
+                maxVelocity=r.max_joint_vel, physicsClientId=c,
+            )
+
+    def reset_joints(self, q: Sequence[float] | np.ndarray) -> None:
+        """Teleport the arm to q (zero velocity) and hold it there: for setup and tests, not for motion."""
+        c = self._check()
+        q = _as_vec(q, 6, "q")
+        for k, j in enumerate(self._arm):
+            pb.resetJointState(self.robot_id, j, float(q[k]), 0.0, physicsClientId=c)
+        self.set_joint_targets(q)
+
+    def joint_positions(self) -> np.ndarray:
+        """(6,) arm joint angles, rad."""
+        c = self._check()
+        return np.array([s[0] for s in pb.getJointStates(self.robot_id, self._arm, physicsClientId=c)])
+
+    def joint_velocities(self) -> np.ndarray:
+        """(6,) arm joint velocities, rad/s."""
+        c = self._check()
+        return np.array([s[1] for s in pb.getJointStates(self.robot_id, self._arm, physicsClientId=c)])
+
+    # ---- gripper --------------------------------------------------------------------------------
+    def set_gripper_opening(self, width_m: float, *, speed_m_s: float | None = None) -> None:
+        """Move both fingers symmetrically to an opening (m, clipped to 0..max_opening_m)."""
+        c = self._check()
+        g = self.settings.gripper
+        half = float(np.clip(width_m, 0.0, g.max_opening_m)) / 2.0
+        v = (g.speed_m_s if speed_m_s is None else float(speed_m_s)) / 2.0
+        for j in self._fingers:
+            pb.setJointMotorControl2(
+                self.robot_id, j, pb.POSITION_CONTROL, targetPosition=half, targetVelocity=0.0,
+                force=g.force_n, positionGain=0.2, velocityGain=1.0, maxVelocity=v, physicsClientId=c,
+            )
+
+    def open_gripper(self) -> None:
+        """Open to gripper.max_opening_m at gripper.speed_m_s."""
+        self.set_gripper_opening(self.settings.gripper.max_opening_m)
+
+    def close_gripper(self, *, force_n: float | None = None, speed_m_s: float | None = None) -> None:
+        """Close at a speed (default gripper.speed_m_s) until blocked, then squeeze with force_n per finger.
+
+        Each finger is a velocity motor limited to `force_n` (default gripper.force_n), so on an object
+        the grip force settles at that value, as on a Robotiq gripper.
+        """
+        c = self._check()
+        g = self.settings.gripper
+        f = g.force_n if force_n is None else float(force_n)
+        v = (g.speed_m_s if speed_m_s is None else float(speed_m_s)) / 2.0
+        for j in self._fingers:
+            pb.setJointMotorControl2(
+                self.robot_id, j, pb.VELOCITY_CONTROL, targetVelocity=-v, force=f, physicsClientId=c
+            )
+
+    def gripper_opening(self) -> float:
+        """Current distance between the finger pads, m."""
+        c = self._check()
+        return float(sum(s[0] for s in pb.getJointStates(self.robot_id, self._fingers, physicsClientId=c)))
+
+    def gripper_settled(self, *, tol_m_s: float = 2e-3) -> bool:
+        """True when both fingers have stopped (closed on an object, fully closed or at the target)."""
+        c = self._check()
+        return all(abs(s[1]) < tol_m_s for s in pb.getJointStates(self.robot_id, self._fingers, physicsClientId=c))
+
+    def grasped_object(self) -> int | None:
+        """Id of the object both fingers touch (contacts of the last step), or None."""
+        c = self._check()
+        touching = []
+        for link in _FINGER_LINKS:
+            pts = pb.getContactPoints(bodyA=self.robot_id, linkIndexA=self._link_index[link], physicsClientId=c)
+            touching.append({p[2] for p in pts if p[2] in self._objects})
+        both = touching[0] & touching[1]
+        return min(both) if both else None
+
+    def grasp_settled(self, *, tol_m_s: float = 2e-3) -> bool:
+        """True when the fingers have stopped on an object that both of them touch."""
+        return self.gripper_settled(tol_m_s=tol_m_s) and self.grasped_object() is not None
+
+    # ---- ground truth (metrics and tests only) ----------------------------------------------------
+    def body_ids(self) -> dict[str, int]:
+        """Every body by name: 'robot', fixture names, object names, 'aruco_marker'."""
+        return dict(self._bodies)
+
+    def link_indices(self) -> dict[str, int]:
+        """Robot link name -> PyBullet link index ('base_link' is -1)."""
+        return dict(self._link_index)
+
+    def object_ids(self) -> list[int]:
+        """Body ids of the scene objects, in config order."""
+        return list(self._objects)
+
+    def object_pose(self, body_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,), quaternion xyzw (4,)) of an object (its geometric centre)."""
+        c = self._check()
+        pos, quat = pb.getBasePositionAndOrientation(body_id, physicsClientId=c)
+        return np.array(pos), np.array(quat)
+
+    def object_state(self, body_id: int) -> ObjectState:
+        """Ground truth of one object."""
+        if body_id not in self._objects:
+            raise InvalidRequestError(f"{body_id} is not an object id; objects: {self.object_ids()}")
+        sp = self._objects[body_id]
+        pos, quat = self.object_pose(body_id)
+        z_axis = np.array(pb.getMatrixFromQuaternion(quat.tolist())).reshape(3, 3)[:, 2]
+        return ObjectState(
+            id=body_id, name=sp.name, cls=sp.template.cls, color=sp.color, position=pos,
+            orientation_xyzw=quat, lying=bool(abs(z_axis[2]) < math.sqrt(0.5)), size=sp.template.size,
+        )
+
+    def objects(self) -> list[ObjectState]:
+        """Ground truth of every object, in config order."""
+        return [self.object_state(i) for i in self._objects]
+
+    def set_object_pose(
+        self, body_id: int, position: Sequence[float] | np.ndarray, orientation_xyzw: Sequence[float] | np.ndarray
+    ) -> None:
+        """Teleport an object (zero velocity): for test setups, never during a measured run."""
+        c = self._check()
+        if body_id not in self._objects:
+            raise InvalidRequestError(f"{body_id} is not an object id; objects: {self.object_ids()}")
+        pos = _as_vec(position, 3, "position")
+        quat = _as_vec(orientation_xyzw, 4, "orientation_xyzw")
+        pb.resetBasePositionAndOrientation(body_id, pos.tolist(), (quat / np.linalg.norm(quat)).tolist(), physicsClientId=c)
+        pb.resetBaseVelocity(body_id, [0, 0, 0], [0, 0, 0], physicsClientId=c)
+
+    def link_pose(self, link_name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,), quaternion xyzw (4,)) of a robot link frame (e.g. 'tool0', 'tcp')."""
+        c = self._check()
+        if link_name not in self._link_index:
+            raise InvalidRequestError(f"unknown robot link {link_name!r}; links: {', '.join(self._link_index)}")
+        j = self._link_index[link_name]
+        if j < 0:
+            pos, quat = pb.getBasePositionAndOrientation(self.robot_id, physicsClientId=c)
+        else:
+            s = pb.getLinkState(self.robot_id, j, computeForwardKinematics=True, physicsClientId=c)
+            pos, quat = s[4], s[5]
+        return np.array(pos), np.array(quat)
+
+    def render(self, T_world_camera: np.ndarray, intrinsics: "Intrinsics", *, near_m: float, far_m: float) -> "RGBDFrame":
+        """Render an RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics.
+
+        Depth is converted from PyBullet's non-linear z-buffer to metres along the optical axis.
+        """
+        from twin.camera import RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix
+
+        c = self._check()
+        with _quiet_stdout(self._egl):
+            _, _, rgba, zbuf, _ = pb.getCameraImage(
+                intrinsics.width,
+                intrinsics.height,
+                viewMatrix=gl_view_matrix(T_world_camera),
+                projectionMatrix=gl_projection_matrix(intrinsics, near_m, far_m),
+                renderer=pb.ER_BULLET_HARDWARE_OPENGL if self._egl else pb.ER_TINY_RENDERER,
+                flags=pb.ER_NO_SEGMENTATION_MASK,
+                physicsClientId=c,
+            )
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(intrinsics.height, intrinsics.width, 4)[:, :, :3].copy()
+        zb = np.asarray(zbuf, dtype=np.float64).reshape(intrinsics.height, intrinsics.width)
+        return RGBDFrame(rgb, depth_from_zbuffer(zb, near_m, far_m), intrinsics)
+
+    def link_matrix(self, link_name: str) -> np.ndarray:
+        """(4, 4) pose of a robot link frame in the base frame."""
+        pos, quat = self.link_pose(link_name)
+        T = np.eye(4)
+        T[:3, :3] = np.array(pb.getMatrixFromQuaternion(quat.tolist())).reshape(3, 3)
+        T[:3, 3] = pos
+        return T
+
+    def marker_pose(self) -> np.ndarray:
+        """(4, 4) ground-truth pose of the ArUco marker frame (OpenCV convention) in the base frame."""
+        c = self._check()
+        if self._marker_id is None:
+            raise WorldError("this scene has no ArUco plate (add a fixture with urdf: urdf/aruco_plate.urdf)")
+        pos, quat = pb.getBasePositionAndOrientation(self._marker_id, physicsClientId=c)
+        T = np.eye(4)
+        T[:3, :3] = np.array(pb.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        T[:3, 3] = pos
+        return T
+
+    @staticmethod
+    def _points(raw: Sequence[Any]) -> list[ContactPoint]:
+        return [
+            ContactPoint(
+                body_a=p[1], body_b=p[2], link_a=p[3], link_b=p[4], position_on_a=np.array(p[5]),
+                position_on_b=np.array(p[6]), normal_on_b=np.array(p[7]), distance=float(p[8]),
+                normal_force=float(p[9]),
+            )
+            for p in raw
+        ]
+
+    def contacts(self, body_a: int | None = None, body_b: int | None = None) -> list[ContactPoint]:
+        """Contact points of the last physics step, optionally filtered to body A (and body B)."""
+        c = self._check()
+        kw: dict[str, int] = {}
+        if body_a is not None:
+            kw["bodyA"] = body_a
+        if body_b is not None:
+            if body_a is None:
+                raise InvalidRequestError("give body_a when filtering by body_b")
+            kw["bodyB"] = body_b
+        return self._points(pb.getContactPoints(physicsClientId=c, **kw))
+
+    def robot_contacts(self, *, ignore: Sequence[int] = ()) -> list[ContactPoint]:
+        """Contacts between the robot (any link) and any other body except `ignore` (e.g. the grasped object)."""
+        skip = set(ignore)
+        return [p for p in self.contacts(self.robot_id) if p.body_b not in skip and p.body_b != self.robot_id]
+
+    def closest_points(
+        self, body_a: int, body_b: int, max_distance_m: float, *, link_a: int | None = None, link_b: int | None = None
+    ) -> list[ContactPoint]:
+        """Closest-point pairs closer than max_distance_m (negative distance = penetration); no stepping."""
+        c = self._check()
+        kw: dict[str, int] = {}
+        if link_a is not None:
+            kw["linkIndexA"] = link_a
+        if link_b is not None:
+            kw["linkIndexB"] = link_b
+        return self._points(pb.getClosestPoints(body_a, body_b, max_distance_m, physicsClientId=c, **kw))
+
+
+def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Quaternion x-y-z-w of a rotation matrix (Shepperd's method)."""
+    m = R
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
+    q_arr = np.array(q)
+    return q_arr / np.linalg.norm(q_arr)
