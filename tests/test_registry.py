@@ -112,3 +112,16 @@ def test_third_party_plugin_is_listed_and_plans_by_name_from_config(acme_plugin,
         plan(s, load_config(cfg, ["planners.transfer.params.speed_fraction=3"]).planners["transfer"], req)
     with pytest.raises(ConfigError, match=r"unknown parameter 'sped'; allowed: speed_fraction"):
         plan(s, load_config(cfg, ["planners.transfer.params.sped=0.1"]).planners["transfer"], req)
+
+
+def test_every_hook_is_documented_in_the_readme():
+    from pathlib import Path
+
+    from twin.hookspecs import TwinSpec
+    from twin.registry import HOOKS
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    specs = {n for n in dir(TwinSpec) if n.startswith("twin_")}
+    assert specs == set(HOOKS)
+    for hook in specs:
+        assert f"`{hook}(registry)`" in readme, f"{hook} is not documented in README.md"
