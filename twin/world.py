@@ -152,6 +152,11 @@ def _flush_c_stdout() -> None:
         pass
 
 
+# Implicit cylinders: PyBullet otherwise meshes every cylinder into a polygon, and its geometry then
+# differs from the FCL planning scene's exact cylinders by up to 2 mm.
+_URDF_FLAGS = pb.URDF_USE_INERTIA_FROM_FILE | pb.URDF_USE_IMPLICIT_CYLINDER
+
+
 @contextmanager
 def _quiet_stdout(active: bool = True) -> Iterator[None]:
     """Silence C-level writes to stdout (fd 1) from PyBullet plugins; library code prints nothing."""
@@ -292,7 +297,7 @@ class World:
         try:
             self.robot_id = pb.loadURDF(
                 self._urdf(self.settings.robot.urdf), [0, 0, 0], [0, 0, 0, 1],
-                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+                useFixedBase=True, flags=_URDF_FLAGS, physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load robot URDF {self.settings.robot.urdf}: {e}") from None
@@ -321,7 +326,7 @@ class World:
         try:
             bid = pb.loadURDF(
                 self._urdf(urdf), list(position), pb.getQuaternionFromEuler(list(rpy)),
-                useFixedBase=True, flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+                useFixedBase=True, flags=_URDF_FLAGS, physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load fixture {name!r} from {urdf}: {e}") from None
@@ -468,7 +473,7 @@ class World:
         try:
             bid = pb.loadURDF(
                 self._urdf(sp.template.urdf), list(sp.position), _quat_from_matrix(R).tolist(),
-                flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c,
+                flags=_URDF_FLAGS, physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load object {sp.name!r} from {sp.template.urdf}: {e}") from None

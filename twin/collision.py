@@ -1,0 +1,780 @@
+"""FCL planning scene: the robot (from its URDF collision primitives), the static cell (fixture URDFs),
+perceived obstacle boxes and an object held in the gripper.
+
+Why this shape: planners call the collision check millions of times, so everything is built once and a
+query only moves the robot's shapes. Link poses come from a compiled, vectorised URDF chain (numpy); the
+shapes are moved with `setRotation/setTranslation` on persistent FCL objects; then
+* robot vs environment: one manager-vs-manager call of FCL's DynamicAABBTree broadphase (moving robot
+  shapes + held object vs fixtures + boxes);
+* self-collision: the allowed shape pairs are prefiltered with bounding spheres in one numpy step and
+  the few survivors (~3 per configuration) go to FCL's narrow phase directly. For distances the pairs
+  are visited in order of their sphere lower bound and the walk stops once the bound exceeds the best
+  distance found; that best distance then bounds the environment broadphase.
+
+Self-collision exclusions (`excluded_pairs`), computed from the URDF:
+1. links of one rigid body (joined by fixed joints only, e.g. wrist_3_link + tool0 + gripper_base);
+2. rigid bodies joined directly by one joint (base/shoulder, shoulder/upper_arm, ..., wrist_2/wrist_3
+   body, gripper_base body/fingers): their housings touch by construction;
+3. pairs in contact (signed distance <= 1 mm) at a reference configuration: all zeros and the home
+   posture, each with the gripper fully open and closed (this adds left_finger/right_finger, which
+   touch when closed);
+4. any pairs the caller adds (`extra_excluded_pairs`, e.g. from an SRDF-like "never collide" list).
+The held object is never tested against the rigid body it is attached to (wrist_3 .. tcp) nor the
+fingers. Links rigidly fixed to the world (base_link) are never tested against the environment: their
+pose cannot change, and base_link stands on the table.
+
+Padding: `padding_m` inflates every environment shape (fixtures and boxes) on each side; the robot, the
+held object and self-collision are unpadded. Distances to the environment are therefore reduced by the
+padding (exactly on faces, conservatively near box edges). Distances are signed: < 0 is a penetration.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import fcl
+import numpy as np
+
+from twin.errors import ConfigError, InvalidRequestError
+from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
+
+if TYPE_CHECKING:
+    from twin.config import Settings
+
+__all__ = ["PlanningScene", "DistanceResult", "PathCheck", "FixtureSpec"]
+
+log = logging.getLogger("twin")
+
+_CONTACT_TOL_M = 1e-3  # rule 3 above: "in contact" at a reference configuration
+_FAR = 1e9
+
+
+@dataclass(frozen=True)
+class DistanceResult:
+    """Smallest signed distance between the robot (incl. the held object) and anything it may hit.
+
+    distance: metres, < 0 = penetration depth of a colliding pair (not necessarily the deepest).
+    robot_part: robot link (or held object) name; other: environment object or robot link name.
+    self_collision: the pair is robot-robot. Names are '' when nothing can be measured.
+    """
+
+    distance: float
+    robot_part: str
+    other: str
+    self_collision: bool = False
+
+    @property
+    def in_collision(self) -> bool:
+        return self.distance <= 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class PathCheck:
+    """Result of `check_path`: `segment` i means the collision lies between qs[i] and qs[i+1] (or at
+    qs[0] for i = 0); `q` is the first colliding interpolated configuration."""
+
+    free: bool
+    segment: int | None = None
+    q: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class FixtureSpec:
+    """A static body: name, URDF path and (4, 4) pose in the world (= robot base) frame."""
+
+    name: str
+    urdf: str | Path
+    pose: np.ndarray
+
+
+class _Vec:
+    """Hands python-fcl a persistent buffer view: its setters call `arr.astype(float64)` and read the
+    memory, so returning a ready memoryview skips a numpy copy per call (halves the transfer cost)."""
+
+    __slots__ = ("mv",)
+
+    def __init__(self, mv: memoryview):
+        self.mv = mv
+
+    def astype(self, *_: Any, **__: Any) -> memoryview:
+        return self.mv
+
+
+def _geometry(kind: str, size: Sequence[float], pad: float = 0.0) -> Any:
+    if kind == "box":
+        return fcl.Box(*(float(s) + 2 * pad for s in size))
+    if kind == "cylinder":
+        return fcl.Cylinder(float(size[0]) + pad, float(size[1]) + 2 * pad)
+    if kind == "sphere":
+        return fcl.Sphere(float(size[0]) + pad)
+    if kind == "capsule":
+        return fcl.Capsule(float(size[0]) + pad, float(size[1]))
+    raise ConfigError(f"collision shape {kind!r} is not supported by the planning scene (use primitives)")
+
+
+def _bounding_radius(kind: str, size: Sequence[float]) -> float:
+    """Radius of the sphere about the shape's origin that encloses it (all primitives are centred)."""
+    if kind == "box":
+        return 0.5 * math.sqrt(sum(float(v) ** 2 for v in size))
+    if kind == "cylinder":
+        return math.hypot(float(size[0]), 0.5 * float(size[1]))
+    if kind == "capsule":
+        return float(size[0]) + 0.5 * float(size[1])
+    return float(size[0])
+
+
+def _tf(T: np.ndarray) -> Any:
+    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
+
+
+class _CollideFlag:
+    __slots__ = ("hit",)
+
+    def __init__(self) -> None:
+        self.hit = False
+
+
+def _collide_cb(o1: Any, o2: Any, flag: _CollideFlag) -> bool:
+    if fcl.collide(o1, o2, _CREQ):
+        flag.hit = True
+        return True
+    return False
+
+
+class _DistAcc:
+    """Running minimum handed to the broadphase; starting it at a known bound prunes every farther pair."""
+
+    __slots__ = ("request", "result")
+
+    def __init__(self, bound: float = _FAR) -> None:
+        self.request = _DREQ
+        self.result = fcl.DistanceResult(bound)
+
+
+def _distance_cb(o1: Any, o2: Any, acc: _DistAcc) -> tuple[bool, float]:
+    fcl.distance(o1, o2, acc.request, acc.result)
+    # keep exploring overlapping AABBs after a penetration so the deepest one is usually found
+    return False, max(acc.result.min_distance, 1e-12)
+
+
+_CREQ = fcl.CollisionRequest()
+_DREQ = fcl.DistanceRequest(enable_signed_distance=True)
+
+
+_ONES3 = np.ones(3)
+_HELD = "\0held"  # node name of the held object in the self-collision pair list
+
+
+class PlanningScene:
+    """Collision and distance queries for the arm in its cell.
+
+    `q`: (6,) joint angles, rad (shoulder_pan .. wrist_3); `qs`: (n, 6). Poses are (4, 4) in the
+    world = robot base frame, sizes in metres. Build with `PlanningScene.from_settings(settings)`.
+    Not thread-safe: a query moves the scene's shared FCL objects (use one scene per thread/process).
+    """
+
+    def __init__(
+        self,
+        robot_urdf: str | Path,
+        *,
+        fixtures: Sequence[FixtureSpec] = (),
+        padding_m: float = 0.0,
+        reference_configs: Iterable[Sequence[float]] = (),
+        extra_excluded_pairs: Iterable[tuple[str, str]] = (),
+        finger_opening_m: float | None = None,
+        tcp_link: str = "tcp",
+    ):
+        if not (math.isfinite(padding_m) and 0.0 <= padding_m < 1.0):
+            raise InvalidRequestError(f"padding_m must be in [0, 1) m, got {padding_m}")
+        self.padding_m = float(padding_m)
+        self.model = m = RobotModel.from_urdf(robot_urdf)
+        if len(m.arm_joints) != 6:
+            raise ConfigError(f"{robot_urdf}: expected 6 arm joints, found {list(m.arm_joints)}")
+        if tcp_link not in m.link_index:
+            raise ConfigError(f"{robot_urdf}: no link named {tcp_link!r} for the tcp")
+        arm = set(m.arm_joints)
+        for j in m.joint_order:
+            if j.mimic is not None and j.mimic[0] in arm:
+                raise ConfigError(f"{robot_urdf}: joint {j.name!r} mimics an arm joint; not supported")
+        self.tcp_link = tcp_link
+        # each finger moves half the opening (RobotModel convention): the stroke is twice the smallest range
+        g = m.gripper_joints
+        self.max_opening_m = 2.0 * min(m.joints[n].upper for n in g) if g else 0.0
+        self._opening = self.max_opening_m if finger_opening_m is None else float(finger_opening_m)
+        self._check_opening(self._opening)
+
+        # ---- compiled chain: frame 0 = root, frame k+1 = child link of arm joint k ---------------
+        self._frame_links = [m.root] + [m.joints[n].child for n in m.arm_joints]
+        self._frame_of = {ln: self._frame_links.index(m.rigid_parent(ln, movable=m.arm_joints)) for ln in m.link_names}
+        order = sorted(range(6), key=lambda k: m.joint_order.index(m.joints[m.arm_joints[k]]))
+        self._chain = [(k, self._frame_of[m.joints[m.arm_joints[k]].parent]) for k in order]
+        self._revolute = np.array([m.joints[n].type != "prismatic" for n in m.arm_joints])
+        self._all_revolute = bool(self._revolute.all())
+        self._F_list: list[np.ndarray] = [np.eye(4)] * 7
+        self._gen = np.zeros((6, 4, 4))  # generator of each joint's motion (rotation K or translation)
+        for k, n in enumerate(m.arm_joints):
+            a = m.joints[n].axis
+            if self._revolute[k]:
+                self._gen[k, :3, :3] = [[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]]
+            else:
+                self._gen[k, :3, 3] = a
+
+        # ---- robot shapes (built once; fcl reports the python geometry back in distance results) --
+        self._shapes = m.shapes()
+        for s in self._shapes:
+            if s.kind == "mesh":
+                raise ConfigError(f"{robot_urdf}: link {s.link!r} uses a mesh; the planning scene needs primitives")
+        self._owner: dict[int, tuple[str, bool]] = {}  # id(geometry) -> (name, is_robot)
+        self._geom_object: dict[int, Any] = {}  # id(geometry) -> its CollisionObject
+        self._warm: tuple[Any, Any, tuple[str, str]] | None = None  # last closest robot/env objects
+        self._scratch = fcl.DistanceResult()  # reused: a fresh one costs as much as the distance itself
+        self._shape_objects = []
+        for s in self._shapes:
+            geom = _geometry(s.kind, s.size)
+            self._owner[id(geom)] = (s.link, True)
+            self._shape_objects.append(fcl.CollisionObject(geom))
+            self._geom_object[id(geom)] = self._shape_objects[-1]
+        self._shape_radius = [_bounding_radius(s.kind, s.size) for s in self._shapes]
+        self._static_links = {ln for ln in m.link_names if self._frame_of[ln] == 0}
+        self._held_excluded = self._rigid_body_links(self.tcp_link) | self._gripper_links()
+        self._attached: tuple[str, Any, np.ndarray, Any, float] | None = None  # name, obj, T_tcp_obj, geom, radius
+        self._update_constants()
+        refs = [np.zeros(6)] + [np.asarray(r, dtype=float) for r in reference_configs]
+        excl = self._compute_exclusions(refs)
+        for a, b in extra_excluded_pairs:
+            if a not in m.link_index or b not in m.link_index:
+                raise ConfigError(f"excluded pair ({a!r}, {b!r}) names a link that {robot_urdf} does not have")
+            excl.add((a, b) if m.link_index[a] < m.link_index[b] else (b, a))
+        self.excluded_pairs: frozenset[tuple[str, str]] = frozenset(excl)
+
+        # ---- environment ---------------------------------------------------------------------------
+        self._env = fcl.DynamicAABBTreeCollisionManager()
+        self._env_objects: dict[str, list[tuple[Any, Any]]] = {}
+        self._fixture_names: set[str] = set()
+        for fx in fixtures:
+            self._add_fixture(fx)
+        self._env.setup()
+        self._rebuild_robot()
+
+    @classmethod
+    def from_settings(cls, settings: "Settings") -> "PlanningScene":
+        """Robot from settings.robot.urdf (gripper fully open), fixtures from settings.world.fixtures,
+        padding from settings.collision.padding_m; the home posture is an exclusion reference."""
+        fixtures = [
+            FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
+            for f in settings.world.fixtures
+        ]
+        return cls(
+            settings.resolve(settings.robot.urdf),
+            fixtures=fixtures,
+            padding_m=settings.collision.padding_m,
+            reference_configs=[settings.robot.home],
+        )
+
+    # =============================================================================================
+    # construction helpers
+    # =============================================================================================
+    def _check_opening(self, w: float) -> None:
+        if not (math.isfinite(w) and -1e-12 <= w <= self.max_opening_m + 1e-12):
+            raise InvalidRequestError(f"gripper opening must be in [0, {self.max_opening_m}] m, got {w}")
+
+    def _rigid_body_links(self, link: str) -> set[str]:
+        m = self.model
+        root = m.rigid_parent(link)
+        return {ln for ln in m.link_names if m.rigid_parent(ln) == root}
+
+    def _gripper_links(self) -> set[str]:
+        """Links moved by a gripper joint (the fingers and anything below them)."""
+        m = self.model
+        out: set[str] = set()
+        for gj in m.gripper_joints:
+            start = m.joints[gj].child
+            for ln in m.link_names:
+                cur: str | None = ln
+                while cur is not None and cur != start:
+                    cur = m.parent_link(cur)
+                if cur == start:
+                    out.add(ln)
+        return out
+
+    def _update_constants(self) -> None:
+        """Constants of the compiled chain at the current finger opening: local joint transforms are
+        A + u*B + v*C with u = sin q, v = 1 - cos q (revolute, Rodrigues) or u = q, v = 0 (prismatic)."""
+        m = self.model
+        L0 = m.link_pose_array(np.zeros((1, 6)), finger_opening=self._opening)[0]
+        F0inv = [np.linalg.inv(L0[m.link_index[ln]]) for ln in self._frame_links]
+        J = np.empty((6, 4, 4))
+        for k, name in enumerate(m.arm_joints):
+            j = m.joints[name]
+            J[k] = F0inv[self._frame_of[j.parent]] @ L0[m.link_index[j.parent]] @ j.origin
+        self._A = J
+        self._B = J @ self._gen
+        self._C = J @ self._gen @ self._gen
+        self._C[~self._revolute] = 0.0
+        self._ABC = np.ascontiguousarray(np.stack([self._A, self._B, self._C], axis=1).reshape(6, 3, 16))
+        self._W = np.ones((6, 3))
+        # every link relative to its frame, and every shape relative to its frame
+        self._link_const = {ln: F0inv[self._frame_of[ln]] @ L0[m.link_index[ln]] for ln in m.link_names}
+        self._shape_const = np.array([self._link_const[s.link] @ s.origin for s in self._shapes])
+        self._tcp_frame = self._frame_of[self.tcp_link]
+        self._tcp_const = self._link_const[self.tcp_link]
+        if hasattr(self, "_objects"):
+            self._refresh_constants()
+
+    def _compute_exclusions(self, refs: list[np.ndarray]) -> set[tuple[str, str]]:
+        m = self.model
+        geo_links = [ln for ln in m.link_names if m.links[ln].shapes]
+        body = {ln: m.rigid_parent(ln) for ln in m.link_names}
+        excl: set[tuple[str, str]] = set()
+        for a, b in itertools.combinations(geo_links, 2):
+            ba, bb = body[a], body[b]
+            pa, pb = m.parent_link(ba), m.parent_link(bb)
+            if ba == bb or (pa is not None and body[pa] == bb) or (pb is not None and body[pb] == ba):
+                excl.add((a, b))
+        saved = self._opening
+        frames = [self._frame_of[s.link] for s in self._shapes]
+        for w in (0.0, self.max_opening_m):
+            self._opening = w
+            self._update_constants()
+            for q in refs:
+                T = self._frames(q[None])[0][frames] @ self._shape_const
+                objs = [fcl.CollisionObject(_geometry(s.kind, s.size), _tf(T[i])) for i, s in enumerate(self._shapes)]
+                for i, k in itertools.combinations(range(len(self._shapes)), 2):
+                    a, b = self._shapes[i].link, self._shapes[k].link
+                    if a == b or (a, b) in excl or (b, a) in excl:
+                        continue
+                    if fcl.distance(objs[i], objs[k], _DREQ, fcl.DistanceResult()) <= _CONTACT_TOL_M:
+                        excl.add((a, b))
+                        log.debug("self-collision exclusion (contact at a reference posture): %s - %s", a, b)
+        self._opening = saved
+        self._update_constants()
+        pos = m.link_index
+        return {(a, b) if pos[a] < pos[b] else (b, a) for a, b in excl}
+
+    def _allowed(self, a: str, b: str) -> bool:
+        if a == b:
+            return False
+        if _HELD in (a, b):
+            return (b if a == _HELD else a) not in self._held_excluded
+        return (a, b) not in self.excluded_pairs and (b, a) not in self.excluded_pairs
+
+    def _rebuild_robot(self) -> None:
+        """(Re)build the robot object list, self pairs, transfer buffer and the moving-shape broadphase
+        (at construction, attach and detach)."""
+        objects = list(self._shape_objects)
+        nodes = [s.link for s in self._shapes]
+        frames = [self._frame_of[s.link] for s in self._shapes]
+        radius = list(self._shape_radius)
+        if self._attached is not None:
+            objects.append(self._attached[1])
+            nodes.append(_HELD)
+            frames.append(self._tcp_frame)
+            radius.append(self._attached[4])
+        self._objects = objects
+        self._warm = None
+        self._object_frame = np.array(frames, dtype=int)
+        self._moving = [i for i, f in enumerate(frames) if f != 0]
+        self._moving_objects = [objects[i] for i in self._moving]
+        # self pairs at shape level, with their bounding-sphere radius sums
+        pairs = [(i, k) for i, k in itertools.combinations(range(len(objects)), 2) if self._allowed(nodes[i], nodes[k])]
+        self._pa = np.array([i for i, _ in pairs], dtype=int)
+        self._pb = np.array([k for _, k in pairs], dtype=int)
+        rsum = np.array([radius[i] + radius[k] for i, k in pairs]) + 1e-9
+        self._rsum, self._rsum2 = rsum, rsum**2
+        # centre differences of all pairs as one product: (pairs x objects) selection @ centres
+        self._sel = np.zeros((len(pairs), len(objects)))
+        self._sel[np.arange(len(pairs)), self._pa] = 1.0
+        self._sel[np.arange(len(pairs)), self._pb] = -1.0
+        self._pair_objects = [(objects[i], objects[k]) for i, k in pairs]
+        self._refresh_constants()
+        # transfer buffer: per object a (4, 3) block = [R^T ; t], i.e. R column-major then t (see _Vec)
+        self._buf = np.zeros((len(objects), 4, 3))
+        self._t = self._buf[:, 3]  # translations = bounding-sphere centres
+        self._sinks = [(_Vec(memoryview(self._buf[i, :3])), _Vec(memoryview(self._buf[i, 3]))) for i in self._moving]
+        self._fast = self._probe_fast_path()
+        self._moving_manager = fcl.DynamicAABBTreeCollisionManager()
+        self._moving_manager.registerObjects(self._moving_objects)
+        self._moving_manager.setup()
+        # place every object once (static ones are never moved again) and refit the tree
+        self._pack(self._frames_one(np.zeros(6)))
+        for i, o in enumerate(objects):
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = self._buf[i, :3].T, self._buf[i, 3]
+            o.setTransform(_tf(T))
+        self._moving_manager.update()
+
+    def _refresh_constants(self) -> None:
+        """Per-object constant (object pose in its frame), transposed for the packing product."""
+        S = list(self._shape_const)
+        if self._attached is not None:
+            S.append(self._tcp_const @ self._attached[2])
+        self._ST = np.ascontiguousarray(np.transpose(np.array(S), (0, 2, 1)))
+
+    def _probe_fast_path(self) -> bool:
+        """Check once that python-fcl reads the buffer views as intended (else use plain arrays)."""
+        if not self._sinks:
+            return False
+        T = pose_from_xyz_rpy((0.1, -0.2, 0.3), (0.3, -0.5, 1.1))
+        i = self._moving[0]
+        saved = self._buf[i].copy()
+        self._buf[i, :3] = T[:3, :3].T
+        self._buf[i, 3] = T[:3, 3]
+        o = fcl.CollisionObject(fcl.Sphere(0.1))
+        try:
+            o.setRotation(self._sinks[0][0])
+            o.setTranslation(self._sinks[0][1])
+            ok = bool(np.allclose(o.getRotation(), T[:3, :3]) and np.allclose(o.getTranslation(), T[:3, 3]))
+        except Exception:  # pragma: no cover - depends on the python-fcl version
+            ok = False
+        self._buf[i] = saved
+        if not ok:  # pragma: no cover
+            log.warning("python-fcl setter shortcut unavailable; collision checks will be slower")
+        return ok
+
+    def _add_fixture(self, fx: FixtureSpec) -> None:
+        if fx.name in self._env_objects:
+            raise ConfigError(f"fixture name {fx.name!r} is used twice")
+        shapes = read_fixture_shapes(fx.urdf, np.asarray(fx.pose, dtype=float))
+        self._fixture_names.add(fx.name)
+        self._add_env(fx.name, [(s.kind, s.size, s.pose) for s in shapes])
+
+    def _add_env(self, name: str, shapes: list[tuple[str, tuple[float, ...], np.ndarray]]) -> None:
+        objs = []
+        for kind, size, pose in shapes:
+            geom = _geometry(kind, size, self.padding_m)
+            self._owner[id(geom)] = (name, False)
+            objs.append((fcl.CollisionObject(geom, _tf(pose)), geom))
+            self._geom_object[id(geom)] = objs[-1][0]
+        self._env_objects[name] = objs
+        if objs:
+            self._env.registerObjects([o for o, _ in objs])
+            self._env.update()
+
+    # =============================================================================================
+    # kinematics of the collision model
+    # =============================================================================================
+    def _frames(self, qs: np.ndarray) -> np.ndarray:
+        """(n, 7, 4, 4) frame poses (root + the 6 arm-joint child links) for (n, 6) qs."""
+        if self._all_revolute:
+            u, v = np.sin(qs), 1.0 - np.cos(qs)
+        else:
+            u = np.where(self._revolute, np.sin(qs), qs)
+            v = np.where(self._revolute, 1.0 - np.cos(qs), 0.0)
+        local = self._A + u[:, :, None, None] * self._B + v[:, :, None, None] * self._C
+        F = np.empty((qs.shape[0], 7, 4, 4))
+        F[:, 0] = np.eye(4)
+        for k, f in self._chain:
+            np.matmul(F[:, f], local[:, k], out=F[:, k + 1])
+        return F
+
+    def _frames_one(self, q: np.ndarray) -> np.ndarray:
+        """(7, 4, 4) frames for one configuration (2-D products: fewer numpy calls than _frames)."""
+        if self._all_revolute:
+            u, v = np.sin(q), 1.0 - np.cos(q)
+        else:
+            u = np.where(self._revolute, np.sin(q), q)
+            v = np.where(self._revolute, 1.0 - np.cos(q), 0.0)
+        W = self._W  # local_k = [1, u_k, v_k] @ [A_k; B_k; C_k]: one small matmul instead of five ops
+        W[:, 1] = u
+        W[:, 2] = v
+        local = np.matmul(W[:, None, :], self._ABC).reshape(6, 4, 4)
+        F = self._F_list  # ndarray.dot on 2-D arrays is ~2x cheaper than matmul for 4x4
+        for k, f in self._chain:
+            F[k + 1] = F[f].dot(local[k])
+        return np.array(F)
+
+    def _pack(self, F: np.ndarray) -> None:
+        """Object poses for frames F (7, 4, 4) into the transfer buffer: [R^T; t] = S^T @ F^T[:, :3]."""
+        np.matmul(self._ST, F.transpose(0, 2, 1)[self._object_frame, :, :3], out=self._buf)
+
+    def _pack_batch(self, F: np.ndarray) -> np.ndarray:
+        """(n, m, 4, 3) transfer blocks for frames F (n, 7, 4, 4)."""
+        return self._ST @ F.transpose(0, 1, 3, 2)[:, self._object_frame, :, :3]
+
+    def _push(self) -> None:
+        """Move the moving FCL objects to the poses in the transfer buffer and refit their tree."""
+        if self._fast:
+            for o, (rv, tv) in zip(self._moving_objects, self._sinks):
+                o.setRotation(rv)
+                o.setTranslation(tv)
+        else:  # pragma: no cover
+            for i, o in zip(self._moving, self._moving_objects):
+                o.setRotation(np.ascontiguousarray(self._buf[i, :3].T))
+                o.setTranslation(self._buf[i, 3].copy())
+        self._moving_manager.update()
+
+    def _prepare(self, q: np.ndarray) -> None:
+        self._pack(self._frames_one(q))
+        self._push()
+
+    def _iter_prepared(self, qs: np.ndarray, chunk: int = 256) -> Iterator[int]:
+        for start in range(0, qs.shape[0], chunk):
+            P = self._pack_batch(self._frames(qs[start : start + chunk]))
+            for i in range(P.shape[0]):
+                self._buf[...] = P[i]
+                self._push()
+                yield start + i
+
+    @staticmethod
+    def _as_q(q: np.ndarray) -> np.ndarray:
+        a = np.asarray(q, dtype=float)
+        if a.shape != (6,):
+            raise InvalidRequestError(f"q must have shape (6,), got {a.shape}")
+        if not math.isfinite(a.sum()):
+            raise InvalidRequestError(f"q must be finite, got {a.tolist()}")
+        return a
+
+    @staticmethod
+    def _as_qs(qs: np.ndarray) -> np.ndarray:
+        a = np.asarray(qs, dtype=float)
+        if a.ndim != 2 or a.shape[1] != 6:
+            raise InvalidRequestError(f"qs must have shape (n, 6), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise InvalidRequestError("qs must be finite")
+        return a
+
+    # =============================================================================================
+    # queries
+    # =============================================================================================
+    def _collides_now(self) -> bool:
+        if self._env_objects:
+            flag = _CollideFlag()
+            self._moving_manager.collide(self._env, flag, _collide_cb)
+            if flag.hit:
+                return True
+        d = self._sel.dot(self._t)
+        d *= d
+        for c in np.flatnonzero(d.dot(_ONES3) <= self._rsum2).tolist():
+            oa, ob = self._pair_objects[c]
+            if fcl.collide(oa, ob, _CREQ):
+                return True
+        return False
+
+    def _distance_now(self, include_self: bool = True) -> DistanceResult:
+        best, pair, is_self = _FAR, ("", ""), False
+        if include_self and len(self._pa):
+            d = self._sel.dot(self._t)
+            d *= d
+            lower = np.sqrt(d.dot(_ONES3)) - self._rsum  # sphere bound <= true distance
+            order = np.argsort(lower).tolist()
+            lower_l = lower.tolist()
+            res = self._scratch
+            res.min_distance = _FAR
+            bi = -1
+            for c in order:
+                if lower_l[c] >= best:
+                    break
+                oa, ob = self._pair_objects[c]
+                dc = fcl.distance(oa, ob, _DREQ, res)
+                if dc < best:
+                    best, bi = dc, c
+            if bi >= 0:
+                r = res
+                pair = (self._owner[id(r.o1)][0], self._owner[id(r.o2)][0])
+                is_self = True
+        if self._env_objects:
+            # warm start: the previous closest robot-environment pair bounds this query's broadphase
+            # (consecutive queries along a path usually share it, which prunes most of the tree)
+            warm = self._warm
+            if warm is not None:
+                scratch = self._scratch
+                scratch.min_distance = _FAR
+                dw = fcl.distance(warm[0], warm[1], _DREQ, scratch)
+                if dw < best:
+                    best, pair, is_self = dw, warm[2], False
+            acc = _DistAcc(best)
+            self._moving_manager.distance(self._env, acc, _distance_cb)
+            r = acc.result
+            if r.o1 is not None and r.min_distance < best:
+                g1, g2 = (r.o1, r.o2) if self._owner[id(r.o1)][1] else (r.o2, r.o1)
+                pair = (self._owner[id(g1)][0], self._owner[id(g2)][0])
+                best, is_self = r.min_distance, False
+                self._warm = (self._geom_object[id(g1)], self._geom_object[id(g2)], pair)
+        if best >= _FAR:
+            return DistanceResult(math.inf, "", "")
+        return DistanceResult(float(best), pair[0], pair[1], self_collision=is_self)
+
+    def in_collision(self, q: np.ndarray) -> bool:
+        """True when the arm at q (6,) hits the environment or itself, or the held object hits either."""
+        self._prepare(self._as_q(q))
+        return self._collides_now()
+
+    def min_distance(self, q: np.ndarray, *, include_self: bool = True) -> DistanceResult:
+        """Smallest signed distance at q (6,) over robot-environment and allowed robot-robot pairs.
+
+        Some allowed self pairs never collide but stay close by construction (base_link/upper_arm_link
+        9-12.5 mm, wrist_1/wrist_3 >= 17 mm), so they often hold the minimum; pass include_self=False
+        for the clearance to the environment alone (obstacle-distance costs and constraints)."""
+        self._prepare(self._as_q(q))
+        return self._distance_now(include_self)
+
+    def in_collision_batch(self, qs: np.ndarray) -> np.ndarray:
+        """(n,) bool for (n, 6) configurations (link poses computed vectorised)."""
+        qs = self._as_qs(qs)
+        out = np.zeros(qs.shape[0], dtype=bool)
+        for i in self._iter_prepared(qs):
+            out[i] = self._collides_now()
+        return out
+
+    def min_distance_batch(self, qs: np.ndarray, *, include_self: bool = True) -> np.ndarray:
+        """(n,) signed minimum distances, m, for (n, 6) configurations (see min_distance)."""
+        qs = self._as_qs(qs)
+        out = np.empty(qs.shape[0])
+        for i in self._iter_prepared(qs):
+            out[i] = self._distance_now(include_self).distance
+        return out
+
+    def first_collision(self, qs: np.ndarray) -> int | None:
+        """Index of the first colliding configuration of (n, 6) qs, or None when all are free."""
+        qs = self._as_qs(qs)
+        for i in self._iter_prepared(qs, chunk=32):
+            if self._collides_now():
+                return i
+        return None
+
+    def check_path(self, qs: np.ndarray, *, resolution_rad: float = 0.01) -> PathCheck:
+        """Check the piecewise-linear joint path through (n, 6) waypoints, densified so that no joint
+        moves more than `resolution_rad` between two checked configurations; reports the first hit."""
+        qs = self._as_qs(qs)
+        if not (math.isfinite(resolution_rad) and resolution_rad > 0):
+            raise InvalidRequestError(f"resolution_rad must be > 0, got {resolution_rad}")
+        if qs.shape[0] == 0:
+            return PathCheck(True)
+        pts, seg = [qs[:1]], [0]
+        for i in range(qs.shape[0] - 1):
+            steps = max(1, int(math.ceil(float(np.abs(qs[i + 1] - qs[i]).max()) / resolution_rad)))
+            t = np.arange(1, steps + 1)[:, None] / steps
+            pts.append(qs[i] + t * (qs[i + 1] - qs[i]))
+            seg.extend([i] * steps)
+        dense = np.concatenate(pts)
+        k = self.first_collision(dense)
+        return PathCheck(True) if k is None else PathCheck(False, seg[k], dense[k].copy())
+
+    def link_poses(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """{link: (4, 4)} world poses of every robot link at q (6,), at the current gripper opening."""
+        F = self._frames_one(self._as_q(q))
+        return {ln: F[self._frame_of[ln]] @ C for ln, C in self._link_const.items()}
+
+    # =============================================================================================
+    # scene edits
+    # =============================================================================================
+    @property
+    def gripper_opening(self) -> float:
+        """Current total finger opening of the collision model, m."""
+        return self._opening
+
+    def set_gripper_opening(self, width_m: float) -> None:
+        """Move the collision model's fingers to a total opening of `width_m` (0 .. max stroke)."""
+        w = float(width_m)
+        self._check_opening(w)
+        self._opening = w
+        self._update_constants()
+
+    def names(self) -> list[str]:
+        """Names of the environment objects (fixtures and boxes), in insertion order."""
+        return list(self._env_objects)
+
+    def add_box(self, name: str, size: Sequence[float], pose: np.ndarray) -> None:
+        """Add (or replace) an obstacle box of full extents `size` (3,) at `pose` (4, 4) in the world
+        frame; fixtures cannot be replaced this way (remove them first)."""
+        if not isinstance(name, str) or not name:
+            raise InvalidRequestError("box name must be a non-empty string")
+        if name in self._fixture_names:
+            raise InvalidRequestError(f"{name!r} is a fixture; remove it first or choose another name")
+        sz = _check_size(size)
+        T = _check_pose(pose)
+        if name in self._env_objects:
+            self.remove(name)
+        self._add_env(name, [("box", sz, T)])
+
+    def add_box_bounds(self, name: str, lo: Sequence[float], hi: Sequence[float]) -> None:
+        """Add (or replace) an axis-aligned obstacle box between corners lo (3,) < hi (3,), world frame."""
+        a, b = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        if a.shape != (3,) or b.shape != (3,) or not (np.isfinite(a).all() and np.isfinite(b).all()):
+            raise InvalidRequestError(f"lo and hi must be 3 finite numbers each, got {lo!r}, {hi!r}")
+        if np.any(b <= a):
+            raise InvalidRequestError(f"need lo < hi on every axis, got lo={a.tolist()} hi={b.tolist()}")
+        T = np.eye(4)
+        T[:3, 3] = 0.5 * (a + b)
+        self.add_box(name, b - a, T)
+
+    def remove(self, name: str) -> None:
+        """Remove an environment object (box or fixture) by name."""
+        objs = self._env_objects.pop(name, None)
+        if objs is None:
+            raise InvalidRequestError(f"no object named {name!r} in the scene; present: {self.names()}")
+        for o, geom in objs:
+            self._env.unregisterObject(o)
+            self._owner.pop(id(geom), None)
+            self._geom_object.pop(id(geom), None)
+        self._warm = None
+        self._fixture_names.discard(name)
+        self._env.update()
+
+    @property
+    def attached(self) -> str | None:
+        """Name of the held object, or None."""
+        return None if self._attached is None else self._attached[0]
+
+    def attach_box(self, name: str, size: Sequence[float], T_tcp_object: np.ndarray) -> None:
+        """Hold a box of full extents `size` (3,) at `T_tcp_object` (4, 4, object in the tcp frame): it moves
+        with the tcp and is checked against the environment and the arm, not the gripper holding it."""
+        if self._attached is not None:
+            raise InvalidRequestError(f"already holding {self._attached[0]!r}; detach() first")
+        if not isinstance(name, str) or not name:
+            raise InvalidRequestError("attached object name must be a non-empty string")
+        sz = _check_size(size)
+        T = _check_pose(T_tcp_object)
+        geom = _geometry("box", sz)
+        self._owner[id(geom)] = (name, True)
+        self._attached = (name, fcl.CollisionObject(geom), T, geom, _bounding_radius("box", sz))
+        self._geom_object[id(geom)] = self._attached[1]
+        self._rebuild_robot()
+
+    def detach(self) -> str | None:
+        """Drop the held object from the model; returns its name (None when nothing was held)."""
+        if self._attached is None:
+            return None
+        name, geom = self._attached[0], self._attached[3]
+        self._owner.pop(id(geom), None)
+        self._geom_object.pop(id(geom), None)
+        self._attached = None
+        self._rebuild_robot()
+        return name
+
+    # ---- introspection ------------------------------------------------------------------------
+    def allowed_self_pairs(self) -> list[tuple[str, str]]:
+        """Robot link pairs checked against each other (the held object is not listed)."""
+        m = self.model
+        geo = [ln for ln in m.link_names if m.links[ln].shapes]
+        return [(a, b) for a, b in itertools.combinations(geo, 2) if self._allowed(a, b)]
+
+    def held_object_checked_against(self) -> list[str]:
+        """Robot links the held object is checked against (all but the tcp's rigid body and fingers)."""
+        m = self.model
+        return [ln for ln in m.link_names if m.links[ln].shapes and ln not in self._held_excluded]
+
+
+def _check_size(size: Sequence[float]) -> tuple[float, float, float]:
+    sz = np.asarray(size, dtype=float)
+    if sz.shape != (3,) or not np.isfinite(sz).all() or np.any(sz <= 0):
+        raise InvalidRequestError(f"box size must be 3 positive numbers, got {size!r}")
+    return (float(sz[0]), float(sz[1]), float(sz[2]))
+
+
+def _check_pose(pose: np.ndarray) -> np.ndarray:
+    T = np.asarray(pose, dtype=float)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise InvalidRequestError(f"pose must be a finite (4, 4) transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1.0) > 1e-6 or not np.allclose(
+        T[3], [0, 0, 0, 1]
+    ):
+        raise InvalidRequestError("pose must be rigid: orthonormal rotation with det +1 and last row 0 0 0 1")
+    return T
