@@ -406,3 +406,22 @@ def test_attaching_twice_without_detach_raises(settings):
     s.attach_box("a", (0.05, 0.05, 0.05), np.eye(4))
     with pytest.raises(InvalidRequestError):
         s.attach_box("b", (0.05, 0.05, 0.05), np.eye(4))
+
+
+def test_run_time_boxes_are_listed_with_their_bounds_and_the_held_box_with_its_size():
+    from twin.config import settings_from_dict
+
+    scene = PlanningScene.from_settings(settings_from_dict({}))
+    scene.add_box_bounds("obstacle", [-0.5, -0.2, 0.0], [-0.4, 0.3, 0.2])
+    b = scene.box_bounds()["obstacle"]
+    np.testing.assert_allclose([b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max], [-0.5, -0.4, -0.2, 0.3, 0.0, 0.2], atol=1e-12)
+    assert "table" not in scene.boxes()
+    scene.remove("obstacle")
+    assert scene.box_bounds() == {}
+    T = np.eye(4)
+    T[2, 3] = 0.02
+    scene.attach_box("cube", [0.05, 0.05, 0.05], T)
+    name, size, pose = scene.attached_box()
+    assert name == "cube" and size.tolist() == [0.05, 0.05, 0.05] and pose[2, 3] == 0.02
+    scene.detach()
+    assert scene.attached_box() is None

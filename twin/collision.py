@@ -42,6 +42,7 @@ import fcl
 import numpy as np
 
 from twin.errors import ConfigError, InvalidRequestError
+from twin.types import BoxBounds
 from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 
 if TYPE_CHECKING:
@@ -256,6 +257,7 @@ class PlanningScene:
         # ---- environment ---------------------------------------------------------------------------
         self._env = fcl.DynamicAABBTreeCollisionManager()
         self._env_objects: dict[str, list[tuple[Any, Any]]] = {}
+        self._boxes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._fixture_names: set[str] = set()
         for fx in fixtures:
             self._add_fixture(fx)
@@ -692,6 +694,7 @@ class PlanningScene:
         if name in self._env_objects:
             self.remove(name)
         self._add_env(name, [("box", sz, T)])
+        self._boxes[name] = (np.array(sz, dtype=float), T.copy())
 
     def add_box_bounds(self, name: str, lo: Sequence[float], hi: Sequence[float]) -> None:
         """Add (or replace) an axis-aligned obstacle box between corners lo (3,) < hi (3,), world frame."""
@@ -707,6 +710,7 @@ class PlanningScene:
     def remove(self, name: str) -> None:
         """Remove an environment object (box or fixture) by name."""
         objs = self._env_objects.pop(name, None)
+        self._boxes.pop(name, None)
         if objs is None:
             raise InvalidRequestError(f"no object named {name!r} in the scene; present: {self.names()}")
         for o, geom in objs:
@@ -716,6 +720,25 @@ class PlanningScene:
         self._warm = None
         self._fixture_names.discard(name)
         self._env.update()
+
+    def boxes(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The boxes added at run time (perceived obstacles): name -> (size (3,), pose (4, 4)), world frame."""
+        return {n: (sz.copy(), T.copy()) for n, (sz, T) in self._boxes.items()}
+
+    def box_bounds(self) -> dict[str, BoxBounds]:
+        """The run-time boxes as axis-aligned bounds (the AABB of a rotated box), world frame."""
+        out = {}
+        for n, (sz, T) in self._boxes.items():
+            half = np.abs(T[:3, :3]) @ (0.5 * sz)
+            lo, hi = T[:3, 3] - half, T[:3, 3] + half
+            out[n] = BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])
+        return out
+
+    def attached_box(self) -> tuple[str, np.ndarray, np.ndarray] | None:
+        """(name, size (3,), pose in the tcp frame (4, 4)) of the held box, or None."""
+        if self._attached is None:
+            return None
+        return self._attached[0], self._attached_size.copy(), self._attached[2].copy()
 
     @property
     def attached(self) -> str | None:
@@ -732,6 +755,7 @@ class PlanningScene:
         sz = _check_size(size)
         T = _check_pose(T_tcp_object)
         geom = _geometry("box", sz)
+        self._attached_size = np.array(sz, dtype=float)
         self._owner[id(geom)] = (name, True)
         self._attached = (name, fcl.CollisionObject(geom), T, geom, _bounding_radius("box", sz))
         self._geom_object[id(geom)] = self._attached[1]
