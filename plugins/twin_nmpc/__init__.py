@@ -1,0 +1,11 @@
+"""Built-in nmpc planners (registered through the `twin` entry-point group)."""
+
+from __future__ import annotations
+
+from twin import hookimpl
+from twin.registry import Registry
+
+
+@hookimpl
+def twin_register_planners(registry: Registry) -> None:
+    pass
