@@ -7,7 +7,6 @@ closed form of `ur_analytic_ik` (8 branches), then adds every 2*pi wrap that sta
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -68,14 +67,17 @@ class UR5e:
         q = np.asarray(q, dtype=float)
         if q.shape != (6,):
             raise InvalidRequestError(f"q must have shape (6,), got {q.shape}")
-        tool = self._tool.get(frame)
-        if tool is None:
-            _tool(frame, self.tcp_offset_m)  # raises with the allowed names
-        return ur_analytic_ik.ur5e.forward_kinematics(*q) @ tool
+        return ur_analytic_ik.ur5e.forward_kinematics(*q) @ self._tool_for(frame)
 
     def fk_batch(self, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(n, 4, 4) poses for (n, 6) configurations (vectorised DH)."""
-        return self.dh_frames(qs)[:, 6] @ self._tool[frame] if frame in self._tool else _tool(frame, 0)
+        return self.dh_frames(qs)[:, 6] @ self._tool_for(frame)
+
+    def _tool_for(self, frame: str) -> np.ndarray:
+        tool = self._tool.get(frame)
+        if tool is None:
+            raise InvalidRequestError(f"unknown frame {frame!r}; allowed: {', '.join(_FRAMES)}")
+        return tool
 
     def dh_frames(self, qs: np.ndarray) -> np.ndarray:
         """(n, 7, 4, 4) DH frames 0..6 in the base frame for (n, 6) configurations."""
@@ -103,42 +105,43 @@ class UR5e:
         return out
 
     # ---- inverse kinematics -------------------------------------------------------------------
-    def ik(self, T: np.ndarray, frame: str = "tcp", *, tol: float = 1e-6) -> np.ndarray:
+    def ik(self, T: np.ndarray, frame: str = "tcp", *, tol: float = 1e-6, all_wraps: bool = True) -> np.ndarray:
         """(k, 6) every analytic solution for pose `T` of `frame`, with all 2*pi wraps inside the limits.
 
         Solutions that do not reproduce `T` within `tol` (m and rad, near singular branches) are dropped.
-        k = 0 when the pose is out of reach.
+        k = 0 when the pose is out of reach. `all_wraps=False` gives only the (at most 8) branches with
+        every angle in [-pi, pi).
         """
         T = np.asarray(T, dtype=float)
         if T.shape != (4, 4):
             raise InvalidRequestError(f"T must be a (4, 4) homogeneous transform, got shape {T.shape}")
-        if frame not in self._tool:
-            _tool(frame, self.tcp_offset_m)
-        T_flange = T @ self._tool_inv[frame]
-        branches = [np.asarray(s, dtype=float) for s in ur_analytic_ik.ur5e.inverse_kinematics(T_flange)]
-        sols: list[np.ndarray] = []
-        for s in branches:
+        T_flange = T @ self._tool_inv.get(frame, self._tool_for(frame))
+        branches: list[np.ndarray] = []
+        for s in ur_analytic_ik.ur5e.inverse_kinematics(T_flange):
+            s = np.asarray(s, dtype=float)
             if not np.all(np.isfinite(s)):
                 continue
             s = wrap_to_pi(s)
             F = ur_analytic_ik.ur5e.forward_kinematics(*s)
             if np.abs(F[:3, 3] - T_flange[:3, 3]).max() > tol or np.abs(F[:3, :3] - T_flange[:3, :3]).max() > tol:
                 continue
-            sols.extend(self._wraps(s))
-        if not sols:
+            # branches can coincide at singular poses: keep one of each
+            if not any(np.abs(s - b).max() < 1e-9 for b in branches):
+                branches.append(s)
+        if not branches:
             return np.zeros((0, 6))
-        arr = np.array(sols)
-        # branches can coincide at singular poses: keep one of each
-        _, idx = np.unique(np.round(arr, 9), axis=0, return_index=True)
-        return arr[np.sort(idx)]
+        arr = np.array(branches)
+        if not all_wraps:
+            return arr[[self.within_limits(a) for a in arr]]
+        return np.concatenate([self._wraps(a) for a in arr])
 
-    def _wraps(self, s: np.ndarray) -> list[np.ndarray]:
-        options = []
-        for j in range(6):
-            lo, hi = self.joint_limits[j]
-            vals = [v for v in (s[j] - _TWO_PI, s[j], s[j] + _TWO_PI) if lo - 1e-12 <= v <= hi + 1e-12]
-            options.append(vals)
-        return [np.array(c) for c in itertools.product(*options)]
+    def _wraps(self, s: np.ndarray) -> np.ndarray:
+        """Every combination of s_j + {-2pi, 0, 2pi} inside the joint limits, (m, 6)."""
+        cand = s[:, None] + np.array([-_TWO_PI, 0.0, _TWO_PI])[None, :]
+        ok = (cand >= self.joint_limits[:, :1] - 1e-12) & (cand <= self.joint_limits[:, 1:] + 1e-12)
+        options = [cand[j, ok[j]] for j in range(6)]
+        grids = np.meshgrid(*options, indexing="ij")
+        return np.stack([g.reshape(-1) for g in grids], axis=1)
 
     def within_limits(self, q: np.ndarray) -> bool:
         q = np.asarray(q, dtype=float)
@@ -147,13 +150,28 @@ class UR5e:
     # ---- differential kinematics --------------------------------------------------------------
     def jacobian(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(6, 6) geometric Jacobian in the base frame: rows vx, vy, vz, wx, wy, wz."""
-        F = self.dh_frames(np.asarray(q, dtype=float)[None])[0]
-        p = (F[6] @ self._tool[frame])[:3, 3] if frame in self._tool else _tool(frame, 0)
-        J = np.empty((6, 6))
+        q = np.asarray(q, dtype=float)
+        tool = self._tool_for(frame)
+        origins = np.empty((6, 3))
+        axes = np.empty((6, 3))
+        F = np.eye(4)
+        ca, sa = np.cos(DH_ALPHA), np.sin(DH_ALPHA)
         for i in range(6):
-            z = F[i][:3, 2]
-            J[:3, i] = np.cross(z, p - F[i][:3, 3])
-            J[3:, i] = z
+            origins[i], axes[i] = F[:3, 3], F[:3, 2]
+            ct, st = math.cos(q[i]), math.sin(q[i])
+            A = np.array(
+                [
+                    [ct, -st * ca[i], st * sa[i], DH_A[i] * ct],
+                    [st, ct * ca[i], -ct * sa[i], DH_A[i] * st],
+                    [0.0, sa[i], ca[i], DH_D[i]],
+                    [0.0, 0.0, 0.0, 1.0],
+                ]
+            )
+            F = F @ A
+        p = (F @ tool)[:3, 3]
+        J = np.empty((6, 6))
+        J[:3] = np.cross(axes, p - origins).T
+        J[3:] = axes.T
         return J
 
     def manipulability(self, q: np.ndarray, frame: str = "tcp") -> float:
