@@ -25,6 +25,8 @@ __all__ = [
     "MotionResult",
     "Trajectory",
     "BoxBounds",
+    "ObjectOutcome",
+    "RunSummary",
     "as_q",
 ]
 
@@ -284,3 +286,58 @@ class BoxBounds:
     def extended_y(self, margin_m: float) -> "BoxBounds":
         """The box grown by `margin_m` in +y and -y (the warehouse system's trick to force going over)."""
         return BoxBounds(self.x_min, self.x_max, self.y_min - margin_m, self.y_max + margin_m, self.z_min, self.z_max)
+
+
+@dataclass(frozen=True)
+class ObjectOutcome:
+    """What happened to one object in a task run (judged by physics ground truth at the end)."""
+
+    id: str
+    cls: str
+    color: str | None
+    target_bin: str
+    placed: bool
+    error: str | None = None  # why it was not placed (None when placed)
+    cycle_time_s: float = 0.0  # simulated time spent on this object
+    pose_error_m: float | None = None  # perceived vs true centroid, xy
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """One `twin run`: per-object outcomes and totals; `to_json()` is the --json file's content."""
+
+    config: str
+    seed: int
+    planner: str
+    objects: tuple[ObjectOutcome, ...]
+    sim_time_s: float
+    wall_time_s: float
+    metrics: dict[str, Any] = field(default_factory=dict)  # planner metrics gathered over the run
+
+    @property
+    def success_rate(self) -> float:
+        return sum(o.placed for o in self.objects) / len(self.objects) if self.objects else 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "config": self.config,
+            "seed": self.seed,
+            "planner": self.planner,
+            "objects": [
+                {
+                    "id": o.id,
+                    "class": o.cls,
+                    "color": o.color,
+                    "target_bin": o.target_bin,
+                    "placed": o.placed,
+                    "error": o.error,
+                    "cycle_time_s": o.cycle_time_s,
+                    "pose_error_m": o.pose_error_m,
+                }
+                for o in self.objects
+            ],
+            "success_rate": self.success_rate,
+            "sim_time_s": self.sim_time_s,
+            "wall_time_s": self.wall_time_s,
+            "metrics": self.metrics,
+        }
