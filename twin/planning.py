@@ -106,20 +106,27 @@ def make_planner(block: "PlannerBlock | str", context: PluginContext) -> Any:
 # ---- trajectory checks ----------------------------------------------------------------------------
 def densify(traj: Trajectory, kin: "UR5e", *, max_step_rad: float, max_step_m: float) -> np.ndarray:
     """(k, 6) configurations along `traj`, no joint moving more than `max_step_rad` and the TCP no more
-    than `max_step_m` between neighbours (measured on the samples, subdivided in time)."""
-    q = traj.q
-    if q.shape[0] == 1:
-        return q.copy()
-    dq = np.abs(np.diff(q, axis=0)).max(axis=1)
-    p = kin.fk_batch(q)[:, :3, 3]
-    dp = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    # a factor 2 margin on TCP travel: chords under-estimate arc length between samples
-    n_sub = np.maximum(1, np.ceil(np.maximum(dq / max_step_rad, 2.0 * dp / max_step_m))).astype(int)
-    ts = [traj.t[:1]]
-    for i, n in enumerate(n_sub):
-        ts.append(np.linspace(traj.t[i], traj.t[i + 1], n + 1)[1:])
-    qs, _, _ = traj.sample(np.concatenate(ts))
-    return qs
+    than `max_step_m` between neighbours.
+
+    Motion is measured in "units" per sample interval, max(|dq|/max_step_rad, 2 |dp|/max_step_m) (a
+    factor 2 on TCP travel because chords under-estimate arcs); check points are spaced one unit apart
+    along the accumulated units, so a dense 1 kHz trajectory is thinned and a coarse one subdivided.
+    """
+    if traj.q.shape[0] == 1:
+        return traj.q.copy()
+    ts, q = traj.t, traj.q
+    for _ in range(6):  # a coarse trajectory's chords hide its arcs: re-measure on the new points
+        dq = np.abs(np.diff(q, axis=0)).max(axis=1)
+        p = kin.fk_batch(q)[:, :3, 3]
+        dp = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        if ts is not traj.t and dq.max() <= max_step_rad and dp.max() <= max_step_m:
+            return q
+        units = np.concatenate(([0.0], np.cumsum(np.maximum(dq / max_step_rad, 2.0 * dp / max_step_m))))
+        n = max(1, int(np.ceil(units[-1] - 1e-9)))
+        ts = np.interp(np.linspace(0.0, units[-1], n + 1), units, ts)
+        ts[0], ts[-1] = traj.t[0], traj.t[-1]
+        q, _, _ = traj.sample(ts)
+    return q
 
 
 def first_collision(traj: Trajectory, scene: "PlanningScene", kin: "UR5e", *, max_step_rad: float = 0.01, max_step_m: float = 0.01) -> int | None:
@@ -137,6 +144,15 @@ def _goal_error(request: MotionRequest, q_end: np.ndarray, kin: "UR5e") -> float
     G = request.goal.pose.matrix()
     rot = np.linalg.norm(T[:3, :3] - G[:3, :3])
     return float(max(np.linalg.norm(T[:3, 3] - G[:3, 3]), rot))
+
+
+def _goal_position_error(request: MotionRequest, q_end: np.ndarray, kin: "UR5e") -> float:
+    """Distance (m) of the goal frame's origin at q_end from the goal position (a joint goal: its TCP)."""
+    if isinstance(request.goal, JointGoal):
+        target, frame = kin.fk(request.goal.q, "tcp")[:3, 3], "tcp"
+    else:
+        target, frame = np.asarray(request.goal.pose.position, dtype=float), request.goal.frame
+    return float(np.linalg.norm(kin.fk(q_end, frame)[:3, 3] - target))
 
 
 def _rollout(planner: RecedingHorizonPlanner, request: MotionRequest, scene: "PlanningScene", max_segments: int = 1000) -> MotionResult:
@@ -200,9 +216,16 @@ def _checked(result: MotionResult, request: MotionRequest, scene: "PlanningScene
     start_err = float(np.abs(traj.q[0] - request.start).max())
     if start_err > 1e-6:
         raise PlanningError(f"trajectory starts {start_err:.2e} rad away from the request's start")
-    goal_err = _goal_error(request, traj.q[-1], kin)
-    if goal_err > 1e-6:
-        return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"trajectory ends {goal_err:.2e} away from the goal")
+    tol_m = result.info.get("goal_tolerance_m")
+    if tol_m is not None:
+        # a planner that stops near the goal by design (receding horizon: NMPC) declares its TCP tolerance
+        goal_err = _goal_position_error(request, traj.q[-1], kin)
+        if goal_err > float(tol_m) + 1e-9:
+            return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"trajectory ends {goal_err:.4f} m from the goal (tolerance {tol_m} m)")
+    else:
+        goal_err = _goal_error(request, traj.q[-1], kin)
+        if goal_err > 1e-6:
+            return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"trajectory ends {goal_err:.2e} away from the goal")
     hit = first_collision(traj, scene, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
     if hit is not None:
         log.warning("planner returned a colliding trajectory; reported as COLLISION")
