@@ -77,6 +77,22 @@ def build_parser() -> argparse.ArgumentParser:
     goal.add_argument("--goal-pose", type=_pose_vector, help="tcp pose in the base frame: x,y,z,roll,pitch,yaw (m, rad)")
     p.add_argument("--time-limit", type=float, default=1.0, help="planning time limit, s (default 1)")
     p.add_argument("--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here")
+
+    p = sub.add_parser("run", help="run a sorting task end to end (perception to placed objects) and judge it")
+    _add_config_args(p)
+    p.add_argument("--planner", default=None, help="transfer planner name (replaces planners.transfer)")
+    p.add_argument("--gui", action="store_true", help="open PyBullet's window")
+    p.add_argument("--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera")
+    p.add_argument("--json", dest="json_path", default=None, help="write the run summary here")
+
+    p = sub.add_parser("compare", help="compare planners: planners x scenarios x seeds -> results.jsonl, summary, plots")
+    p.add_argument("config", help="comparison YAML (see configs/compare.yaml, configs/compare-smoke.yaml)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a comparison config value by dotted key, e.g. --set seeds=[0]")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: results/<name>)")
+    p.add_argument("--workers", type=int, default=None, metavar="N", help="parallel runs (default: all CPUs; 0: in this process)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool (default) or Ray (twin[ray])")
+    p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: skip runs already in results.jsonl")
     return parser
 
 
@@ -162,7 +178,67 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     return EXIT_OK if result.success else EXIT_NO_SOLUTION
 
 
-_COMMANDS = {"planners": _cmd_planners, "scene": _cmd_scene, "plan": _cmd_plan}
+def _cmd_run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from twin.tasks import run_task
+
+    settings = _settings(args)
+    console = Console(stderr=True)
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console, transient=True) as progress:
+        bar = progress.add_task(f"{settings.name} seed {settings.seed}: starting", total=None)
+        summary = run_task(
+            settings,
+            planner=args.planner,
+            gui=args.gui,
+            record=args.record,
+            config_name=str(args.config),
+            on_stage=lambda text: progress.update(bar, description=f"{settings.name} seed {settings.seed}: {text}"),
+        )
+    if args.json_path:
+        _write_json(args.json_path, summary.to_json())
+    table = Table(title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}")
+    for col in ("object", "class", "colour", "target", "placed", "cycle s", "pose err mm", "error"):
+        table.add_column(col)
+    for o in summary.objects:
+        table.add_row(
+            o.id, o.cls, o.color or "", o.target_bin, "yes" if o.placed else "no", f"{o.cycle_time_s:.1f}",
+            "" if o.pose_error_m is None else f"{o.pose_error_m * 1e3:.1f}", o.error or "",
+        )
+    Console(width=200).print(table)
+    print(f"placed {sum(o.placed for o in summary.objects)}/{len(summary.objects)} "
+          f"({summary.success_rate:.0%}), simulated {summary.sim_time_s:.1f} s, wall {summary.wall_time_s:.1f} s")
+    return EXIT_OK
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from twin.compare import run_comparison
+    from twin.compare.report import summary_table
+
+    def progress(row: dict[str, Any], done: int, total: int) -> None:
+        line = f"[{done}/{total}] {row['run_id']}: {row['status']}"
+        if not row.get("success") and row.get("reason"):
+            line += f" ({row['reason'][:100]})"
+        print(line, flush=True)
+
+    result = run_comparison(
+        args.config, out_dir=args.out, workers=args.workers, backend=args.backend, resume=args.resume,
+        overrides=args.overrides, on_row=progress,
+    )
+    Console(width=200).print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
+    if result.skipped:
+        print(f"skipped {len(result.skipped)} runs: {result.skipped[0][1]}")
+    print(f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before); wrote "
+          + ", ".join(str(f) for f in result.files))
+    return EXIT_OK
+
+
+_COMMANDS = {"planners": _cmd_planners, "scene": _cmd_scene, "plan": _cmd_plan, "run": _cmd_run}
+_COMMANDS["compare"] = _cmd_compare
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -267,10 +267,15 @@ class PlanningScene:
     @classmethod
     def from_settings(cls, settings: "Settings") -> "PlanningScene":
         """Robot from settings.robot.urdf (gripper fully open), fixtures from settings.world.fixtures,
-        padding from settings.collision.padding_m; the home posture is an exclusion reference."""
+        padding from settings.collision.padding_m; the home posture is an exclusion reference.
+
+        Fixtures marked `known: false` (obstacles the robot has to perceive) are left out: a task adds
+        what perception found with `add_box_bounds`.
+        """
         fixtures = [
             FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
             for f in settings.world.fixtures
+            if f.known
         ]
         return cls(
             settings.resolve(settings.robot.urdf),

@@ -29,6 +29,16 @@ __all__ = [
     "CameraSettings",
     "CollisionSettings",
     "PlannerBlock",
+    "TaskSettings",
+    "RobocupTaskSettings",
+    "WarehouseTaskSettings",
+    "DepthNoiseSettings",
+    "DetectorBlock",
+    "WarehousePerceptionSettings",
+    "IcpSettings",
+    "GraspEntry",
+    "RobocupPerceptionSettings",
+    "PerceptionSettings",
     "load_config",
     "settings_from_dict",
     "PROJECT_ROOT",
@@ -72,6 +82,7 @@ class FixtureSettings(_Model):
     urdf: str
     position: Vec3 = (0.0, 0.0, 0.0)
     rpy: Vec3 = (0.0, 0.0, 0.0)
+    known: bool = True  # in the planners' scene from the start; false: the robot must perceive it
 
 
 class ObjectSpec(_Model):
@@ -135,6 +146,27 @@ class ArucoSettings(_Model):
     size_m: float = Field(0.10, gt=0)
 
 
+class DepthNoiseSettings(_Model):
+    """D435i-like depth noise: RMS = z^2 * subpixel / (focal_px * baseline_m), plus dropouts.
+
+    Defaults give ~1 mm at 0.5 m, ~4 mm at 1 m, ~15 mm at 2 m (Intel's model for the D435i). Dropouts
+    are invalid pixels (depth 0): a random fraction everywhere and a larger one at depth edges, where a
+    stereo camera loses the match. `rgb_noise_std` is Gaussian pixel noise on the colour image (0..255).
+    """
+
+    enabled: bool = True
+    subpixel: float = Field(0.08, ge=0)
+    baseline_m: float = Field(0.05, gt=0)
+    focal_px: float = Field(424.0, gt=0)
+    dropout_fraction: float = Field(0.002, ge=0, le=1)
+    edge_dropout_fraction: float = Field(0.3, ge=0, le=1)
+    edge_threshold_m: float = Field(0.03, gt=0)
+    min_range_m: float = Field(0.17, ge=0)
+    max_range_m: float = Field(10.0, gt=0)
+    depth_unit_m: float = Field(0.001, ge=0)
+    rgb_noise_std: float = Field(2.0, ge=0)
+
+
 class CameraSettings(_Model):
     """RGB-D camera: D435i-like intrinsics at 640x480.
 
@@ -152,6 +184,13 @@ class CameraSettings(_Model):
     position: Vec3 = (-1.25, 0.0, 0.55)
     target: Vec3 = (-0.30, 0.0, 0.0)
     wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
+    noise: DepthNoiseSettings = Field(default_factory=DepthNoiseSettings)
+    # wrist mount: joint angles where the camera looks straight down from ~0.72 m above the table centre
+    # (image x along base +y), and the settling pause before a frame is taken there (seed 002: 3 s)
+    capture_pose: Q6 = (-0.2518, -1.2366, 0.4574, -0.7916, -1.5708, -0.2518)
+    settle_s: float = Field(3.0, ge=0)
+    # wrist mount: joint angles where the camera sees the base marker for `twin calibrate` (None: capture_pose)
+    calibration_pose: Q6 | None = None
 
     @model_validator(mode="after")
     def _near_far(self) -> "CameraSettings":
@@ -177,6 +216,169 @@ class PlannerBlock(_Model):
     retimer_params: dict[str, Any] = Field(default_factory=dict)
 
 
+class DetectorBlock(_Model):
+    """A detector plugin chosen by name, with its own parameters (validated by the plugin's model)."""
+
+    name: str = "geometric"
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class WarehousePerceptionSettings(_Model):
+    """Seeds 000/001 `cube_detector`: depth thresholds, RANSAC plane, DBSCAN, labels by mean colour.
+
+    `voxel_m` > 0 downsamples before DBSCAN (full-resolution DBSCAN takes seconds); `dbscan_min_points`
+    is the full-resolution value and is scaled by the downsampling ratio. Point counts (obstacle, cubes)
+    are counted in the full-resolution cloud. `roi_min`/`roi_max` (base frame) drop points of the robot
+    and anything off the table. `centroid`: "resting" takes x, y from the cluster's top face and z half way
+    between that face and the table (unbiased for boxes on the table); "mean" is the seed's plain mean of
+    the visible points (biased towards the camera and upwards).
+    """
+
+    min_depth_m: float = Field(0.25, ge=0)
+    max_depth_m: float = Field(1.5, gt=0)
+    plane_threshold_m: float = Field(0.02, gt=0)
+    plane_iterations: int = Field(500, ge=10)
+    dbscan_eps_m: float = Field(0.015, gt=0)
+    dbscan_min_points: int = Field(40, ge=1)
+    voxel_m: float = Field(0.004, ge=0)
+    obstacle_min_points: int = Field(10000, ge=1)
+    obstacle_color: str = "blue"
+    labels: list[str] = Field(default_factory=lambda: ["black", "red", "blue", "green"])
+    cube_min_points: int = Field(150, ge=1)
+    cube_max_extent_m: float = Field(0.09, gt=0)
+    roi_min: Vec3 = (-1.0, -0.8, -0.05)
+    roi_max: Vec3 = (0.2, 0.8, 0.35)
+    box_extension_y_m: float = Field(0.5, ge=0)
+    centroid: Literal["resting", "mean"] = "resting"
+
+
+class IcpSettings(_Model):
+    """Seed 002 ICP template refinement (MATLAB pcregistericp parameters)."""
+
+    template_points: int = Field(2048, ge=100)
+    denoise_neighbors: int = Field(10, ge=1)
+    denoise_std_ratio: float = Field(1.5, gt=0)
+    voxel_m: float = Field(0.003, ge=0)
+    voxel_above_points: int = Field(500, ge=1)
+    max_iterations: int = Field(60, ge=1)
+    tolerance: tuple[float, float] = (1e-4, 1e-6)  # translation (m), rotation (rad) change to stop
+    inlier_ratio: float = Field(0.7, gt=0, le=1)
+    min_points: int = Field(20, ge=3)
+    accept_rmse_m: float = Field(0.025, gt=0)
+
+
+class GraspEntry(_Model):
+    """One row of the grasp lookup: tcp height above the table (m) and gripper opening before closing (m)."""
+
+    z_grasp_m: float = Field(ge=0)
+    w_grip_m: float = Field(gt=0, le=0.085)
+
+
+def _default_grasp_table() -> dict[str, GraspEntry]:
+    rows = {
+        "bottle_vertical": (0.150, 0.085), "bottle_horizontal": (0.034, 0.085),
+        "can_vertical": (0.070, 0.085), "can_horizontal": (0.033, 0.085),
+        "spam_vertical": (0.050, 0.085), "spam_horizontal": (0.035, 0.085),
+        "cube_vertical": (0.0375, 0.085), "cube_horizontal": (0.0375, 0.085),
+        "marker_vertical": (0.090, 0.040), "marker_horizontal": (0.012, 0.040),
+    }
+    return {k: GraspEntry(z_grasp_m=z, w_grip_m=w) for k, (z, w) in rows.items()}
+
+
+class RobocupPerceptionSettings(_Model):
+    """Seed 002 pose estimation: table removal, PCA orientation rules, ICP, the grasp lookup.
+
+    PCA rules in order: alpha1 < alpha1_vertical_deg -> vertical; e > elongation_horizontal and alpha1 >
+    alpha1_horizontal_deg -> horizontal; alpha3 < alpha3_vertical_deg -> vertical; else horizontal.
+    Classes in `force_vertical` skip the rules (seed: spam). `height_check` (not in the seed) then compares
+    the object's top height above the table with its upright and lying heights and takes the nearer one
+    when they differ by more than `height_check_min_diff_m`: this fixes the seed's lying-can failure.
+    `grasp` keys are `<class>_<vertical|horizontal>`; entries given in a config replace the defaults key
+    by key.
+    """
+
+    min_depth_m: float = Field(0.20, ge=0)
+    max_depth_m: float = Field(1.5, gt=0)
+    table_threshold_m: float = Field(0.008, gt=0)
+    alpha1_vertical_deg: float = Field(30.0, gt=0, lt=90)
+    elongation_horizontal: float = Field(3.0, gt=1)
+    alpha1_horizontal_deg: float = Field(45.0, gt=0, lt=90)
+    alpha3_vertical_deg: float = Field(30.0, gt=0, lt=90)
+    force_vertical: list[str] = Field(default_factory=lambda: ["spam"])
+    height_check: bool = True
+    height_check_min_diff_m: float = Field(0.015, ge=0)
+    icp: IcpSettings = Field(default_factory=IcpSettings)
+    grasp: dict[str, GraspEntry] = Field(default_factory=_default_grasp_table)
+
+    @field_validator("grasp", mode="before")
+    @classmethod
+    def _merge_grasp(cls, v: Any) -> Any:
+        if not isinstance(v, dict):
+            return v
+        merged: dict[str, Any] = dict(_default_grasp_table())
+        merged.update(v)
+        for key in merged:
+            c, _, o = key.rpartition("_")
+            if not c or o not in ("vertical", "horizontal"):
+                raise ValueError(f"grasp key {key!r} must look like <class>_vertical or <class>_horizontal")
+        return merged
+
+
+class PerceptionSettings(_Model):
+    """What `twin perceive` runs: the warehouse pipeline (seeds 000/001) or the RoboCup one (seed 002).
+
+    `extrinsics`: how the camera-to-base transform is obtained; "auto" uses the ArUco marker for a fixed
+    camera and forward kinematics of the measured joints plus `camera.wrist_offset_m` for a wrist camera.
+    """
+
+    pipeline: Literal["robocup", "warehouse"] = "robocup"
+    extrinsics: Literal["auto", "aruco", "kinematics"] = "auto"
+    detector: DetectorBlock = Field(default_factory=DetectorBlock)
+    warehouse: WarehousePerceptionSettings = Field(default_factory=WarehousePerceptionSettings)
+    robocup: RobocupPerceptionSettings = Field(default_factory=RobocupPerceptionSettings)
+
+
+class RobocupTaskSettings(_Model):
+    """The seed-002 state machine: where each class goes and how the grasp is approached."""
+
+    # class (or class_colour, e.g. cube_red) -> the fixture name of its bin; the seed's log: spam -> green,
+    # red cube -> blue. Unlisted classes go to `default_bin`.
+    bins: dict[str, str] = Field(
+        default_factory=lambda: {"bottle": "bin_blue", "can": "bin_blue", "marker": "bin_blue", "spam": "bin_green", "cube": "bin_blue"}
+    )
+    default_bin: str = "bin_green"
+    hover_m: float = Field(0.20, gt=0, le=0.5)  # pre-grasp hover above the grasp point
+    place_clearance_m: float = Field(0.10, ge=0, le=0.5)  # object bottom above the bin walls when released
+    retries: int = Field(1, ge=0, le=5)  # a failed object is retried this often from a fresh perception
+
+
+class WarehouseTaskSettings(_Model):
+    """The seed-000/001 task: fixed drop location per colour on the robot's side of the obstacle."""
+
+    drop_zones: dict[str, Vec3] = Field(
+        default_factory=lambda: {
+            "black": (-0.28, -0.30, 0.0),
+            "red": (-0.28, -0.16, 0.0),
+            "blue": (-0.28, 0.18, 0.0),
+            "green": (-0.28, 0.32, 0.0),
+        }
+    )
+    drop_radius_m: float = Field(0.06, gt=0)  # success: the cube rests within this xy distance of its zone
+    hover_m: float = Field(0.15, gt=0, le=0.5)
+    release_height_m: float = Field(0.06, ge=0, le=0.5)  # cube bottom above the table when released
+    retries: int = Field(1, ge=0, le=5)
+
+
+class TaskSettings(_Model):
+    """Which reference system `twin run` runs, and its parameters."""
+
+    kind: Literal["robocup", "warehouse"] = "robocup"
+    robocup: RobocupTaskSettings = Field(default_factory=RobocupTaskSettings)
+    warehouse: WarehouseTaskSettings = Field(default_factory=WarehouseTaskSettings)
+    settle_s: float = Field(0.5, ge=0, le=5)  # pause after gripper actions (seed 002: 0.5-0.8 s)
+    max_sim_time_s: float = Field(900.0, gt=0)  # a run stops (objects left are failed) after this
+
+
 class Settings(_Model):
     """Everything a run needs, validated on load."""
 
@@ -189,6 +391,8 @@ class Settings(_Model):
     camera: CameraSettings = Field(default_factory=CameraSettings)
     collision: CollisionSettings = Field(default_factory=CollisionSettings)
     planners: dict[str, PlannerBlock] = Field(default_factory=dict)
+    task: TaskSettings = Field(default_factory=TaskSettings)
+    perception: PerceptionSettings = Field(default_factory=PerceptionSettings)
 
     def resolve(self, path: str) -> Path:
         """A path from the config, relative paths taken from the project root."""

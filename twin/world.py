@@ -22,7 +22,7 @@ import math
 import os
 import sys
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,6 +221,7 @@ class World:
         self._cid = -1
         self._egl = False
         self._steps = 0
+        self._observers: list[tuple[int, Callable[[World], None]]] = []
         self.dt = 1.0 / settings.world.physics_hz
         try:
             self._cid = pb.connect(pb.GUI if self._gui else pb.DIRECT)
@@ -524,7 +525,15 @@ class World:
             raise InvalidRequestError(f"cannot step a negative number of times ({n})")
         for _ in range(int(n)):
             pb.stepSimulation(physicsClientId=c)
-        self._steps += int(n)
+            self._steps += 1
+            if self._observers:
+                for every, fn in self._observers:
+                    if self._steps % every == 0:
+                        fn(self)
+
+    def observe(self, fn: "Callable[[World], None]", *, every_s: float) -> None:
+        """Call `fn(world)` every `every_s` simulated seconds while stepping (recorders, GUI pacing)."""
+        self._observers.append((max(1, int(round(every_s / self.dt))), fn))
 
     def reset(self) -> None:
         """Back to the state after construction: robot at home, objects at their sampled poses.
