@@ -26,6 +26,7 @@ log = logging.getLogger("twin")
 
 # stage -> planner group in `settings.planners`
 STAGE_GROUPS = {
+    "capture": "movej",
     "align": "movej",
     "hover": "movej",
     "home": "movej",
