@@ -89,10 +89,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config", help="comparison YAML (see configs/compare.yaml, configs/compare-smoke.yaml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a comparison config value by dotted key, e.g. --set seeds=[0]")
-    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: results/<name>)")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: out/<name> of the config)")
     p.add_argument("--workers", type=int, default=None, metavar="N", help="parallel runs (default: all CPUs; 0: in this process)")
     p.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool (default) or Ray (twin[ray])")
     p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: skip runs already in results.jsonl")
+
+    p = sub.add_parser("perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth")
+    _add_config_args(p)
+    p.add_argument("--detector", default=None, help="detector plugin (replaces perception.detector.name), e.g. geometric, oracle")
+    p.add_argument("--json", dest="json_path", default=None, help="write objects, false_positives, calibration, timings here")
+
+    p = sub.add_parser("calibrate", help="estimate the camera-to-base transform from the base ArUco marker; error against the truth")
+    _add_config_args(p)
+    p.add_argument("--json", dest="json_path", default=None, help="write the calibration (errors and poses) here")
     return parser
 
 
@@ -239,6 +248,57 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 _COMMANDS = {"planners": _cmd_planners, "scene": _cmd_scene, "plan": _cmd_plan, "run": _cmd_run}
 _COMMANDS["compare"] = _cmd_compare
+
+
+def _pose_line(T: Any) -> str:
+    import numpy as np
+
+    R = np.asarray(T)[:3, :3]
+    rpy = (math.degrees(math.atan2(R[2, 1], R[2, 2])), math.degrees(-math.asin(max(-1.0, min(1.0, R[2, 0])))),
+           math.degrees(math.atan2(R[1, 0], R[0, 0])))
+    xyz = np.asarray(T)[:3, 3]
+    return f"xyz [{xyz[0]:+.4f}, {xyz[1]:+.4f}, {xyz[2]:+.4f}] m, rpy [{rpy[0]:+.2f}, {rpy[1]:+.2f}, {rpy[2]:+.2f}] deg"
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from twin.perception.evaluate import run_calibration
+
+    settings = _settings(args)
+    rep = run_calibration(settings)
+    print(f"camera-to-base (ArUco, {rep.method}, {rep.n_points} points, reprojection {rep.reprojection_px:.2f} px)")
+    print(f"  estimate: {_pose_line(rep.T_base_camera)}")
+    print(f"  truth:    {_pose_line(rep.T_base_camera_true)}")
+    print(f"  error: {rep.translation_error_m * 1e3:.2f} mm, {rep.rotation_error_deg:.3f} deg")
+    if args.json_path:
+        _write_json(args.json_path, rep.to_dict())
+    return EXIT_OK
+
+
+def _cmd_perceive(args: argparse.Namespace) -> int:
+    from twin.perception.evaluate import run_perception
+
+    settings = _settings(args)
+    rep = run_perception(settings, detector=args.detector)
+    fmt = "{:<24} {:<15} {:<15} {:<11} {:<11} {:<7} {:<7} {:>8} {:>8} {:>6}"
+    print(fmt.format("object", "class", "estimate", "orient", "estimate", "color", "est", "dxy mm", "yaw deg", "S"))
+    for o in rep.objects:
+        def show(v: Any, scale: float = 1.0, nd: int = 1) -> str:
+            return "-" if v is None else f"{v * scale:.{nd}f}"
+        print(fmt.format(o["name"], o["class_true"], o["class_est"] or "MISSED", o["orientation_true"], o["orientation_est"] or "-",
+                         o["color_true"] or "-", o["color_est"] or "-", show(o["position_error_m"], 1e3), show(o["yaw_error_deg"]),
+                         f"{o['score']:.1f}"))
+    cal = rep.calibration
+    cal_txt = f"{cal['translation_error_m'] * 1e3:.2f} mm, {cal['rotation_error_deg']:.3f} deg" if cal else "no marker"
+    print(f"false positives: {rep.false_positives}; calibration error: {cal_txt}; mean score S: {rep.score_mean:.1f}")
+    if rep.obstacle is not None and rep.obstacle["max_face_error_m"] is not None:
+        print(f"obstacle box: largest face error {rep.obstacle['max_face_error_m'] * 1e3:.1f} mm ({rep.obstacle['points']} points)")
+    if args.json_path:
+        _write_json(args.json_path, rep.to_dict())
+    return EXIT_OK
+
+
+_COMMANDS["perceive"] = _cmd_perceive
+_COMMANDS["calibrate"] = _cmd_calibrate
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -40,6 +40,8 @@ __all__ = [
     "RobocupPerceptionSettings",
     "PerceptionSettings",
     "load_config",
+    "read_yaml",
+    "apply_override",
     "settings_from_dict",
     "PROJECT_ROOT",
 ]
@@ -292,7 +294,8 @@ class RobocupPerceptionSettings(_Model):
     alpha1_horizontal_deg -> horizontal; alpha3 < alpha3_vertical_deg -> vertical; else horizontal.
     Classes in `force_vertical` skip the rules (seed: spam). `height_check` (not in the seed) then compares
     the object's top height above the table with its upright and lying heights and takes the nearer one
-    when they differ by more than `height_check_min_diff_m`: this fixes the seed's lying-can failure.
+    when they differ by more than `height_check_min_diff_m` (this fixes the seed's lying-can failure),
+    and calls a class whose two heights are alike (the cube: the same shape either way) vertical.
     `grasp` keys are `<class>_<vertical|horizontal>`; entries given in a config replace the defaults key
     by key.
     """
@@ -410,7 +413,7 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+def read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
     path = path.resolve()
     if path in seen:
         raise ConfigError(f"{path}: `extends` forms a cycle through {' -> '.join(map(str, seen))}")
@@ -428,11 +431,11 @@ def _read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
     if parent is not None:
         if not isinstance(parent, str):
             raise ConfigError(f"{path}: `extends` must be a file path, got {parent!r}")
-        data = _merge(_read_yaml(path.parent / parent, seen + (path,)), data)
+        data = _merge(read_yaml(path.parent / parent, seen + (path,)), data)
     return data
 
 
-def _apply_override(data: dict[str, Any], override: str) -> None:
+def apply_override(data: dict[str, Any], override: str) -> None:
     if "=" not in override:
         raise ConfigError(f"override {override!r} must look like key.path=value")
     key, raw = override.split("=", 1)
@@ -477,7 +480,7 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:
     Raises ConfigError for a missing file, bad YAML, an unknown key (with its dotted path) or a bad value.
     """
     p = Path(path)
-    data = _read_yaml(p)
+    data = read_yaml(p)
     for o in overrides:
-        _apply_override(data, o)
+        apply_override(data, o)
     return settings_from_dict(data, source=str(p))

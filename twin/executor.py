@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -50,28 +51,40 @@ class MotionRecord:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def execute(world: "World", traj: Trajectory, *, hold_s: float = 0.0, ignore_bodies: tuple[int, ...] = ()) -> ExecutionReport:
+def execute(
+    world: "World",
+    traj: Trajectory,
+    *,
+    hold_s: float = 0.0,
+    ignore_bodies: tuple[int, ...] = (),
+    on_step: Callable[[], None] | None = None,
+) -> ExecutionReport:
     """Play `traj` on the arm at the physics rate, then hold its last point for `hold_s`.
 
     Counts steps in which the arm touches something other than `ignore_bodies` (a held object or the
-    object being grasped) as unexpected contacts.
+    object being grasped) as unexpected contacts (sampled every 8 steps); `on_step` is called after
+    every physics step, for callers that measure more.
     """
     dt = world.dt
     n = int(np.ceil(traj.duration / dt - 1e-9))
     worst = 0.0
     contacts = 0
-    for k in range(1, n + 1):
-        q, qd, _ = traj.sample(min(k * dt, traj.duration) + traj.t[0])
-        world.set_joint_targets(q, qd)
+    if n:
+        qs, qds, _ = traj.sample(np.minimum(np.arange(1, n + 1) * dt, traj.duration) + traj.t[0])
+    for k in range(n):
+        world.set_joint_targets(qs[k], qds[k])
         world.step()
-        err = float(np.abs(world.joint_positions() - q).max())
-        worst = max(worst, err)
-        if k % 8 == 0 and world.robot_contacts(ignore=ignore_bodies):
+        if on_step is not None:
+            on_step()
+        worst = max(worst, float(np.abs(world.joint_positions() - qs[k]).max()))
+        if (k + 1) % 8 == 0 and world.robot_contacts(ignore=ignore_bodies):
             contacts += 1
     world.set_joint_targets(traj.q[-1])
     hold = int(round(hold_s / dt))
-    if hold:
-        world.step(hold)
+    for _ in range(hold):
+        world.step()
+        if on_step is not None:
+            on_step()
     return ExecutionReport(n * dt + hold * dt, worst, world.joint_positions(), contacts)
 
 

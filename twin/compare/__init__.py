@@ -1,0 +1,29 @@
+"""Planner comparisons (`twin compare`): planners x scenarios x seeds, measured the same way, resumable.
+
+    from twin.compare import run_comparison
+    result = run_comparison("configs/compare-smoke.yaml", out_dir="results/smoke", workers=2)
+    result.summary.overall[0].success_rate
+
+Modules: `spec` (the config model and the run list), `metrics` (what one run measures), `worker` (one
+run, the function every backend executes), `runner` (the sweep, results.jsonl, resume, backends),
+`report` (summary.csv, summary.md, rich table), `plots` (PNG; the only matplotlib user).
+Importing this package loads neither PyBullet, FCL, Ray nor matplotlib.
+"""
+
+from __future__ import annotations
+
+from twin.compare.runner import CompareResult, check_spec, read_results, run_comparison
+from twin.compare.spec import CompareSpec, RunTask, compare_spec_from_dict, expand_runs, load_compare_config, run_id
+
+__all__ = [
+    "CompareResult",
+    "CompareSpec",
+    "RunTask",
+    "check_spec",
+    "compare_spec_from_dict",
+    "expand_runs",
+    "load_compare_config",
+    "read_results",
+    "run_comparison",
+    "run_id",
+]

@@ -1,0 +1,210 @@
+"""What the comparison measures on one run, and the names the reports use.
+
+Metrics are split in two dicts per row: `metrics` are deterministic for the same (planner, case, seed)
+(the same sweep twice gives identical values), `timing` holds wall-clock numbers that never are.
+Every row carries every key (None where it does not apply: a failed plan has no duration, a motion
+query has no task success rate), so rows, CSV and summaries share one schema.
+
+Physics ("contacts seen in physics", goal error) comes from executing the planned trajectory in the
+PyBullet world: the arm is commanded `q(t), qd(t)` at every physics step, then held at the end for
+`settle_s`. A contact is any robot link touching any other body, except the base link on what it
+stands on (it is fixed to the world and cannot move).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from twin.executor import execute
+from twin.types import JointGoal, MotionRequest, MotionResult, RunSummary, Trajectory
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.config import Settings
+    from twin.kinematics import UR5e
+    from twin.world import World
+
+__all__ = [
+    "MetricDef",
+    "METRICS",
+    "TIMINGS",
+    "METRIC_KEYS",
+    "TIMING_KEYS",
+    "empty_metrics",
+    "empty_timing",
+    "trajectory_metrics",
+    "timing_metrics",
+    "execute_in_physics",
+    "task_metrics",
+    "finite_or_none",
+]
+
+_MAX_FINE_SAMPLES = 200_000
+
+
+@dataclass(frozen=True)
+class MetricDef:
+    """A metric's key, unit and one-line meaning (used as column headers and in summary.md)."""
+
+    key: str
+    unit: str
+    description: str
+    better: str = "lower"  # "lower" | "higher" | "" (neither)
+
+
+METRICS: tuple[MetricDef, ...] = (
+    MetricDef("duration_s", "s", "trajectory duration"),
+    MetricDef("joint_path_length_rad", "rad", "joint-space path length (sum of |dq|, 2-norm)"),
+    MetricDef("tcp_path_length_m", "m", "TCP path length"),
+    MetricDef("max_jerk", "rad/s^3", "max |jerk| of any joint (finite differences of qdd, fine resampling)"),
+    MetricDef("min_clearance_m", "m", "minimum FCL distance to the environment along the trajectory", "higher"),
+    MetricDef("contacts", "", "distinct (robot link, body) contacts seen when executed in physics"),
+    MetricDef("contact_time_s", "s", "simulated time with any unexpected robot contact"),
+    MetricDef("goal_error_m", "m", "TCP position error after execution and settling"),
+    MetricDef("goal_error_rad", "rad", "max joint error to the planned final posture after settling"),
+    MetricDef("solves", "", "solver calls of a receding-horizon planner", ""),
+    MetricDef("task_success_rate", "", "objects placed / objects (task runs)", "higher"),
+    MetricDef("cycle_time_s", "s", "mean simulated time per placed object (task runs)"),
+    MetricDef("sim_time_s", "s", "simulated time of the whole task run"),
+)
+
+TIMINGS: tuple[MetricDef, ...] = (
+    MetricDef("planning_time_s", "s", "planning time (receding horizon: total over all solves)"),
+    MetricDef("solve_time_median_s", "s", "median time per solve (receding horizon)"),
+    MetricDef("solve_time_max_s", "s", "longest solve (receding horizon)"),
+    MetricDef("wall_time_s", "s", "wall time of the whole run in its worker"),
+)
+
+METRIC_KEYS: tuple[str, ...] = tuple(m.key for m in METRICS)
+TIMING_KEYS: tuple[str, ...] = tuple(m.key for m in TIMINGS)
+
+
+def finite_or_none(x: Any) -> float | None:
+    """A JSON-safe float: None for None, NaN and infinities (JSON has no inf)."""
+    if x is None:
+        return None
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def empty_metrics() -> dict[str, Any]:
+    return {k: None for k in METRIC_KEYS}
+
+
+def empty_timing() -> dict[str, Any]:
+    return {k: None for k in TIMING_KEYS}
+
+
+def _fine(traj: Trajectory, dt: float) -> Trajectory:
+    """The trajectory resampled at `dt` (coarsened if it would exceed _MAX_FINE_SAMPLES)."""
+    if traj.t.shape[0] < 2:
+        return traj
+    dt = max(dt, traj.duration / _MAX_FINE_SAMPLES)
+    return traj.resampled(dt)
+
+
+def trajectory_metrics(
+    traj: Trajectory, *, kin: "UR5e", scene: "PlanningScene", settings: "Settings", jerk_dt_s: float = 1e-3
+) -> tuple[dict[str, float | None], str]:
+    """Duration, joint and TCP path length, max |jerk| and minimum clearance of a planned trajectory,
+    and the closest pair 'robot_part->other' (why the clearance is what it is).
+
+    Path lengths and jerk use a fine resampling (`jerk_dt_s`) so that coarse and dense planners are
+    measured alike. Clearance is the FCL distance robot-vs-environment (self pairs excluded: some stay
+    close by construction) at the planning API's own check resolution.
+    """
+    from twin.planning import densify
+
+    fine = _fine(traj, jerk_dt_s)
+    dq = np.diff(fine.q, axis=0)
+    joint_len = float(np.linalg.norm(dq, axis=1).sum()) if dq.size else 0.0
+    p = kin.fk_batch(fine.q)[:, :3, 3]
+    tcp_len = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) if fine.t.shape[0] > 1 else 0.0
+    if fine.t.shape[0] > 1:
+        jerk = np.diff(fine.qdd, axis=0) / np.diff(fine.t)[:, None]
+        max_jerk = float(np.abs(jerk).max())
+    else:
+        max_jerk = 0.0
+    col = settings.collision
+    qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+    d = scene.min_distance_batch(qs, include_self=False)
+    closest = scene.min_distance(qs[int(np.argmin(d))], include_self=False)
+    pair = f"{closest.robot_part}->{closest.other}" if closest.robot_part else ""
+    return {
+        "duration_s": traj.duration,
+        "joint_path_length_rad": joint_len,
+        "tcp_path_length_m": tcp_len,
+        "max_jerk": max_jerk,
+        "min_clearance_m": finite_or_none(float(d.min())),
+    }, pair
+
+
+def timing_metrics(result: MotionResult) -> tuple[dict[str, float | None], int | None]:
+    """Planning time (total) and, for receding-horizon planners, per-solve statistics and the count."""
+    out = empty_timing()
+    out["planning_time_s"] = float(result.planning_time_s)
+    solves = result.info.get("solve_times_s") if isinstance(result.info, dict) else None
+    if solves is None:
+        return out, None
+    st = np.asarray(list(solves), dtype=float)
+    if st.size:
+        out["planning_time_s"] = float(st.sum())
+        out["solve_time_median_s"] = float(np.median(st))
+        out["solve_time_max_s"] = float(st.max())
+    return out, int(result.info.get("solves", st.size))
+
+
+def execute_in_physics(
+    world: "World", traj: Trajectory, request: MotionRequest, *, kin: "UR5e", settle_s: float = 0.5
+) -> tuple[dict[str, float | int | None], list[str]]:
+    """Execute `traj` in `world` (reset first, so the outcome does not depend on earlier runs).
+
+    Returns (contacts, contact_time_s, goal_error_m, goal_error_rad) and the sorted contact pairs
+    'robot_link->body'.
+    """
+    world.reset()
+    world.reset_joints(traj.q[0])
+    link_name = {i: n for n, i in world.link_indices().items()}
+    body_name = {i: n for n, i in world.body_ids().items()}
+    dt = world.dt
+    pairs: set[str] = set()
+    contact_steps = 0
+
+    def observe() -> None:
+        nonlocal contact_steps
+        hit = False
+        for c in world.robot_contacts():
+            if c.link_a == -1:  # the base link is fixed to the world and stands on the table
+                continue
+            hit = True
+            pairs.add(f"{link_name.get(c.link_a, c.link_a)}->{body_name.get(c.body_b, c.body_b)}")
+        contact_steps += hit
+
+    execute(world, traj, hold_s=math.ceil(settle_s / dt - 1e-9) * dt, on_step=observe)
+    q_end = traj.q[-1]
+    q_exec = world.joint_positions()
+    if isinstance(request.goal, JointGoal):
+        frame, goal_p = "tcp", kin.fk(request.goal.q)[:3, 3]
+    else:
+        frame, goal_p = request.goal.frame, np.asarray(request.goal.pose.position, dtype=float)
+    p_exec = kin.fk(q_exec, frame)[:3, 3]
+    return {
+        "contacts": len(pairs),
+        "contact_time_s": contact_steps * dt,
+        "goal_error_m": float(np.linalg.norm(p_exec - goal_p)),
+        "goal_error_rad": float(np.abs(q_exec - q_end).max()),
+    }, sorted(pairs)
+
+
+def task_metrics(summary: RunSummary) -> dict[str, float | None]:
+    """Task success rate, mean cycle time per placed object and total simulated time of a task run."""
+    placed = [o.cycle_time_s for o in summary.objects if o.placed]
+    return {
+        "task_success_rate": float(summary.success_rate),
+        "cycle_time_s": float(np.mean(placed)) if placed else None,
+        "sim_time_s": float(summary.sim_time_s),
+    }

@@ -1,0 +1,365 @@
+"""The comparison config: which planners, on which scenarios, with which seeds.
+
+A comparison file is YAML loaded straight into `CompareSpec` (unknown keys rejected with their dotted
+path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
+
+    name: smoke
+    seeds: [0, 1]
+    planners:
+      - ruckig.movej                                  # a bare registered name ...
+      - {name: toppra.movel, params: {...}}           # ... or a planner block
+      - {name: ompl.rrtconnect, retimer: toppra, label: rrtconnect+toppra}
+    scenarios:
+      - name: warehouse-random                        # motion queries in a scene config
+        scene: warehouse.yaml                         # relative to this file
+        random: {count: 3, goal: joint}
+      - name: robocup-fixed
+        scene: robocup.yaml
+        queries:
+          - {start: [0, -1.6, 1.5, -1.5, -1.57, 0], goal: [0.3, -1.4, 1.2, -1.4, -1.57, 0.2]}
+          - {start: [0, -1.6, 1.5, -1.5, -1.57, 0], goal_pose: [-0.5, 0.1, 0.2, 3.1416, 0, 0]}
+      - name: warehouse-task                          # a full task run (`twin run`)
+        task: warehouse.yaml
+        seeds: [0, 1]                                 # this scenario's own seeds
+
+Why the cross product is expanded here: every run gets its `run_id` from (planner, case, seed), where a
+case is one query of a query scenario (`name#i`) or a task scenario (`name`), so run ids are stable
+across reruns, resumes and backends.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    PrivateAttr,
+    Tag,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from twin.config import PlannerBlock, apply_override, read_yaml
+from twin.errors import ConfigError
+
+__all__ = [
+    "ComparePlanner",
+    "QuerySpec",
+    "RandomQueries",
+    "QueryScenario",
+    "TaskScenario",
+    "CompareSpec",
+    "RunTask",
+    "load_compare_config",
+    "compare_spec_from_dict",
+    "expand_runs",
+    "run_id",
+]
+
+_NAME_PATTERN = r"^[A-Za-z0-9_.+\-]+$"  # no '|', '#' or spaces: they delimit run ids
+
+Q6 = tuple[float, float, float, float, float, float]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ComparePlanner(PlannerBlock):
+    """A planner block plus a `label` that names it in results (default: its registered name).
+
+    Labels let one planner appear twice with different params (`rrtconnect-fast`, `rrtconnect-slow`).
+    """
+
+    label: str | None = Field(None, pattern=_NAME_PATTERN)
+
+    @property
+    def id(self) -> str:
+        return self.label or self.name
+
+    def block(self) -> PlannerBlock:
+        """The plain planner block (what `make_planner` takes)."""
+        return PlannerBlock(
+            name=self.name, params=self.params, retimer=self.retimer, retimer_params=self.retimer_params
+        )
+
+
+class QuerySpec(_Model):
+    """One explicit motion query: start (6,) rad and either a joint goal (6,) rad or a TCP pose goal
+    `goal_pose` = x, y, z, roll, pitch, yaw (m, rad; base frame) of `frame`."""
+
+    start: Q6
+    goal: Q6 | None = None
+    goal_pose: tuple[float, float, float, float, float, float] | None = None
+    frame: Literal["tcp", "flange"] = "tcp"
+
+    @model_validator(mode="after")
+    def _one_goal(self) -> "QuerySpec":
+        if (self.goal is None) == (self.goal_pose is None):
+            raise ValueError("give exactly one of `goal` (joint angles) or `goal_pose` (x, y, z, roll, pitch, yaw)")
+        vals = list(self.start) + list(self.goal or ()) + list(self.goal_pose or ())
+        if not all(math.isfinite(v) for v in vals):
+            raise ValueError("start and goal must be finite numbers")
+        return self
+
+
+class RandomQueries(_Model):
+    """Seeded random queries: `count` per seed, start and goal with the TCP pointing down at a random
+    yaw (+-90 deg) inside a box (base frame, m), IK branch nearest the home posture, at least `min_clearance_m`
+    from the environment and `min_travel_m` apart.
+
+    The default box is the work area in front of the arm, over the table; in the warehouse scene it
+    straddles the obstacle wall, so straight-line planners meet it.
+    """
+
+    count: int = Field(ge=1, le=10_000)
+    goal: Literal["joint", "pose"] = "joint"
+    region_x: tuple[float, float] = (-0.65, -0.25)
+    region_y: tuple[float, float] = (-0.35, 0.35)
+    region_z: tuple[float, float] = (0.05, 0.40)
+    min_clearance_m: float = Field(0.02, ge=0)
+    min_travel_m: float = Field(0.10, ge=0)
+
+    @field_validator("region_x", "region_y", "region_z")
+    @classmethod
+    def _ordered(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not v[0] <= v[1]:
+            raise ValueError(f"range must be [min, max] with min <= max, got {list(v)}")
+        return v
+
+
+class QueryScenario(_Model):
+    """Motion queries planned in the static cell of a scene config, then executed in PyBullet.
+
+    Loose objects are left out of both the planning scene and the physics, so the two agree. Fixtures
+    marked `known: false` (obstacles a task must perceive first) are, with `unknown_fixtures: box`,
+    added to the planning scene as the axis-aligned box a perfect detector would report (a motion query
+    has no perception step; box-based planners such as NMPC see them too); with `ignore` the planners
+    do not see them and the physics shows what the robot hits.
+    """
+
+    name: str = Field(pattern=_NAME_PATTERN)
+    scene: str
+    overrides: list[str] = Field(default_factory=list)
+    queries: list[QuerySpec] = Field(default_factory=list)
+    random: RandomQueries | None = None
+    seeds: list[int] | None = None
+    time_limit_s: float | None = Field(None, gt=0)
+    unknown_fixtures: Literal["box", "ignore"] = "box"
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "QueryScenario":
+        if bool(self.queries) == (self.random is not None):
+            raise ValueError("give exactly one of `queries` (a list) or `random` ({count: N, ...})")
+        return self
+
+    @property
+    def kind(self) -> str:
+        return "query"
+
+    def case_count(self) -> int:
+        return len(self.queries) if self.queries else self.random.count  # type: ignore[union-attr]
+
+
+class TaskScenario(_Model):
+    """A full task run (`twin run`) of a scene/task config with each planner."""
+
+    name: str = Field(pattern=_NAME_PATTERN)
+    task: str
+    overrides: list[str] = Field(default_factory=list)
+    seeds: list[int] | None = None
+
+    @property
+    def kind(self) -> str:
+        return "task"
+
+    def case_count(self) -> int:
+        return 1
+
+
+def _scenario_kind(v: Any) -> str:
+    if isinstance(v, dict):
+        return "task" if "task" in v else "query"
+    return "task" if isinstance(v, TaskScenario) else "query"
+
+
+Scenario = Annotated[
+    Annotated[QueryScenario, Tag("query")] | Annotated[TaskScenario, Tag("task")],
+    Discriminator(_scenario_kind),
+]
+
+
+class CompareSpec(_Model):
+    """A whole comparison: planners x scenarios x seeds, and how each run is measured.
+
+    `execute`: run each trajectory in PyBullet (contacts, goal error after `settle_s`).
+    `jerk_dt_s`: the resampling step for max |jerk| (finite differences of qdd).
+    """
+
+    name: str = Field("compare", pattern=_NAME_PATTERN)
+    planners: list[ComparePlanner] = Field(min_length=1)
+    scenarios: list[Scenario] = Field(min_length=1)
+    seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
+    time_limit_s: float = Field(1.0, gt=0)
+    execute: bool = True
+    settle_s: float = Field(0.5, ge=0, le=10)
+    jerk_dt_s: float = Field(1e-3, gt=0, le=0.01)
+    _source: str | None = PrivateAttr(None)
+
+    @property
+    def source(self) -> str | None:
+        """The file (or '<dict>') it was loaded from, for error messages."""
+        return self._source
+
+    @field_validator("planners", mode="before")
+    @classmethod
+    def _bare_names(cls, v: Any) -> Any:
+        if isinstance(v, list):
+            return [{"name": p} if isinstance(p, str) else p for p in v]
+        return v
+
+    @field_validator("seeds")
+    @classmethod
+    def _unique_seeds(cls, v: list[int]) -> list[int]:
+        if len(set(v)) != len(v):
+            raise ValueError(f"seeds must be unique, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> "CompareSpec":
+        ids = [p.id for p in self.planners]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"planner labels must be unique, repeated: {dup} (give each a `label`)")
+        names = [s.name for s in self.scenarios]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"scenario names must be unique, repeated: {dup}")
+        for s in self.scenarios:
+            if s.seeds is not None and (not s.seeds or len(set(s.seeds)) != len(s.seeds)):
+                raise ValueError(f"scenario {s.name!r}: seeds must be a non-empty list of unique integers")
+        return self
+
+    def seeds_for(self, scenario: QueryScenario | TaskScenario) -> list[int]:
+        return list(scenario.seeds) if scenario.seeds is not None else list(self.seeds)
+
+
+# ---- runs ----------------------------------------------------------------------------------------
+def run_id(planner: str, case: str, seed: int) -> str:
+    """The unique, deterministic id of one run: 'planner|case|seed=N'."""
+    return f"{planner}|{case}|seed={seed}"
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """Everything a worker needs for one run; plain data, so it pickles to processes and Ray."""
+
+    run_id: str
+    planner_id: str
+    planner: dict[str, Any]  # the PlannerBlock as a dict
+    scenario: str
+    case: str
+    kind: Literal["query", "task"]
+    seed: int
+    config: str  # absolute path of the scene/task config
+    overrides: tuple[str, ...] = ()
+    query_index: int | None = None
+    query: dict[str, Any] | None = None  # an explicit QuerySpec as a dict
+    random: dict[str, Any] | None = None  # RandomQueries as a dict
+    time_limit_s: float = 1.0
+    execute: bool = True
+    settle_s: float = 0.5
+    jerk_dt_s: float = 1e-3
+    unknown_fixtures: Literal["box", "ignore"] = "box"
+
+    def random_seed(self) -> list[int]:
+        """Seed sequence of a random query: independent per (scenario, seed, index), stable across processes."""
+        return [int(self.seed) & 0xFFFFFFFF, zlib.crc32(self.scenario.encode()), int(self.query_index or 0)]
+
+
+def expand_runs(spec: CompareSpec) -> list[RunTask]:
+    """The cross product planners x cases x seeds, in a fixed order (scenario, case, seed, planner)."""
+    out: list[RunTask] = []
+    for sc in spec.scenarios:
+        for seed in spec.seeds_for(sc):
+            for i in range(sc.case_count()):
+                case = f"{sc.name}#{i}" if isinstance(sc, QueryScenario) else sc.name
+                for p in spec.planners:
+                    common: dict[str, Any] = dict(
+                        run_id=run_id(p.id, case, seed), planner_id=p.id, planner=p.block().model_dump(),
+                        scenario=sc.name, case=case, seed=seed, overrides=tuple(sc.overrides),
+                    )
+                    if isinstance(sc, QueryScenario):
+                        out.append(RunTask(
+                            kind="query", config=sc.scene, query_index=i,
+                            query=sc.queries[i].model_dump() if sc.queries else None,
+                            random=sc.random.model_dump() if sc.random is not None else None,
+                            time_limit_s=sc.time_limit_s or spec.time_limit_s, execute=spec.execute,
+                            settle_s=spec.settle_s, jerk_dt_s=spec.jerk_dt_s,
+                            unknown_fixtures=sc.unknown_fixtures, **common,
+                        ))
+                    else:
+                        out.append(RunTask(kind="task", config=sc.task, **common))
+    return out
+
+
+# ---- loading -------------------------------------------------------------------------------------
+def _format(source: str, err: ValidationError) -> str:
+    e = err.errors()[0]
+    # drop the union tags pydantic puts into the location ('scenarios.0.query.x' -> 'scenarios.0.x')
+    raw = e["loc"]
+    loc = [str(p) for i, p in enumerate(raw) if not (p in ("query", "task") and i > 0 and isinstance(raw[i - 1], int))]
+    where = ".".join(loc) or "(top level)"
+    more = f" (and {len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
+    if e["type"] == "extra_forbidden":
+        return f"{source}: unknown key {where!r}{more}"
+    msg = e["msg"].removeprefix("Value error, ")
+    return f"{source}: {where}: {msg}{more}"
+
+
+def _resolve_configs(spec: CompareSpec, base: Path, source: str) -> CompareSpec:
+    scenarios = []
+    for i, sc in enumerate(spec.scenarios):
+        key = "task" if isinstance(sc, TaskScenario) else "scene"
+        raw = getattr(sc, key)
+        p = Path(raw)
+        p = p if p.is_absolute() else (base / p)
+        if not p.is_file():
+            raise ConfigError(f"{source}: scenarios.{i}.{key}: config file not found: {raw} (looked at {p.resolve()})")
+        scenarios.append(sc.model_copy(update={key: str(p.resolve())}))
+    return spec.model_copy(update={"scenarios": scenarios})
+
+
+def compare_spec_from_dict(
+    data: dict[str, Any], *, source: str = "<dict>", base_dir: str | Path | None = None
+) -> CompareSpec:
+    """Validate a mapping into a CompareSpec; scene paths are resolved against `base_dir` (default: cwd).
+
+    Raises ConfigError naming the dotted path of a bad or unknown key.
+    """
+    try:
+        spec = CompareSpec.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(_format(source, err)) from None
+    spec = _resolve_configs(spec, Path(base_dir) if base_dir is not None else Path.cwd(), source)
+    spec._source = source
+    return spec
+
+
+def load_compare_config(path: str | Path, overrides: Iterable[str] = ()) -> CompareSpec:
+    """Load a comparison YAML (following `extends`), apply `a.b=value` overrides, validate, and resolve
+    the scenarios' config paths relative to the file. Raises ConfigError."""
+    p = Path(path)
+    data = read_yaml(p)
+    for o in overrides:
+        apply_override(data, o)
+    return compare_spec_from_dict(data, source=str(p), base_dir=p.resolve().parent)
