@@ -146,6 +146,12 @@ class ArucoSettings(_Model):
     dictionary: str = "DICT_4X4_50"
     id: int = Field(0, ge=0)
     size_m: float = Field(0.10, gt=0)
+    # camera-to-base estimation: "pnp" is the seed's solvePnP(IPPE_SQUARE) on the corners; "pnp+plane"
+    # takes the marker's plane from the depth image (the table), which removes the tilt/range error of a
+    # small marker seen far and obliquely (~3 cm at the warehouse camera); `refine_grid` adds the marker's
+    # interior grid corners to PnP when its cells are at least 5 px
+    method: Literal["pnp+plane", "pnp"] = "pnp+plane"
+    refine_grid: bool = True
 
 
 class DepthNoiseSettings(_Model):
@@ -231,9 +237,11 @@ class WarehousePerceptionSettings(_Model):
     `voxel_m` > 0 downsamples before DBSCAN (full-resolution DBSCAN takes seconds); `dbscan_min_points`
     is the full-resolution value and is scaled by the downsampling ratio. Point counts (obstacle, cubes)
     are counted in the full-resolution cloud. `roi_min`/`roi_max` (base frame) drop points of the robot
-    and anything off the table. `centroid`: "resting" takes x, y from the cluster's top face and z half way
-    between that face and the table (unbiased for boxes on the table); "mean" is the seed's plain mean of
-    the visible points (biased towards the camera and upwards).
+    (its base at the origin, the gripper hanging above the table) and anything off the table; the work
+    area lies at negative x. `centroid`: "resting" takes x, y from the cluster's footprint (the smallest
+    rectangle around it seen from above) and z half way between its top face and the table (unbiased for
+    boxes on the table); "mean" is the seed's plain mean of the visible points (~2 cm off: towards the
+    camera and upwards, as only the top and front faces are seen).
     """
 
     min_depth_m: float = Field(0.25, ge=0)
@@ -249,7 +257,7 @@ class WarehousePerceptionSettings(_Model):
     cube_min_points: int = Field(150, ge=1)
     cube_max_extent_m: float = Field(0.09, gt=0)
     roi_min: Vec3 = (-1.0, -0.8, -0.05)
-    roi_max: Vec3 = (0.2, 0.8, 0.35)
+    roi_max: Vec3 = (-0.10, 0.8, 0.30)
     box_extension_y_m: float = Field(0.5, ge=0)
     centroid: Literal["resting", "mean"] = "resting"
 

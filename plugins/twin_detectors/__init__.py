@@ -1,4 +1,8 @@
-"""Built-in perception detectors (registered through the `twin` entry-point group)."""
+"""Built-in perception detectors (registered through the `twin` entry-point group).
+
+- `geometric`: point-cloud clusters above the table, classified by size, shape and colour.
+- `oracle`: ORACLE - reads simulator ground truth handed over by the caller; for ablations only.
+"""
 
 from __future__ import annotations
 
@@ -8,4 +12,11 @@ from twin.registry import Registry
 
 @hookimpl
 def twin_register_detectors(registry: Registry) -> None:
-    pass
+    registry.add_detector(
+        "geometric", "twin_detectors.geometric:GeometricDetector",
+        description="clusters above the table, classified by size, shape and colour", extra="perception",
+    )
+    registry.add_detector(
+        "oracle", "twin_detectors.oracle:OracleDetector",
+        description="ORACLE: ground-truth classes and masks (ablations only)", extra="perception",
+    )

@@ -1,0 +1,101 @@
+"""Taking a frame the way the reference systems do, and nothing more.
+
+Fixed mount (seeds 000/001): let the scene settle, render from the configured camera pose. Wrist mount
+(seed 002): put the arm in the capture pose (~0.7 m above the table), wait the settling pause, render.
+The frame then goes through the sensor model. What perception gets back is the frame, the measured
+joint angles and the camera pose that the robot's own kinematics predicts (for a wrist camera: forward
+kinematics of the measured joints times the configured hand-eye offset) - never simulator ground truth.
+
+The arm is teleported to the capture pose (`World.reset_joints`): a perception run needs no planner. A
+task that moves there with a planner calls `capture_frame(..., move=False)` once it has arrived.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from twin.camera import Intrinsics, RGBDFrame, camera_pose
+from twin.config import Settings
+from twin.perception.noise import apply_sensor_noise
+
+if TYPE_CHECKING:
+    from twin.world import World
+
+__all__ = ["Capture", "capture_frame", "wrist_camera_offset", "noise_rng"]
+
+log = logging.getLogger("twin")
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One captured frame with what the robot knows about where the camera was.
+
+    `frame`: the RGB-D frame after the sensor model. `q`: (6,) measured joint angles, rad.
+    `T_base_camera_nominal`: (4, 4) camera pose from the configured mount (fixed) or from forward
+    kinematics of `q` and the hand-eye offset (wrist); the ArUco calibration estimates it independently.
+    `timings_s`: seconds spent settling (physics), rendering and in the sensor model.
+    """
+
+    frame: RGBDFrame
+    q: np.ndarray
+    T_base_camera_nominal: np.ndarray
+    mount: str
+    pose_name: str
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def wrist_camera_offset(settings: Settings) -> np.ndarray:
+    """(4, 4) pose of the wrist camera in the tool0 frame (the hand-eye calibration of the config)."""
+    T = np.eye(4)
+    T[:3, 3] = settings.camera.wrist_offset_m
+    return T
+
+
+def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
+    """The generator of the sensor noise for scene `seed` (separate from the layout's generator)."""
+    return np.random.default_rng([int(seed), 0x5EED, int(stream)])
+
+
+def capture_frame(
+    world: "World",
+    settings: Settings,
+    *,
+    pose: Literal["capture", "calibration"] = "capture",
+    move: bool = True,
+    settle_s: float | None = None,
+    rng: np.random.Generator | None = None,
+) -> Capture:
+    """Settle, render and add sensor noise; for a wrist camera first go to the capture/calibration pose.
+
+    `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed)`.
+    """
+    from twin.kinematics import UR5e
+
+    cam = settings.camera
+    if cam.mount == "wrist" and move:
+        q_target = cam.capture_pose if pose == "capture" or cam.calibration_pose is None else cam.calibration_pose
+        world.reset_joints(np.asarray(q_target, dtype=float))
+    settle = cam.settle_s if settle_s is None else float(settle_s)
+    t0 = time.perf_counter()
+    world.step(int(round(settle * settings.world.physics_hz)))
+    t1 = time.perf_counter()
+    q = world.joint_positions()
+    if cam.mount == "wrist":
+        T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
+        T_render = world.link_matrix("tool0") @ wrist_camera_offset(settings)
+    else:
+        T_nominal = camera_pose(cam)
+        T_render = T_nominal
+    intr = Intrinsics.from_settings(cam)
+    t2 = time.perf_counter()
+    clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)
+    t3 = time.perf_counter()
+    frame = apply_sensor_noise(clean, cam.noise, rng if rng is not None else noise_rng(world.seed))
+    t4 = time.perf_counter()
+    log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)
+    return Capture(frame, q, T_nominal, cam.mount, pose, {"settle": t1 - t0, "render": t3 - t2, "noise": t4 - t3})

@@ -1,0 +1,114 @@
+"""What a detector plugin returns, and the frame-wide cloud that detectors and pose estimation share.
+
+A detector turns an RGB-D frame (plus the camera pose in the base frame) into `Detection`s: a class,
+a colour, a confidence and a pixel mask - the role YOLO plays in seed 002, where the mask is the depth
+crop. Detectors are plugins (`registry.add_detector`) implementing the `Detector` protocol; the pose
+estimation that follows (`twin.perception.robocup`) only needs the mask.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from twin.camera import RGBDFrame, point_cloud
+from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
+
+if TYPE_CHECKING:
+    from twin.config import RobocupPerceptionSettings
+
+__all__ = ["Detection", "Detector", "SceneCloud", "scene_cloud", "CLASSES", "detection_label"]
+
+CLASSES = ("bottle", "can", "spam", "marker", "cube")
+"""Object classes; cubes are further told apart by colour (cube_red, cube_blue, ...): 8 detection classes."""
+
+
+def detection_label(cls: str, color: str | None) -> str:
+    """The seed's detection class name: the class, or cube_<colour> for cubes."""
+    return f"{cls}_{color}" if cls == "cube" and color else cls
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detected object.
+
+    `cls`: one of CLASSES; `color`: colour name (cubes) or None; `confidence` in [0, 1]; `pixels`: (n,)
+    flat indices (row * width + column) of the object's pixels; `bbox`: (u_min, v_min, u_max, v_max) px.
+    `info`: detector-specific extras (features, distances) for debugging and reports.
+    """
+
+    cls: str
+    color: str | None
+    confidence: float
+    pixels: np.ndarray
+    bbox: tuple[int, int, int, int]
+    info: dict[str, Any]
+
+    @property
+    def label(self) -> str:
+        return detection_label(self.cls, self.color)
+
+
+@runtime_checkable
+class Detector(Protocol):
+    """A detector plugin: `cls(params, context)`, then `detect(...)` per frame.
+
+    Set the class attribute `needs_ground_truth = True` to be handed the simulator's ground truth
+    (only the labelled `oracle` detector does; it exists for ablations).
+    """
+
+    def detect(
+        self, frame: RGBDFrame, T_base_camera: np.ndarray, *, cloud: "SceneCloud | None" = None, ground_truth: Any = None
+    ) -> list[Detection]:
+        """Detections in `frame`; `T_base_camera` (4, 4) is the estimated camera pose; `cloud` the
+        frame-wide base-frame cloud when the caller has it already (else the detector builds it)."""
+        ...
+
+
+@dataclass(frozen=True)
+class SceneCloud:
+    """Every valid pixel of a frame as a base-frame point, with its colour and pixel index, plus the
+    table plane (normal up) fitted to them. `height` is each point's signed height above the table.
+    `timings_s`: seconds for back-projection ("cloud") and the table plane ("plane")."""
+
+    points: np.ndarray
+    rgb: np.ndarray
+    pixels: np.ndarray
+    table: Plane
+    height: np.ndarray
+    image_shape: tuple[int, int]
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def select(self, pixels: np.ndarray) -> np.ndarray:
+        """Indices into `points` of the given flat pixel indices (pixels without depth are skipped)."""
+        lookup = np.full(self.image_shape[0] * self.image_shape[1], -1, dtype=np.int64)
+        lookup[self.pixels] = np.arange(len(self.pixels))
+        idx = lookup[np.asarray(pixels, dtype=np.int64)]
+        return idx[idx >= 0]
+
+
+def scene_cloud(frame: RGBDFrame, T_base_camera: np.ndarray, params: "RobocupPerceptionSettings", *, seed: int = 0) -> SceneCloud:
+    """Back-project the frame within the depth limits, map it to the base frame, fit the table plane.
+
+    The plane is fitted by RANSAC on every 4th point (threshold: the table removal threshold), then
+    refitted on its inliers; it is the largest plane in view, which from the capture pose is the table.
+    """
+    t0 = time.perf_counter()
+    H, W = frame.depth_m.shape
+    pts, rgb = point_cloud(frame)
+    v, u = np.nonzero(frame.depth_m > 0)
+    pixels = v * W + u
+    ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
+    pts, rgb, pixels = pts[ok], rgb[ok], pixels[ok]
+    base = transform_points(T_base_camera, pts)
+    sub = base[:: 4]
+    t1 = time.perf_counter()
+    plane = fit_plane_ransac(sub, params.table_threshold_m / 2, iterations=200, rng=np.random.default_rng(seed))
+    plane = plane.oriented(np.array([0.0, 0.0, 10.0]))  # normal up: towards a point high above the table
+    plane = Plane(plane.normal, plane.offset, np.zeros(0, dtype=bool))
+    height = plane.distance(base)
+    t2 = time.perf_counter()
+    return SceneCloud(base, rgb, pixels, plane, height, (H, W), {"cloud": t1 - t0, "plane": t2 - t1})

@@ -1,0 +1,144 @@
+"""The warehouse `cube_detector` (seeds 000/001): obstacle box and labelled cubes from one RGB-D frame.
+
+Steps, as in the seed: (1) depth thresholds; (2) RANSAC plane (0.02 m), plane inliers removed; (3) DBSCAN
+(eps 0.015 m, minPts 40); (4) obstacle = the blue cluster with >= 10000 points; (5) every other cluster
+is a cube labelled black/red/blue/green by its mean colour. The plane is fitted in the camera frame; the
+remaining points are then mapped to the base frame with the camera-to-base transform (DBSCAN does not
+change under a rigid transform), so the obstacle's axis-aligned box is axis-aligned in the base frame, as
+the planner needs it, and it is extended by 0.5 m in +-y. Cube centroids are reported in both frames.
+
+Deviations, each for a measured reason (see WarehousePerceptionSettings): the cloud is voxel-downsampled
+before DBSCAN (full resolution takes seconds) with minPts scaled by the downsampling ratio, while point
+counts stay full-resolution counts; points outside a base-frame region of interest are dropped so the
+robot's own links never become clusters; the box's bottom face is put on the fitted table plane (the
+plane step cut the box's lowest 2 cm); cube centroids are by default taken from the footprint and the
+top face ("resting" centroid) because the mean of the visible points sits ~2 cm off the true centre.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from twin.camera import RGBDFrame, point_cloud
+from twin.config import WarehousePerceptionSettings
+from twin.perception.colors import classify_color
+from twin.perception.geometry import Plane, transform_points
+from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
+from twin.types import BoxBounds
+
+__all__ = ["LabeledCube", "WarehouseResult", "perceive_warehouse"]
+
+log = logging.getLogger("twin")
+
+
+@dataclass(frozen=True)
+class LabeledCube:
+    """One cube: centroid (3,) in the base frame (and in the camera frame), colour label, full-res points."""
+
+    centroid: np.ndarray
+    color_label: str
+    n_points: int
+    centroid_camera: np.ndarray
+    mean_rgb: np.ndarray
+
+
+@dataclass(frozen=True)
+class WarehouseResult:
+    """What the warehouse perception hands to the planner (base frame) plus diagnostics.
+
+    `obstacle`: smallest AABB around the obstacle cluster (None when no obstacle was seen);
+    `obstacle_extended`: the same box grown by `box_extension_y_m` in +y and -y; `cubes`: every other
+    cluster; `rejected`: clusters that were neither (too small, too large, wrong colour);
+    `timings_s`: seconds per stage.
+    """
+
+    obstacle: BoxBounds | None
+    obstacle_extended: BoxBounds | None
+    cubes: tuple[LabeledCube, ...]
+    obstacle_points: int
+    rejected: int
+    table_plane_base: Plane
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def perceive_warehouse(
+    frame: RGBDFrame, T_base_camera: np.ndarray, params: WarehousePerceptionSettings, *, seed: int = 0
+) -> WarehouseResult:
+    """Run the seed's cube_detector on one frame; `T_base_camera` (4, 4) from the ArUco calibration."""
+    o3d = open3d()
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    pts, rgb = point_cloud(frame)
+    ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
+    pts, rgb = pts[ok], rgb[ok]
+    timings["cloud"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    o3d.utility.random.seed(int(seed))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
+    a, b, c, d = model
+    n = np.array([a, b, c])
+    plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(np.zeros(3))
+    keep = np.ones(len(pts), dtype=bool)
+    keep[np.asarray(inliers, dtype=np.int64)] = False
+    pts, rgb = pts[keep], rgb[keep]
+    timings["plane"] = time.perf_counter() - t0
+
+    plane_base = plane_to_frame(plane_cam, T_base_camera)
+    plane_base = plane_base.oriented(np.array([0.0, 0.0, 10.0]))  # normal up
+    pts_base = transform_points(T_base_camera, pts)
+    roi = np.all((pts_base >= params.roi_min) & (pts_base <= params.roi_max), axis=1)
+    pts, rgb, pts_base = pts[roi], rgb[roi], pts_base[roi]
+
+    t0 = time.perf_counter()
+    clusters = cluster_points(
+        pts_base, rgb, eps_m=params.dbscan_eps_m, min_points=params.dbscan_min_points, voxel_m=params.voxel_m
+    )
+    timings["dbscan"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    obstacle: BoxBounds | None = None
+    obstacle_n = 0
+    cubes: list[LabeledCube] = []
+    rejected = 0
+    table_z = _table_height(plane_base)
+    T_camera_base = np.linalg.inv(T_base_camera)
+    for cl in clusters:
+        label = classify_color(cl.mean_rgb, params.labels)
+        if label == params.obstacle_color and cl.n_points >= params.obstacle_min_points:
+            if cl.n_points > obstacle_n:
+                lo, hi = cl.points.min(axis=0), cl.points.max(axis=0)
+                lo[2] = min(lo[2], table_z)  # it stands on the table: the plane step removed its bottom
+                obstacle = BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])
+                obstacle_n = cl.n_points
+            continue
+        extent = cl.points.max(axis=0) - cl.points.min(axis=0)
+        if cl.n_points < params.cube_min_points or float(extent.max()) > params.cube_max_extent_m:
+            rejected += 1
+            log.debug("warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3))
+            continue
+        centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
+        cubes.append(LabeledCube(centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb))
+    timings["label"] = time.perf_counter() - t0
+    extended = obstacle.extended_y(params.box_extension_y_m) if obstacle is not None else None
+    log.debug("warehouse: %d cubes, obstacle %s (%d points), %d rejected", len(cubes), obstacle, obstacle_n, rejected)
+    return WarehouseResult(obstacle, extended, tuple(cubes), obstacle_n, rejected, plane_base, timings)
+
+
+def _table_height(plane_base: Plane) -> float:
+    """z of the table plane under the work area (the plane is nearly level in the base frame)."""
+    nz = plane_base.normal[2]
+    return float(plane_base.offset / nz) if abs(nz) > 1e-6 else 0.0
+
+
+def _cube_centroid(cl: Cluster, table_z: float) -> np.ndarray:
+    """x, y: centre of the footprint rectangle; z: half way between the top face and the table."""
+    fp = footprint(cl.points)
+    inner = fp.contains(cl.points[:, :2], shrink=0.6)
+    z_top = float(np.median(cl.points[inner, 2])) if inner.sum() >= 5 else float(np.percentile(cl.points[:, 2], 95))
+    return np.array([fp.center[0], fp.center[1], 0.5 * (z_top + table_z)])
