@@ -355,7 +355,7 @@ class RobocupTaskSettings(_Model):
     # class (or class_colour, e.g. cube_red) -> the fixture name of its bin; the seed's log: spam -> green,
     # red cube -> blue. Unlisted classes go to `default_bin`.
     bins: dict[str, str] = Field(
-        default_factory=lambda: {"bottle": "bin_blue", "can": "bin_blue", "marker": "bin_blue", "spam": "bin_green", "cube": "bin_blue"}
+        default_factory=lambda: {"bottle": "bin_green", "can": "bin_green", "marker": "bin_green", "spam": "bin_green", "cube": "bin_blue"}
     )
     default_bin: str = "bin_green"
     hover_m: float = Field(0.20, gt=0, le=0.5)  # pre-grasp hover above the grasp point

@@ -32,6 +32,7 @@ STAGE_GROUPS = {
     "home": "movej",
     "descent": "movel",
     "ascent": "movel",
+    "place": "movel",
     "transfer": "transfer",
 }
 DEFAULT_PLANNERS = {"movej": "ruckig.movej", "movel": "toppra.movel", "transfer": "ruckig.movej"}
@@ -127,6 +128,7 @@ class Cell:
         self.world.close_gripper()
         self.settle(self.settings.task.settle_s)
         self.held_body = self.world.grasped_object()
+        self.scene.set_gripper_opening(min(self.world.gripper_opening(), self.scene.max_opening_m))
         return self.held_body
 
     def attach(self, name: str, size: np.ndarray, *, below_tcp_m: float = 0.0) -> None:

@@ -21,12 +21,14 @@ from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, top_down
 from twin.types import ObjectOutcome
 
-__all__ = ["run_robocup", "bin_for"]
+__all__ = ["run_robocup", "bin_for", "feasible_cube_yaw"]
 
 log = logging.getLogger("twin")
 
 _BIN_HALF_M = 0.15  # bins are 0.30 x 0.30 m (urdf/bin_*.urdf)
 _BIN_WALL_M = 0.12
+_BIN_FLOOR_M = 0.01
+_RELEASE_GAP_M = 0.03  # the object's bottom above the bin floor when the gripper opens
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
 
 
@@ -62,14 +64,24 @@ def _in_any_bin(p: np.ndarray, bins: dict[str, np.ndarray]) -> bool:
     return any(abs(p[0] - c[0]) < _BIN_HALF_M and abs(p[1] - c[1]) < _BIN_HALF_M for c in bins.values())
 
 
+def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> float:
+    """The seed grips cubes diagonally (+45 deg, edge-to-edge self-locking), but across a 75 mm cube's
+    diagonal that spans 106 mm, more than the 85 mm stroke: fall back to a face grip where it cannot fit."""
+    if est.cls != "cube":
+        return yaw
+    side = OBJECT_TEMPLATES["cube"].size[0]
+    return yaw - math.pi / 4 if side * math.sqrt(2.0) > max_opening_m else yaw
+
+
 def _pan_towards(x: float, y: float) -> float:
     """Shoulder pan that faces the point (x, y): with pan 0 the arm reaches towards -x."""
     return math.atan2(y, x) - math.pi if math.atan2(y, x) > 0 else math.atan2(y, x) + math.pi
 
 
-def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray) -> None:
+def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray, slot_index: int) -> None:
     task = cell.settings.task.robocup
     x, y, z_grasp, yaw, _, _, w_grip = (float(v) for v in est.grasp)
+    yaw = feasible_cube_yaw(est, yaw, cell.settings.gripper.max_opening_m)
     # (1) base-first alignment
     q = cell.world.joint_positions().copy()
     pan = _pan_towards(x, y)
@@ -91,11 +103,22 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray) -> None
     ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
     side = float(max(ext[0], ext[1]))
     cell.attach(est.cls, np.array([side, side, ext[2]]), below_tcp_m=z_grasp - ext[2] / 2)
-    # (6) transfer above the bin, the object's bottom `place_clearance_m` above the walls
-    place = top_down((bin_xy[0], bin_xy[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw)
-    cell.move_pose("transfer", place)
-    # (7) place
+    # (6) transfer above the bin slot, the object's bottom `place_clearance_m` above the walls
+    slot = np.asarray(bin_xy[:2], dtype=float) + _slot_offset(slot_index, side)
+    cell.move_pose("transfer", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
+    if cell.world.grasped_object() is None:
+        raise StageFailed("transfer", "the object was dropped while carrying it")
+    # (7) place: lower it into the bin (a tall object dropped from above the walls topples out), release
+    cell.move_pose("place", top_down((slot[0], slot[1], _BIN_FLOOR_M + _RELEASE_GAP_M + z_grasp), yaw))
     cell.release()
+    cell.move_pose("ascent", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
+
+
+def _slot_offset(k: int, side_m: float) -> np.ndarray:
+    """Where in the bin the k-th object goes: the four quarters in turn, as far out as its size allows."""
+    reach = max(0.0, min(0.07, _BIN_HALF_M - 0.01 - side_m / 2 - 0.005))
+    signs = [(1, 1), (-1, -1), (1, -1), (-1, 1)][k % 4]
+    return reach * np.array(signs, dtype=float)
 
 
 def run_robocup(cell: Cell) -> list[ObjectOutcome]:
@@ -106,6 +129,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     bins = _bin_centres(settings)
     detector = make_detector(settings)
     targets: list[_Target] = []
+    placed_in: dict[str, int] = {}
     home = np.array(settings.robot.home)
     capture_q = np.array(settings.camera.capture_pose)
     for _ in range(3 * len(truth) + 3):
@@ -125,13 +149,16 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:
             break
+        _update_obstacles(cell, seen.objects, est, bins)
         tgt = _target_for(est, targets)
         tgt.attempts += 1
         tgt.true_ids |= _true_match(world, est)  # metrics only: which true object this was
         cell.current = est.label
         t0 = world.sim_time
         try:
-            _pick_and_place(cell, est, bins[bin_for(est.cls, est.color, settings)])
+            bin_name = bin_for(est.cls, est.color, settings)
+            _pick_and_place(cell, est, bins[bin_name], placed_in.get(bin_name, 0))
+            placed_in[bin_name] = placed_in.get(bin_name, 0) + 1
             tgt.done, tgt.error = True, None
         except StageFailed as e:
             tgt.error = str(e)
@@ -146,6 +173,23 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             log.info("robocup: could not return home: %s", e)
     cell.settle(1.0)
     return _judge(cell, truth, targets, bins)
+
+
+def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict) -> None:
+    """Every other perceived object on the table becomes a box in the planning scene (the target is left
+    out: the fingers close around it)."""
+    for name in [n for n in cell.scene.boxes() if n.startswith("seen_")]:
+        cell.scene.remove(name)
+    for i, est in enumerate(estimates):
+        if est is target or _in_any_bin(est.position, bins):
+            continue
+        ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
+        T = top_down(est.position, est.yaw)
+        T[:3, :3] = np.eye(3)
+        side = float(max(ext[0], ext[1]))  # yaw-free: a square footprint that covers any yaw
+        size = np.array([side, side, ext[2]])
+        T[2, 3] = ext[2] / 2 + 0.002
+        cell.scene.add_box(f"seen_{i}_{est.label}", size, T)
 
 
 def _choose(estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict, retries: int) -> ObjectEstimate | None:
