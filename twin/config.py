@@ -290,7 +290,7 @@ def _default_grasp_table() -> dict[str, GraspEntry]:
         "can_vertical": (0.070, 0.085), "can_horizontal": (0.033, 0.085),
         "spam_vertical": (0.050, 0.085), "spam_horizontal": (0.035, 0.085),
         "cube_vertical": (0.0375, 0.085), "cube_horizontal": (0.0375, 0.085),
-        "marker_vertical": (0.090, 0.040), "marker_horizontal": (0.012, 0.040),
+        "marker_vertical": (0.090, 0.040), "marker_horizontal": (0.016, 0.040),
     }
     return {k: GraspEntry(z_grasp_m=z, w_grip_m=w) for k, (z, w) in rows.items()}
 

@@ -184,12 +184,13 @@ def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target:
         if est is target or _in_any_bin(est.position, bins):
             continue
         ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
-        T = top_down(est.position, est.yaw)
-        T[:3, :3] = np.eye(3)
-        side = float(max(ext[0], ext[1]))  # yaw-free: a square footprint that covers any yaw
-        size = np.array([side, side, ext[2]])
-        T[2, 3] = ext[2] / 2 + 0.002
-        cell.scene.add_box(f"seen_{i}_{est.label}", size, T)
+        short, long_ = sorted((float(ext[0]), float(ext[1])))
+        # the grasp yaw closes across the short side (cubes: across a face, 45 deg off the seed's yaw)
+        yaw = est.yaw - math.pi / 4 if est.cls == "cube" else est.yaw
+        T = np.eye(4)
+        T[:3, :3] = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+        T[:3, 3] = [est.position[0], est.position[1], ext[2] / 2 + 0.002]
+        cell.scene.add_box(f"seen_{i}_{est.label}", np.array([short, long_, ext[2]]), T)
 
 
 def _choose(estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict, retries: int) -> ObjectEstimate | None:
