@@ -376,7 +376,7 @@ class WarehouseTaskSettings(_Model):
     )
     drop_radius_m: float = Field(0.06, gt=0)  # success: the cube rests within this xy distance of its zone
     hover_m: float = Field(0.25, gt=0, le=0.5)  # above the obstacle top: MoveJ there is a straight joint path
-    release_height_m: float = Field(0.06, ge=0, le=0.5)  # cube bottom above the table when released
+    release_height_m: float = Field(0.02, ge=0, le=0.5)  # cube bottom above the table when released
     retries: int = Field(1, ge=0, le=5)
 
 

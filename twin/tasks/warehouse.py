@@ -20,6 +20,7 @@ __all__ = ["run_warehouse"]
 log = logging.getLogger("twin")
 
 _CUBE_M = 0.05
+_APPROACH_M = 0.06  # the transfer ends this far above the drop point
 _GRASP_YAW = np.pi / 2  # the seed perceives no cube yaw; an 85 mm stroke closes on a 50 mm cube at any yaw
 
 
@@ -44,7 +45,12 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
         raise StageFailed("ascent", "the cube slipped out of the gripper")
     cell.attach("cube", np.full(3, _CUBE_M))
     drop = (zone[0], zone[1], zone[2] + task.release_height_m + _CUBE_M / 2)
-    cell.move_pose("transfer", top_down(drop, _GRASP_YAW))
+    above = (drop[0], drop[1], drop[2] + _APPROACH_M)
+    cell.move_pose("transfer", top_down(above, _GRASP_YAW))
+    if cell.world.grasped_object() is None:
+        raise StageFailed("transfer", "the cube was dropped while carrying it")
+    # NMPC stops within 3 cm of its goal: finish with a short straight move to the exact drop point
+    cell.move_pose("place", top_down(drop, _GRASP_YAW))
     cell.release()
     cell.move_pose("ascent", top_down((drop[0], drop[1], drop[2] + task.hover_m / 2), _GRASP_YAW))
 
