@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up twin on a fresh Debian machine with Python 3.11: the Debian packages its dependencies need,
-# a virtual environment in .venv, and twin with every built-in backend and the test tools.
+# a virtual environment in .venv, and twin with every built-in backend (OMPL, CasADi, open3d, Ray,
+# matplotlib) and the test tools.
 # Safe to run again: it only installs what is missing.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -21,6 +22,7 @@ command -v "$PY" >/dev/null 2>&1 || PY=python3
 "$PY" -c 'import sys; assert sys.version_info[:2] >= (3, 11), "twin needs Python 3.11+"'
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v -i "warning" || true
-.venv/bin/python -m pip install -q -e ".[test]" 2>&1 | grep -v -i "warning" || true
-.venv/bin/python -c "import twin, pybullet, fcl, ruckig, toppra" || { echo "setup: install failed" >&2; exit 1; }
+.venv/bin/python -m pip install -q -e ".[all,test]" 2>&1 | grep -v -i "warning" || true
+.venv/bin/python -c "import twin, pybullet, fcl, ruckig, toppra, ompl, casadi, open3d, ray, matplotlib" \
+  || { echo "setup: install failed" >&2; exit 1; }
 echo "setup: ready (.venv)"

@@ -1,0 +1,381 @@
+"""Benchmark of the OMPL planners (issue 5), and the same queries planned by mplib. A plain script: prints
+numbers, asserts nothing.
+
+    python bench/bench_ompl.py [--queries 20] [--time-limit 1.0] [--planners ompl.rrtconnect,ompl.prm]
+                               [--all-queries] [--no-mplib]
+
+Queries: seeded random top-down TCP poses, as in tests/test_ompl.py. RoboCup scene: table <-> table and
+table <-> inside a bin; warehouse scene: carrying a 50 mm cube from behind the (perceived) obstacle box to
+the robot's side of it or back. Half joint goals, half pose goals. By default only queries whose straight
+joint motion collides are kept (`--all-queries` keeps every query), so every planner has to search.
+
+Prints per planner and scene: success rate, median / p95 planning time (everything `plan()` does:
+checks, sampling, shortcutting, retiming, the final fine check), median path length (joint-space L2, rad)
+and trajectory duration, and how many returned trajectories an independent FCL check every 0.002 rad /
+1 mm of TCP travel finds colliding. `ompl.rrtconnect (no final check)` is the same planner without its
+clearance and final check, which is what mplib does.
+
+mplib (OMPL RRTConnect + FCL + TOPP-RA in C++) pins numpy < 2, so it lives in its own virtual environment,
+bench/.mplib-venv (created here on first use with `python -m venv` + `pip install mplib`; it ignores
+itself in git), and plans through bench/mplib_driver.py in a subprocess: same URDF, the self-collision
+pairs our scene excludes (as an SRDF), the cell's boxes, the held cube, the same start and goal
+configurations (a pose goal's collision-free IK solutions) and time limit. Its trajectories are checked
+with the same fine FCL check. Printed last: median planning time of ompl.rrtconnect / median of mplib.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.collision import PlanningScene
+from twin.config import PlannerBlock, Settings, load_config
+from twin.errors import DependencyMissing
+from twin.planning import first_collision, limits_from_settings, make_context, make_planner, plan_with
+from twin.registry import Kind
+from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
+from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+MPLIB_VENV = BENCH / ".mplib-venv"
+TOP_DOWN = np.diag([1.0, -1.0, -1.0])
+FINE_RAD, FINE_M = 0.002, 0.002
+CUBE = 0.05
+
+
+# ---- scenes and queries (as in tests/test_ompl.py) --------------------------------------------------------
+def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ TOP_DOWN
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+class Cell:
+    """Settings, FCL scene (perceived obstacle boxes added, the cube held in the warehouse), context."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.settings: Settings = load_config(ROOT / "configs" / f"{name}.yaml")
+        self.scene = PlanningScene.from_settings(self.settings)
+        for f in self.settings.world.fixtures:
+            if not f.known:
+                for shape in read_fixture_shapes(self.settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
+                    self.scene.add_box(f.name, shape.size, shape.pose)
+        if name == "warehouse":
+            self.scene.attach_box("cube", [CUBE] * 3, np.eye(4))
+        self.ctx = make_context(self.settings)
+        self.kin = self.ctx.kinematics
+        self.limits = limits_from_settings(self.settings)
+        self.home = np.array(self.settings.robot.home)
+
+    def ik_near_home(self, T: np.ndarray) -> np.ndarray | None:
+        sols = self.kin.ik(T, all_wraps=False)
+        if sols.shape[0] == 0:
+            return None
+        for q in sols[np.argsort(np.abs(sols - self.home).max(axis=1))][:2]:
+            if not self.scene.in_collision(q):
+                return q
+        return None
+
+    def goal_configs(self, start: np.ndarray, goal: Any) -> np.ndarray:
+        """The goal as configurations: a joint goal, or every collision-free IK solution, nearest first."""
+        if isinstance(goal, JointGoal):
+            return np.asarray(goal.q)[None]
+        sols = self.kin.ik(goal.pose.matrix(), goal.frame)
+        sols = sols[~self.scene.in_collision_batch(sols)] if sols.shape[0] else sols
+        return sols[np.argsort(np.abs(sols - start).max(axis=1))][:64]
+
+    def blocked(self, start: np.ndarray, goals: np.ndarray) -> bool:
+        return not any(self.scene.check_path(np.stack([start, g]), resolution_rad=0.02).free for g in goals[:3])
+
+    def queries(self, n: int, seed: int, only_blocked: bool) -> list[tuple[np.ndarray, Any, np.ndarray]]:
+        rng = np.random.default_rng(seed)
+        yaw = lambda: rng.uniform(-math.pi, math.pi)  # noqa: E731
+        out: list[tuple[np.ndarray, Any, np.ndarray]] = []
+        while len(out) < n:
+            if self.name == "warehouse":
+                Ta = top_down(rng.uniform(-0.66, -0.55), rng.uniform(0.10, 0.32), rng.uniform(0.05, 0.15), yaw())
+                Tb = top_down(rng.uniform(-0.34, -0.26), rng.uniform(0.10, 0.36), rng.uniform(0.05, 0.15), yaw())
+            else:
+                Ta = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
+                if rng.random() < 0.6:
+                    side = 1.0 if rng.random() < 0.5 else -1.0
+                    Tb = top_down(rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw())
+                else:
+                    Tb = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
+            if rng.random() < 0.5:
+                Ta, Tb = Tb, Ta
+            a, b = self.ik_near_home(Ta), self.ik_near_home(Tb)
+            if a is None or b is None:
+                continue
+            goal = PoseGoal(Pose.from_matrix(Tb)) if len(out) % 2 else JointGoal(b)
+            goals = self.goal_configs(a, goal)
+            if goals.shape[0] == 0 or (only_blocked and not self.blocked(a, goals)):
+                continue
+            out.append((a, goal, goals))
+        return out
+
+
+# ---- our planners ------------------------------------------------------------------------------------------
+def fine_collides(cell: Cell, traj: Any) -> bool:
+    return first_collision(traj, cell.scene, cell.kin, max_step_rad=FINE_RAD, max_step_m=FINE_M) is not None
+
+
+def run_ours(cell: Cell, block: PlannerBlock, queries: list[Any], time_limit: float) -> dict[str, Any] | str:
+    try:
+        planner = make_planner(block, cell.ctx)
+    except DependencyMissing as e:
+        return str(e).split(". ")[0]
+    rows = []
+    for k, (start, goal, _) in enumerate(queries):
+        req = MotionRequest(start, goal, cell.limits, time_limit_s=time_limit, seed=k)
+        res = plan_with(planner, req, cell.scene, cell.ctx)
+        ok = res.success
+        rows.append(
+            {
+                "ok": ok,
+                "time_s": res.planning_time_s,
+                "length": float(res.info.get("path_length_rad", math.nan)) if ok else math.nan,
+                "duration": res.trajectory.duration if ok and res.trajectory is not None else math.nan,
+                "fine_hit": bool(ok and fine_collides(cell, res.trajectory)),
+                "status": res.status.value,
+            }
+        )
+    return summarize(rows)
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    t = np.array([r["time_s"] for r in rows])
+    ok = np.array([r["ok"] for r in rows])
+    length = np.array([r["length"] for r in rows])
+    dur = np.array([r["duration"] for r in rows])
+    failures: dict[str, int] = {}
+    for r in rows:
+        if not r["ok"]:
+            failures[r["status"]] = failures.get(r["status"], 0) + 1
+    return {
+        "n": len(rows),
+        "success": float(ok.mean()) if rows else math.nan,
+        "median_s": float(np.median(t)) if rows else math.nan,
+        "p95_s": float(np.percentile(t, 95)) if rows else math.nan,
+        "length": float(np.nanmedian(length)) if ok.any() else math.nan,
+        "duration": float(np.nanmedian(dur)) if ok.any() else math.nan,
+        "fine_hits": int(sum(r["fine_hit"] for r in rows)),
+        "failures": failures,
+        "times": t.tolist(),
+    }
+
+
+def print_row(label: str, s: dict[str, Any] | str) -> None:
+    if isinstance(s, str):
+        print(f"  {label:34s} unavailable: {s}")
+        return
+    fails = ", ".join(f"{k} {v}" for k, v in sorted(s["failures"].items()))
+    print(
+        f"  {label:34s} {s['success'] * 100:5.1f}%  {s['median_s'] * 1e3:7.1f}  {s['p95_s'] * 1e3:7.1f}"
+        f"  {s['length']:6.2f}  {s['duration']:5.2f}  {s['fine_hits']:3d}  {fails}"
+    )
+
+
+# ---- mplib --------------------------------------------------------------------------------------------------
+def mplib_python() -> Path | str:
+    """The mplib venv's python, created on first use; or a string saying why it is unavailable."""
+    py = MPLIB_VENV / "bin" / "python"
+    if py.exists() and subprocess.run([str(py), "-c", "import mplib"], capture_output=True).returncode == 0:
+        return py
+    print(f"mplib: creating {MPLIB_VENV.relative_to(ROOT)} (python -m venv + pip install mplib) ...", flush=True)
+    try:
+        subprocess.run([sys.executable, "-m", "venv", str(MPLIB_VENV)], check=True, capture_output=True, text=True)
+        (MPLIB_VENV / ".gitignore").write_text("# created by bench/bench_ompl.py\n*\n")
+        pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "mplib"], capture_output=True, text=True, timeout=900)
+        if pip.returncode != 0:
+            return f"pip install mplib failed: {(pip.stderr or pip.stdout).strip().splitlines()[-1:]}"
+        check = subprocess.run([str(py), "-c", "import mplib"], capture_output=True, text=True)
+        if check.returncode != 0:
+            return f"mplib installed but does not import: {check.stderr.strip().splitlines()[-1:]}"
+    except (OSError, subprocess.SubprocessError) as e:
+        return f"could not create the venv: {e}"
+    return py
+
+
+def mplib_spec(cell: Cell, queries: list[Any], time_limit: float, rrt_range: float = 0.1) -> dict[str, Any]:
+    scene, s = cell.scene, cell.settings
+    boxes = []
+    shapes = [(f.name, sh) for f in s.world.fixtures if f.known for sh in read_fixture_shapes(s.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))]
+    for name, sh in shapes:
+        if sh.kind != "box":
+            raise SystemExit(f"fixture {name}: only boxes are passed to mplib, got {sh.kind}")
+        boxes.append({"name": f"{name}_{len(boxes)}", "size": list(sh.size), "pose": sh.pose.tolist()})
+    for name, (size, T) in scene.boxes().items():
+        boxes.append({"name": name, "size": size.tolist(), "pose": T.tolist()})
+    held = scene.attached_box()
+    model = scene.model
+    half = scene.gripper_opening / 2.0  # each finger moves half the opening (RobotModel convention)
+    return {
+        "urdf": str(s.resolve(s.robot.urdf)),
+        "move_group": scene.tcp_link,
+        "excluded_pairs": [list(p) for p in sorted(scene.excluded_pairs)],
+        "arm_joints": list(model.arm_joints),
+        "static_links": [ln for ln in model.link_names if model.rigid_parent(ln, movable=model.arm_joints) == model.root],
+        "fixed_qpos": {j: half for j in model.gripper_joints},
+        "boxes": boxes,
+        "attached_box": None if held is None else {"size": held[1].tolist(), "pose": held[2].tolist()},
+        "vel": cell.limits.max_joint_vel.tolist(),
+        "acc": cell.limits.max_joint_acc.tolist(),
+        "time_limit_s": time_limit,
+        "time_step_s": 0.01,
+        "rrt_range": rrt_range,  # mplib's default is 0.1
+        "queries": [{"start": a.tolist(), "goals": g.tolist()} for a, _, g in queries],
+    }
+
+
+def run_mplib(py: Path, cell: Cell, queries: list[Any], time_limit: float, rrt_range: float) -> dict[str, Any] | str:
+    spec = mplib_spec(cell, queries, time_limit, rrt_range)
+    proc = subprocess.run(
+        [str(py), str(BENCH / "mplib_driver.py")],
+        input=json.dumps(spec),
+        capture_output=True,
+        text=True,
+        timeout=60 + 3 * time_limit * len(queries),
+    )
+    if proc.returncode != 0:
+        return f"driver failed: {proc.stderr.strip().splitlines()[-3:]}"
+    answer = json.loads(proc.stdout.strip().splitlines()[-1])
+    rows = []
+    for r in answer["results"]:
+        q = np.array(r["q"]) if r["ok"] else np.zeros((0, 6))
+        ok = bool(r["ok"]) and q.shape[0] > 0
+        hit = bool(ok and not cell.scene.check_path(q, resolution_rad=FINE_RAD).free)
+        length = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) if ok else math.nan
+        rows.append({"ok": ok, "time_s": r["time_s"], "length": length, "duration": (q.shape[0] - 1) * spec["time_step_s"] if ok else math.nan,
+                     "fine_hit": hit, "status": "success" if ok else r["status"][:40]})
+    out = summarize(rows)
+    out["ompl_median_s"] = float(np.median([r["ompl_s"] for r in answer["results"]]))
+    out["topp_median_s"] = float(np.median([r["topp_s"] for r in answer["results"] if r["ok"]] or [math.nan]))
+    out["version"] = answer.get("mplib_version", "?")
+    out["setup_s"] = answer.get("setup_s", math.nan)
+    return out
+
+
+# ---- main ---------------------------------------------------------------------------------------------------
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--queries", type=int, default=20, help="queries per scene")
+    ap.add_argument("--time-limit", type=float, default=1.0, help="planning time limit per query, s")
+    ap.add_argument("--planners", default="all", help="comma-separated ompl.* names (default: every registered one)")
+    ap.add_argument("--all-queries", action="store_true", help="keep queries whose straight joint motion is free")
+    ap.add_argument("--no-mplib", action="store_true", help="skip the mplib comparison")
+    ap.add_argument("--seed", type=int, default=2024)
+    args = ap.parse_args()
+
+    cells = [Cell("robocup"), Cell("warehouse")]
+    names = sorted(n for n in cells[0].ctx.registry.names([Kind.PLANNER]) if n.startswith("ompl."))
+    if args.planners != "all":
+        names = [n.strip() for n in args.planners.split(",")]
+    blocks = [(n, PlannerBlock(name=n)) for n in names]
+    if "ompl.rrtconnect" in names:
+        blocks.insert(
+            names.index("ompl.rrtconnect") + 1,
+            ("ompl.rrtconnect (no final check)", PlannerBlock(name="ompl.rrtconnect", params={"verify_resolution_rad": 0, "clearance_m": 0})),
+        )
+    queries = {c.name: c.queries(args.queries, args.seed + i, not args.all_queries) for i, c in enumerate(cells)}
+    print(f"{args.queries} queries per scene ({'all' if args.all_queries else 'straight joint motion blocked'}), "
+          f"time limit {args.time_limit:g} s, seeds per query 0..{args.queries - 1}")
+    header = f"  {'planner':34s} {'succ':>6s}  {'med ms':>7s}  {'p95 ms':>7s}  {'len':>6s}  {'dur s':>5s}  hit  failures"
+
+    results: dict[str, dict[str, Any]] = {}
+    for cell in cells:
+        print(f"\n{cell.name}:\n{header}")
+        for label, block in blocks:
+            t0 = time.perf_counter()
+            s = run_ours(cell, block, queries[cell.name], args.time_limit)
+            results.setdefault(label, {})[cell.name] = s
+            print_row(label, s)
+            sys.stdout.flush()
+            _ = time.perf_counter() - t0
+
+    print("\nall scenes:\n" + header)
+    for label, _ in blocks:
+        per = results[label]
+        if any(isinstance(v, str) for v in per.values()):
+            print_row(label, next(v for v in per.values() if isinstance(v, str)))
+            continue
+        print_row(label, merge(list(per.values())))
+
+    if args.no_mplib:
+        return
+    print("\nmplib:")
+    py = mplib_python()
+    if isinstance(py, str):
+        print(f"  mplib is not available here ({py}); skipping the comparison.")
+        return
+    print(header)
+    mplib_runs: dict[str, dict[str, Any]] = {}
+    for rrt_range in (0.1, 1.0):  # mplib's default range, and ours
+        label = f"mplib range {rrt_range:g}"
+        mp: dict[str, Any] = {}
+        for cell in cells:
+            s = run_mplib(py, cell, queries[cell.name], args.time_limit, rrt_range)
+            mp[cell.name] = s
+            print_row(f"{label} [{cell.name}]", s)
+        if any(isinstance(v, str) for v in mp.values()):
+            print(f"  {label}: failed on a scene; no ratio.")
+            continue
+        mp["all"] = merge([mp[c.name] for c in cells])
+        print_row(f"{label} [all]", mp["all"])
+        for c in cells:
+            print(f"    [{c.name}] median OMPL part {mp[c.name]['ompl_median_s'] * 1e3:.1f} ms, TOPP-RA part {mp[c.name]['topp_median_s'] * 1e3:.1f} ms")
+        mplib_runs[label] = mp
+    if not mplib_runs:
+        return
+    print("\nratio of median planning time, ours / mplib (same queries, same time limit):")
+    for label in ("ompl.rrtconnect", "ompl.rrtconnect (no final check)"):
+        if label not in results or any(isinstance(v, str) for v in results[label].values()):
+            continue
+        ours = dict(results[label], all=merge([results[label][c.name] for c in cells]))
+        for mlabel, mp in mplib_runs.items():
+            parts = ", ".join(f"{c.name}: {ours[c.name]['median_s'] / mp[c.name]['median_s']:.2f}" for c in cells)
+            print(f"  {label:34s} / {mlabel:16s} {ours['all']['median_s'] / mp['all']['median_s']:.2f}  ({parts})")
+
+
+def merge(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """Pool per-scene summaries (times re-pooled for the quantiles; medians of length/duration averaged)."""
+    t = np.concatenate([np.array(s["times"]) for s in summaries])
+    n = sum(s["n"] for s in summaries)
+    failures: dict[str, int] = {}
+    for s in summaries:
+        for k, v in s["failures"].items():
+            failures[k] = failures.get(k, 0) + v
+    return {
+        "n": n,
+        "success": sum(s["success"] * s["n"] for s in summaries) / n,
+        "median_s": float(np.median(t)),
+        "p95_s": float(np.percentile(t, 95)),
+        "length": _nanmean([s["length"] for s in summaries]),
+        "duration": _nanmean([s["duration"] for s in summaries]),
+        "fine_hits": sum(s["fine_hits"] for s in summaries),
+        "failures": failures,
+        "times": t.tolist(),
+    }
+
+
+def _nanmean(values: list[float]) -> float:
+    v = np.array(values, dtype=float)
+    return float(v[~np.isnan(v)].mean()) if (~np.isnan(v)).any() else math.nan
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONWARNINGS", "ignore")
+    main()

@@ -1,0 +1,212 @@
+"""Parameters of the OMPL planners: one pydantic model per planner, built from one table.
+
+Why a table: OMPL 2.0.1's Python bindings cannot return a planner's `ParamSet` (`params()` raises), so
+the names OMPL declares for each planner (`range`, `goal_bias`, `rewire_factor`, ...) are listed here
+with their types, bounds and the setter that applies them. Each planner's model accepts exactly its own
+OMPL parameters plus the options every `ompl.*` planner shares (`OmplParams`), and rejects anything
+else: the registry turns that into a ConfigError that lists the allowed names. When a planner is created
+the setters are looked up on the installed binding, so a parameter the binding lacks is a clear error too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, create_model
+
+__all__ = ["OmplParams", "OmplParam", "OMPL_PARAMS", "PlannerSpec", "PLANNER_SPECS", "params_model"]
+
+
+class OmplParams(BaseModel):
+    """Options shared by every `ompl.*` planner (units in the names; None = derived, see each field)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    time_limit_s: float | None = Field(
+        None, gt=0, description="cap on the planning time; the request's time_limit_s applies when smaller or when None"
+    )
+    joint_range: Literal["compact", "full"] = Field(
+        "compact",
+        description=(
+            "sampling bounds: 'compact' = [-pi, pi] per joint widened to start +- pi and to the joint goal "
+            "(every IK branch keeps a representative); 'full' = the joint limits (+-2pi, elbow +-pi)"
+        ),
+    )
+    validity_resolution_rad: float = Field(
+        0.02, gt=0, le=0.5, description="largest joint step between two checked states of a motion (max-abs, rad)"
+    )
+    clearance_m: float = Field(
+        0.005,
+        ge=0,
+        le=0.05,
+        description=(
+            "planning and the final check keep this distance to the environment (obstacles inflated); "
+            "0 = plan on the scene as given. A query whose start or goal lies closer is planned without it"
+        ),
+    )
+    verify_resolution_rad: float = Field(
+        0.002, ge=0, le=0.1, description="joint step of the final check of the timed trajectory; 0 = no final check"
+    )
+    verify_resolution_m: float = Field(
+        0.004, gt=0, le=0.05, description="TCP travel resolution of the final check (checked every half of it, as twin.planning does)"
+    )
+    try_direct: bool = Field(True, description="return the straight joint-space motion when it is free (no sampling)")
+    simplify: bool = Field(True, description="shortcut the path with OMPL's PathSimplifier before retiming")
+    simplify_max_steps: int = Field(
+        20, ge=1, le=10_000, description="cap on vertex-reduction attempts per simplification pass (bounded, so seeded runs repeat)"
+    )
+    simplify_passes: int = Field(1, ge=1, le=10, description="rope shortcut + vertex reduction + collapse passes (stops early when nothing changes)")
+    max_goal_states: int = Field(64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal set (nearest first)")
+    max_repairs: int = Field(2, ge=0, le=5, description="replans at 4x finer validity resolution if the final check finds a collision")
+    retimer: str = Field("toppra", description="retimer plugin that turns the path into a trajectory (a config block's retimer: wins)")
+    retimer_params: dict[str, Any] = Field(default_factory=dict, description="parameters of that retimer")
+
+
+@dataclass(frozen=True)
+class OmplParam:
+    """One OMPL planner parameter: python type, pydantic Field, and the binding's setter name."""
+
+    type: Any
+    field: Any
+    setter: str
+
+
+def _p(tp: Any, setter: str, description: str, **bounds: Any) -> OmplParam:
+    return OmplParam(tp | None, Field(None, description=description, **bounds), setter)
+
+
+# OMPL's declared parameter names (ParamSet keys) -> setter on the bound planner class
+OMPL_PARAMS: dict[str, OmplParam] = {
+    "range": _p(float, "setRange", "longest motion added in one step (joint-space L2, rad); None = OMPL's 20% of the extent", gt=0),
+    "goal_bias": _p(float, "setGoalBias", "probability of sampling the goal", ge=0, le=1),
+    "intermediate_states": _p(bool, "setIntermediateStates", "keep the states passed on each extension in the tree"),
+    "rewire_factor": _p(float, "setRewireFactor", "scales the rewiring radius / k", gt=0),
+    "use_k_nearest": _p(bool, "setKNearest", "rewire with k nearest instead of a radius"),
+    "delay_collision_checking": _p(bool, "setDelayCC", "check motions of rewiring candidates lazily"),
+    "tree_pruning": _p(bool, "setTreePruning", "prune the tree by the current best cost"),
+    "prune_threshold": _p(float, "setPruneThreshold", "fractional cost change that triggers pruning", ge=0, le=1),
+    "informed_sampling": _p(bool, "setInformedSampling", "sample the informed set only"),
+    "sample_rejection": _p(bool, "setSampleRejection", "reject samples that cannot improve the solution"),
+    "new_state_rejection": _p(bool, "setNewStateRejection", "reject new states that cannot improve the solution"),
+    "use_admissible_heuristic": _p(bool, "setAdmissibleCostToCome", "admissible cost-to-come heuristic for pruning"),
+    "focus_search": _p(bool, "setFocusSearch", "focus the search on the informed set"),
+    "number_sampling_attempts": _p(int, "setNumSamplingAttempts", "attempts to find an informed sample", ge=1),
+    "ordered_sampling": _p(bool, "setOrderedSampling", "sort sample batches by heuristic cost"),
+    "ordering_batch_size": _p(int, "setBatchSize", "batch size of ordered sampling", ge=1),
+    "max_nearest_neighbors": _p(int, "setMaxNearestNeighbors", "roadmap connections per new vertex", ge=1),
+    "samples_per_batch": _p(int, "setSamplesPerBatch", "samples per BIT* batch", ge=1),
+    "use_bitstar_k_nearest": _p(bool, "setUseKNearest", "BIT* k-nearest instead of r-disc graph"),
+    "use_graph_pruning": _p(bool, "setPruning", "prune the BIT* graph by the informed set"),
+    "prune_threshold_as_fractional_cost_change": _p(float, "setPruneThresholdFraction", "cost change that triggers pruning", ge=0, le=1),
+    "delay_rewiring_to_first_solution": _p(bool, "setDelayRewiringUntilInitialSolution", "no rewiring before the first solution"),
+    "use_just_in_time_sampling": _p(bool, "setJustInTimeSampling", "generate samples only where needed"),
+    "drop_unconnected_samples_on_prune": _p(bool, "setDropSamplesOnPrune", "drop unconnected samples when pruning"),
+    "stop_on_each_solution_improvement": _p(bool, "setStopOnSolnImprovement", "return after every improvement"),
+    "use_strict_queue_ordering": _p(bool, "setStrictQueueOrdering", "re-sort the queue on every rewiring"),
+    "find_approximate_solutions": _p(bool, "setConsiderApproximateSolutions", "track approximate solutions"),
+    "border_fraction": _p(float, "setBorderFraction", "fraction of expansions spent on border cells", gt=0, le=1),
+    "failed_expansion_score_factor": _p(float, "setFailedExpansionCellScoreFactor", "score factor after a failed expansion", gt=0, le=1),
+    "min_valid_path_fraction": _p(float, "setMinValidPathFraction", "least valid fraction of a motion to keep it", ge=0, le=1),
+    "temp_change_factor": _p(float, "setTempChangeFactor", "BiTRRT temperature change factor", gt=0),
+    "init_temperature": _p(float, "setInitTemperature", "BiTRRT initial temperature", gt=0),
+    "frontier_threshold": _p(float, "setFrontierThreshold", "BiTRRT frontier distance", ge=0),
+    "frontier_node_ratio": _p(float, "setFrontierNodeRatio", "BiTRRT frontier/non-frontier node ratio", gt=0),
+    "cost_threshold": _p(float, "setCostThreshold", "BiTRRT cost threshold"),
+}
+
+_RRTSTAR = [
+    "range",
+    "goal_bias",
+    "rewire_factor",
+    "use_k_nearest",
+    "delay_collision_checking",
+    "tree_pruning",
+    "prune_threshold",
+    "informed_sampling",
+    "sample_rejection",
+    "new_state_rejection",
+    "use_admissible_heuristic",
+    "focus_search",
+    "number_sampling_attempts",
+    "ordered_sampling",
+    "ordering_batch_size",
+]
+_BITSTAR = [
+    "rewire_factor",
+    "samples_per_batch",
+    "use_bitstar_k_nearest",
+    "use_graph_pruning",
+    "prune_threshold_as_fractional_cost_change",
+    "delay_rewiring_to_first_solution",
+    "use_just_in_time_sampling",
+    "drop_unconnected_samples_on_prune",
+    "stop_on_each_solution_improvement",
+    "use_strict_queue_ordering",
+    "find_approximate_solutions",
+]
+_KPIECE = ["range", "border_fraction", "failed_expansion_score_factor", "min_valid_path_fraction"]
+
+
+@dataclass(frozen=True)
+class PlannerSpec:
+    """One OMPL planner: its class name in `ompl.geometric`, its parameters, whether it optimises
+    (uses its whole time limit unless `stop_at_first_solution`)."""
+
+    ompl_class: str
+    params: tuple[str, ...]
+    optimizing: bool = False
+    defaults: tuple[tuple[str, Any], ...] = ()  # our defaults where OMPL's do not suit a 6-joint arm
+    # OMPL's PRM family adds goal states from a helper thread while the roadmap grows; with Python
+    # validity callbacks and bindings that hold the GIL during solve() that deadlocks (seen with a
+    # pose goal's goal set), so these planners get one goal configuration: the nearest
+    single_goal: bool = False
+
+
+PLANNER_SPECS: dict[str, PlannerSpec] = {
+    # OMPL's default range is 20% of the space extent (~3 rad here): long edges that are mostly rejected
+    # and raw paths that wander; 1 rad halved planning + shortcutting time in the warehouse queries
+    "RRTConnect": PlannerSpec("RRTConnect", ("range", "intermediate_states"), defaults=(("range", 1.0),)),
+    "RRT": PlannerSpec("RRT", ("range", "goal_bias", "intermediate_states"), defaults=(("range", 1.0),)),
+    "RRTstar": PlannerSpec("RRTstar", tuple(_RRTSTAR), True),
+    "InformedRRTstar": PlannerSpec("InformedRRTstar", tuple(_RRTSTAR), True),
+    "SORRTstar": PlannerSpec("SORRTstar", tuple(_RRTSTAR), True),
+    "PRM": PlannerSpec("PRM", ("max_nearest_neighbors",), single_goal=True),
+    "PRMstar": PlannerSpec("PRMstar", (), True, single_goal=True),
+    "LazyPRMstar": PlannerSpec("LazyPRMstar", ("range",), True, single_goal=True),
+    "BITstar": PlannerSpec("BITstar", tuple(_BITSTAR), True),
+    "AORRTC": PlannerSpec("AORRTC", ("range",), True),
+    "KPIECE1": PlannerSpec("KPIECE1", ("goal_bias", *_KPIECE)),
+    "BKPIECE1": PlannerSpec("BKPIECE1", tuple(_KPIECE)),
+    "LBKPIECE1": PlannerSpec("LBKPIECE1", ("range", "border_fraction", "min_valid_path_fraction")),
+    "BiTRRT": PlannerSpec(
+        "BiTRRT",
+        ("range", "temp_change_factor", "init_temperature", "frontier_threshold", "frontier_node_ratio", "cost_threshold"),
+    ),
+}
+
+
+def _bounds(field: Any) -> dict[str, Any]:
+    """The numeric bounds (gt, ge, lt, le) of a pydantic FieldInfo, to rebuild it with another default."""
+    out: dict[str, Any] = {}
+    for m in field.metadata:
+        for key in ("gt", "ge", "lt", "le"):
+            if getattr(m, key, None) is not None:
+                out[key] = getattr(m, key)
+    return out
+
+
+def params_model(spec: PlannerSpec) -> type[OmplParams]:
+    """The pydantic model of one planner: the shared options plus its own OMPL parameters."""
+    fields: dict[str, Any] = {name: (OMPL_PARAMS[name].type, OMPL_PARAMS[name].field) for name in spec.params}
+    for name, value in spec.defaults:
+        f = OMPL_PARAMS[name].field
+        fields[name] = (OMPL_PARAMS[name].type, Field(value, description=f.description, **_bounds(f)))
+    if spec.optimizing:
+        fields["stop_at_first_solution"] = (
+            bool,
+            Field(False, description="stop at the first exact path instead of optimising for the whole time limit"),
+        )
+    model = create_model(f"{spec.ompl_class}Params", __base__=OmplParams, **fields)
+    model.__doc__ = f"Parameters of ompl.{spec.ompl_class.lower()}: the shared options and OMPL's {', '.join(spec.params) or '(none)'}."
+    return model

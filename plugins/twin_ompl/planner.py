@@ -1,0 +1,546 @@
+"""OMPL sampling planners as one-shot `twin` planners (`ompl.rrtconnect`, `ompl.rrtstar`, ...).
+
+One `plan(request, scene)`:
+
+1. start and goal checks on the scene as given (typed failures, no sampling): start outside the limits
+   or in collision -> INVALID_START; joint goal outside the limits or in collision -> INVALID_GOAL; pose
+   goal -> every IK solution (all 2*pi wraps) inside the sampling bounds that is collision-free, nearest
+   first; none -> INVALID_GOAL saying whether the pose is out of reach or every solution collides (and
+   with what);
+2. planning happens on the scene with its environment inflated by `clearance_m` (5 mm; see
+   `twin_ompl.validity.padded_scene`), unless the start or every goal lies closer than that;
+3. the straight joint-space motion to one of the nearest goals, when free, is the answer (`try_direct`);
+4. otherwise OMPL plans in a RealVectorStateSpace(6) whose bounds are `joint_range`: 'compact' by
+   default = [-pi, pi] per joint widened to start +- pi and to a joint goal, clipped to the limits. Every
+   IK branch keeps a representative within pi of the start in each joint, and the sampled volume is ~1/20
+   of the full +-2pi box (elbow +-pi), which RRT-style planners explore much faster; 'full' = the limits;
+5. bounded OMPL shortcutting (rope shortcut, reduceVertices, collapseCloseVertices);
+6. a retimer plugin (`toppra` by default, or the config block's `retimer:`) times the path;
+7. the trajectory is checked every `verify_resolution_rad` / `verify_resolution_m` on the inflated
+   scene; if a straight segment grazes something between the states checked while planning, that segment
+   is planned again at the fine resolution and spliced in (`max_repairs`); if only the timing spline cuts
+   a corner, the path is re-timed through denser waypoints.
+
+Time: the request's `time_limit_s` (or the smaller `time_limit_s` parameter) bounds the whole call up to
+the final retiming and check: sampling stops early enough to leave up to a quarter of the limit for steps
+5-7, and past the sampling deadline every new validity query answers "invalid", so planners that test
+their termination condition only between long batches stop promptly too. The retimer is warmed up when
+the planner is built (TOPP-RA's first import costs ~1 s), not inside a request's limit.
+
+Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) right before the planner and the
+path simplifier are created, so every random generator they own starts from the request's seed; the
+same request and scene give the same path. The seed is process-global: do not plan with OMPL from two
+threads at once (the FCL scene is not thread-safe either).
+
+OMPL 2.0.1 specifics: planners are found by `getattr(ompl.geometric, name)`; LazyPRMstar and BiTRRT are
+not bound (DependencyMissing says so); the PRM family gets only the nearest goal configuration (see
+`PlannerSpec.single_goal`: its goal-adding helper thread deadlocks with Python callbacks).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import ompl.base as ob
+import ompl.geometric as og
+import ompl.util as ou
+
+from twin.config import Settings
+from twin.errors import ConfigError, DependencyMissing, PlanningError, TwinError
+from twin.kinematics import UR5e
+from twin.planning import make_context
+from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
+
+from twin_ompl.params import PLANNER_SPECS, OMPL_PARAMS, OmplParams, PlannerSpec, params_model
+from twin_ompl.validity import CheckCounter, SceneMotionValidator, padded_scene, state_validity_checker, trajectory_check_points
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.registry import PluginContext
+
+__all__ = [
+    "OmplPlanner",
+    "RRTConnect",
+    "RRT",
+    "RRTstar",
+    "InformedRRTstar",
+    "SORRTstar",
+    "PRM",
+    "PRMstar",
+    "LazyPRMstar",
+    "BITstar",
+    "AORRTC",
+    "KPIECE1",
+    "BKPIECE1",
+    "LBKPIECE1",
+    "BiTRRT",
+    "sampling_bounds",
+    "path_length",
+]
+
+log = logging.getLogger("twin")
+
+ou.setLogLevel(ou.LogLevel.LOG_WARN)
+
+_PI = math.pi
+# kept free of sampling (for shortcutting, retiming and the final check) when a planner would use all of
+# its time: a quarter of the limit, at most this many seconds
+_POST_RESERVE_S = 0.25
+_REPAIR_RESERVE_S = 0.05  # a repaired path needs only retiming and the final check
+_DIRECT_GOALS = 3  # nearest goals tried with a straight motion
+
+
+def sampling_bounds(kin: UR5e, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
+    """(6, 2) sampling bounds in rad (see the module docstring, step 3)."""
+    lim = np.asarray(kin.joint_limits, dtype=float)
+    if joint_range == "full":
+        return lim.copy()
+    lo = np.minimum(-_PI, start - _PI)
+    hi = np.maximum(_PI, start + _PI)
+    if joint_goal is not None:
+        lo, hi = np.minimum(lo, joint_goal), np.maximum(hi, joint_goal)
+    return np.stack([np.maximum(lo, lim[:, 0]), np.minimum(hi, lim[:, 1])], axis=1)
+
+
+def path_length(path: np.ndarray) -> float:
+    """Joint-space length of a waypoint path (m, 6): sum of the L2 norms of its segments, rad."""
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if path.shape[0] > 1 else 0.0
+
+
+def _densify(path: np.ndarray, spacing: float) -> np.ndarray:
+    """The polyline through `path` (m, 6) with extra points so no two are more than `spacing` apart (L2)."""
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        k = max(1, math.ceil(float(np.linalg.norm(b - a)) / spacing - 1e-9))
+        out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
+    return np.concatenate(out)
+
+
+def _seed(seed: int) -> None:
+    """Re-seed OMPL's seed generator (seed 0 is OMPL's 'random'; avoid it). Its 'already started'
+    complaint is expected here: re-seeding still restarts the sequence of seeds for new generators."""
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LogLevel.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed) % 2_147_483_647 + 1)
+    finally:
+        ou.setLogLevel(level)
+
+
+def _states(path: Any) -> np.ndarray:
+    return np.array([path.getState(i)[0:6] for i in range(path.getStateCount())], dtype=float)
+
+
+@dataclass
+class _Attempt:
+    """What one sampling run produced (path or a failure) and what it cost."""
+
+    path: np.ndarray | None = None
+    status: Status = Status.NO_SOLUTION
+    reason: str = ""
+    direct: bool = False
+    goal_index: int | None = None
+
+
+class OmplPlanner:
+    """A one-shot planner around one OMPL geometric planner (the subclasses below fix which one).
+
+    `params` is the planner's pydantic model (`Params`), `context` the plugin context (settings,
+    kinematics, registry). `plan(request, scene)` never raises for "no path": it returns a status.
+    """
+
+    spec: PlannerSpec = PLANNER_SPECS["RRTConnect"]
+    Params: type[OmplParams] = params_model(spec)
+
+    def __init__(self, params: OmplParams | None = None, context: "PluginContext | None" = None):
+        if not hasattr(og, self.spec.ompl_class):
+            import ompl
+
+            version = getattr(ompl, "__version__", "") or _dist_version()
+            raise DependencyMissing(
+                f"planner {self.name!r} needs ompl.geometric.{self.spec.ompl_class}, which the installed OMPL "
+                f"{version} Python bindings do not expose (upstream ompl/ompl#1419). Install an OMPL build whose "
+                "bindings include it, or pick another ompl.* planner (`twin planners`)."
+            )
+        self.params = params if params is not None else self.Params()
+        self.context = context
+        if context is not None:
+            self.kin: UR5e = context.kinematics
+            self.settings = context.settings
+        else:
+            self.kin = UR5e()
+            self.settings = Settings()
+        self._planner_setters = self._setters()
+        self._retimer: Any = None
+        self._warm_up()
+
+    # ---- configuration ---------------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return f"ompl.{self.spec.ompl_class.lower()}"
+
+    def _setters(self) -> list[tuple[str, Any]]:
+        """(setter name, value) for every OMPL parameter set in params; a setter the binding lacks is an error."""
+        cls = getattr(og, self.spec.ompl_class)
+        out = []
+        for pname in self.spec.params:
+            value = getattr(self.params, pname)
+            if value is None:
+                continue
+            setter = OMPL_PARAMS[pname].setter
+            if not hasattr(cls, setter):
+                raise ConfigError(f"{self.name}: parameter {pname!r} is not settable in this OMPL build ({setter} missing)")
+            out.append((setter, value))
+        return out
+
+    def set_retimer(self, retimer: Any) -> None:
+        """Use this retimer (any object with `retime(path, limits) -> Trajectory`) instead of `params.retimer`."""
+        if not hasattr(retimer, "retime"):
+            raise PlanningError(f"{type(retimer).__name__} has no retime(path, limits)")
+        self._retimer = retimer
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Time one tiny path now, so a retimer's first-use imports (TOPP-RA ~1 s) are paid at construction,
+        not inside the first request's time limit."""
+        retimer = self.retimer  # an unknown retimer name or bad retimer params fail here, at construction
+        try:
+            retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
+        except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
+            log.debug("%s: retimer warm-up failed: %r", self.name, e)
+
+    @property
+    def retimer(self) -> Any:
+        if self._retimer is None:
+            if self.context is not None:
+                registry, context = self.context.registry, self.context
+            else:
+                context = make_context(self.settings, kinematics=self.kin)
+                registry = context.registry
+            self._retimer = registry.retimer(self.params.retimer, self.params.retimer_params, context)
+        return self._retimer
+
+    # ---- the protocol ----------------------------------------------------------------------------
+    def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+        """Plan `request` in `scene`; "no path" is a status with a reason, never an exception."""
+        t0 = time.perf_counter()
+        limit = request.time_limit_s if self.params.time_limit_s is None else min(request.time_limit_s, self.params.time_limit_s)
+        deadline = t0 + limit
+        result = self._plan(request, scene, t0, deadline, limit)
+        return replace(result, planning_time_s=time.perf_counter() - t0)
+
+    def _plan(self, request: MotionRequest, scene: "PlanningScene", t0: float, deadline: float, limit: float) -> MotionResult:
+        p = self.params
+        kin = self.kin
+        start = np.array(request.start, dtype=float)
+        info: dict[str, Any] = {"planner": self.name, "seed": request.seed}
+
+        # 1. start and goals ------------------------------------------------------------------------
+        if not kin.within_limits(start):
+            lo, hi = kin.joint_limits[:, 0], kin.joint_limits[:, 1]
+            j = int(np.argmax(np.maximum(lo - start, start - hi)))
+            return MotionResult(Status.INVALID_START, f"start joint {j + 1} = {start[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]", info=info)
+        if scene.in_collision(start):
+            return MotionResult(Status.INVALID_START, f"the start configuration is in collision ({_contact(scene, start)})", info=info)
+        joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
+        bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
+        goals, failure = self._goal_set(request, scene, bounds)
+        if failure is not None:
+            return MotionResult(failure[0], failure[1], info=info)
+        assert goals is not None
+        # plan (and check finely) on the scene inflated by the clearance, unless start or goal lie closer
+        clearance = p.clearance_m
+        plan_scene = padded_scene(scene, self.settings, clearance) if clearance > 0 else None
+        if plan_scene is not None:
+            far = ~plan_scene.in_collision_batch(goals)
+            if plan_scene.in_collision(start) or not far.any():
+                plan_scene = None
+            else:
+                goals = goals[far]
+        if plan_scene is None:
+            plan_scene, clearance = scene, 0.0
+        info.update(goal_count=int(goals.shape[0]), bounds=bounds.tolist(), clearance_m=clearance)
+        scene = plan_scene
+
+        # 2.-6. plan, simplify, retime, verify; repair a grazing segment by planning it finer -----------
+        counter = CheckCounter()
+        timings: dict[str, float] = {}
+        att = self._attempt(start, goals, bounds, scene, request.seed, p.validity_resolution_rad, counter, deadline, limit, timings)
+        info.update(direct=att.direct)
+        if att.path is None:
+            return MotionResult(att.status, att.reason, info=self._info(info, counter, timings))
+        path = att.path
+        info.update(goal_index=att.goal_index)
+        repairs = 0
+        while True:
+            traj, outcome, segment = self._timed_and_checked(path, request, scene, timings)
+            info.update(repairs=repairs, waypoints=int(path.shape[0]), path_length_rad=path_length(path))
+            if traj is not None:
+                info.update(duration_s=traj.duration)
+                reason = "ok (straight joint motion)" if att.direct and repairs == 0 else "ok"
+                return MotionResult(Status.SUCCESS, reason, traj, path=path, info=self._info(info, counter, timings))
+            if segment is None or repairs >= p.max_repairs or time.perf_counter() >= deadline:
+                status = Status.LIMIT_VIOLATION if outcome.startswith("retiming failed") else Status.COLLISION
+                return MotionResult(status, f"{outcome} (after {repairs} repairs)", path=path, info=self._info(info, counter, timings))
+            # the straight segment grazes an obstacle between the states checked while planning: plan that
+            # segment again at the final check's resolution and splice the detour in
+            repairs += 1
+            a, b = path[segment], path[segment + 1]
+            fine = p.verify_resolution_rad
+            sub = self._attempt(
+                a, b[None], bounds, scene, request.seed + 7919 * repairs, fine, counter, deadline, limit, timings, repair=True
+            )
+            if sub.path is None:
+                return MotionResult(
+                    Status.COLLISION if sub.status is Status.NO_SOLUTION else sub.status,
+                    f"{outcome}; replanning segment {segment} at {fine:g} rad failed: {sub.reason}",
+                    path=path,
+                    info=self._info(info, counter, timings),
+                )
+            path = np.concatenate([path[: segment + 1], sub.path[1:-1], path[segment + 1 :]])
+            log.debug("%s: segment %d grazed an obstacle; replanned it at %.4f rad", self.name, segment, fine)
+
+    @staticmethod
+    def _info(info: dict[str, Any], counter: CheckCounter, timings: dict[str, float]) -> dict[str, Any]:
+        if counter.error is not None:
+            raise PlanningError(f"the validity check raised {counter.error!r}") from counter.error
+        return dict(
+            info,
+            states_checked=counter.states,
+            motions_checked=counter.motions,
+            configs_checked=counter.configs,
+            **{f"{k}_time_s": v for k, v in timings.items()},
+        )
+
+    # ---- steps -------------------------------------------------------------------------------------
+    def _goal_set(
+        self, request: MotionRequest, scene: "PlanningScene", bounds: np.ndarray
+    ) -> tuple[np.ndarray | None, tuple[Status, str] | None]:
+        """(k, 6) collision-free goal configurations inside `bounds`, nearest to the start first."""
+        kin, start = self.kin, request.start
+        goal = request.goal
+        if isinstance(goal, JointGoal):
+            q = np.array(goal.q, dtype=float)
+            if not kin.within_limits(q):
+                return None, (Status.INVALID_GOAL, "the joint goal is outside the joint limits")
+            if scene.in_collision(q):
+                return None, (Status.INVALID_GOAL, f"the joint goal is in collision ({_contact(scene, q)})")
+            return q[None], None
+        assert isinstance(goal, PoseGoal)
+        if goal.frame not in ("tcp", "flange"):
+            return None, (Status.INVALID_GOAL, f"unknown goal frame {goal.frame!r}; allowed: tcp, flange")
+        sols = kin.ik(goal.pose.matrix(), goal.frame)
+        if sols.shape[0] == 0:
+            return None, (Status.INVALID_GOAL, "the goal pose has no IK solution (out of reach)")
+        inside = np.all((sols >= bounds[:, 0] - 1e-9) & (sols <= bounds[:, 1] + 1e-9), axis=1)
+        sols = sols[inside]
+        if sols.shape[0] == 0:  # cannot happen for 'compact' (every branch has a wrap in [-pi, pi])
+            return None, (Status.INVALID_GOAL, f"no IK solution of the goal pose lies inside the sampling bounds ({self.params.joint_range})")
+        sols = sols[np.argsort(np.abs(sols - start).max(axis=1), kind="stable")]
+        hits = scene.in_collision_batch(sols)
+        free = sols[~hits]
+        if free.shape[0] == 0:
+            return None, (Status.INVALID_GOAL, f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {_contact(scene, sols[0])})")
+        return free[: self.params.max_goal_states], None
+
+    def _attempt(
+        self,
+        start: np.ndarray,
+        goals: np.ndarray,
+        bounds: np.ndarray,
+        scene: "PlanningScene",
+        seed: int,
+        resolution: float,
+        counter: CheckCounter,
+        deadline: float,
+        limit: float,
+        timings: dict[str, float],
+        repair: bool = False,
+    ) -> _Attempt:
+        """One sampling run from `start` to the goal set at `resolution`; adds its timings to `timings`.
+        A `repair` run (one short segment) keeps less time in reserve and stops at its first path."""
+        p = self.params
+        space = ob.RealVectorStateSpace(6)
+        rb = ob.RealVectorBounds(6)
+        for j in range(6):
+            rb.setLow(j, float(bounds[j, 0]))
+            rb.setHigh(j, float(bounds[j, 1]))
+        space.setBounds(rb)
+        si = ob.SpaceInformation(space)
+        si.setStateValidityChecker(state_validity_checker(scene, counter))
+        mv = SceneMotionValidator(si, scene, resolution, counter)
+        si.setMotionValidator(mv)
+        si.setup()
+
+        def spent(key: str, since: float) -> None:
+            timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
+
+        if p.try_direct:
+            t = time.perf_counter()
+            for i in range(min(_DIRECT_GOALS, goals.shape[0])):
+                if mv.motion_free(start, goals[i]):
+                    spent("direct", t)
+                    return _Attempt(np.stack([start, goals[i]]), Status.SUCCESS, direct=True, goal_index=i)
+            spent("direct", t)
+
+        # decide before any OMPL planner exists: a planner destroyed without setup() can crash (AORRTC does)
+        reserve = min(_REPAIR_RESERVE_S, 0.05 * limit) if repair else min(_POST_RESERVE_S, 0.25 * limit)
+        budget = deadline - time.perf_counter() - reserve
+        if budget <= 0.001:
+            return _Attempt(status=Status.TIMEOUT, reason=f"no time left to sample within {limit:.3g} s")
+        ss = og.SimpleSetup(si)
+        st = si.allocState()
+        st[0:6] = start.tolist()
+        ss.setStartState(st)
+        if self.spec.single_goal:
+            goals = goals[:1]  # see PlannerSpec.single_goal
+        if goals.shape[0] == 1:
+            g = si.allocState()
+            g[0:6] = goals[0].tolist()
+            goal: Any = ob.GoalState(si)
+            goal.setState(g)
+        else:
+            goal = ob.GoalStates(si)
+            for q in goals:
+                g = si.allocState()
+                g[0:6] = q.tolist()
+                goal.addState(g)
+        ss.setGoal(goal)
+        _seed(seed)
+        planner = getattr(og, self.spec.ompl_class)(si)
+        for setter, value in self._planner_setters:
+            getattr(planner, setter)(value)
+        ss.setPlanner(planner)
+        ss.setup()
+        ptc = ob.timedPlannerTerminationCondition(budget)
+        if repair or getattr(p, "stop_at_first_solution", False):
+            ptc = ob.plannerOrTerminationCondition(ptc, ob.exactSolnPlannerTerminationCondition(ss.getProblemDefinition()))
+        log.debug("%s: sampling for up to %.3f s, %d goal(s), resolution %.4f rad", self.name, budget, goals.shape[0], resolution)
+        t = time.perf_counter()
+        counter.deadline = t + budget
+        try:
+            status = ss.solve(ptc)
+        finally:
+            counter.deadline = math.inf
+        spent("solve", t)
+        if counter.error is not None:
+            return _Attempt(reason=f"the validity check raised {counter.error!r}")
+        if not ss.haveExactSolutionPath():
+            elapsed = time.perf_counter() - t
+            what = status.asString() if hasattr(status, "asString") else str(status)
+            if elapsed >= budget * 0.95:
+                return _Attempt(
+                    status=Status.TIMEOUT,
+                    reason=f"{self.spec.ompl_class} found no path within {limit:.3g} s ({what}; {counter.states} states, {counter.motions} motions checked)",
+                )
+            return _Attempt(status=Status.NO_SOLUTION, reason=f"{self.spec.ompl_class}: {what}")
+        path = ss.getSolutionPath()
+        if p.simplify:
+            t = time.perf_counter()
+            self._simplify(si, path, deadline)  # bounded passes; no refusals here (OMPL would warn of "touching")
+            spent("simplify", t)
+        waypoints = _states(path)
+        waypoints[0] = start  # OMPL copies states exactly; make the ends bit-identical anyway
+        gi = int(np.argmin(np.abs(goals - waypoints[-1]).max(axis=1)))
+        waypoints[-1] = goals[gi]
+        return _Attempt(waypoints, Status.SUCCESS, goal_index=gi)
+
+    def _simplify(self, si: Any, path: Any, deadline: float) -> None:
+        """OMPL shortcutting in bounded passes (no wall-clock cut inside a pass, so seeded runs repeat)."""
+        steps = self.params.simplify_max_steps
+        ps = og.PathSimplifier(si)
+        for _ in range(self.params.simplify_passes):
+            if time.perf_counter() >= deadline:
+                break
+            # rope shortcutting does most of the work on a raw tree path; the others tidy what is left
+            changed = ps.ropeShortcutPath(path)
+            if time.perf_counter() < deadline and path.getStateCount() > 2:
+                changed |= ps.reduceVertices(path, steps, max(1, steps // 2), 0.33)
+            if time.perf_counter() < deadline and path.getStateCount() > 2:
+                changed |= ps.collapseCloseVertices(path, steps, max(1, steps // 2))
+            if not changed or path.getStateCount() <= 2:
+                break
+
+    def _timed_and_checked(
+        self, path: np.ndarray, request: MotionRequest, scene: "PlanningScene", timings: dict[str, float]
+    ) -> tuple[Trajectory | None, str, int | None]:
+        """(trajectory, "ok", None) when the timed `path` passes the final check; else (None, why, segment)
+        with `segment` the index of a straight path segment that itself collides (None: the path is free
+        but its timing spline cuts a corner even through a denser path, or retiming failed)."""
+        p = self.params
+
+        def spent(key: str, since: float) -> None:
+            timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
+
+        last = ""
+        for spacing in (None, 0.02, 0.005):
+            P = path if spacing is None else _densify(path, spacing)
+            t = time.perf_counter()
+            try:
+                traj = self.retimer.retime(P, request.limits)
+            except TwinError as e:
+                spent("retime", t)
+                return None, f"retiming failed: {e}", None
+            spent("retime", t)
+            if p.verify_resolution_rad <= 0:
+                return traj, "ok", None
+            t = time.perf_counter()
+            qs = trajectory_check_points(traj, self.kin, p.verify_resolution_rad, p.verify_resolution_m)
+            hit = scene.first_collision(qs)
+            if hit is None:
+                spent("verify", t)
+                return traj, "ok", None
+            # the path itself (missed between the states checked while planning) or the spline's corner?
+            check = scene.check_path(path, resolution_rad=p.verify_resolution_rad)
+            spent("verify", t)
+            if not check.free:
+                assert check.segment is not None
+                return None, f"path segment {check.segment} collides at {p.verify_resolution_rad:g} rad", check.segment
+            last = f"the timed trajectory collides ({_contact(scene, qs[hit])}) while its path is free"
+        return None, last, None
+
+
+def _contact(scene: "PlanningScene", q: np.ndarray) -> str:
+    """'a vs b' for the closest (or penetrating) pair at q, for failure reasons."""
+    try:
+        d = scene.min_distance(q)
+    except Exception:  # noqa: BLE001 - a reason must never fail the planner
+        return "colliding pair unknown"
+    if not d.robot_part:
+        return "colliding pair unknown"
+    return f"{d.robot_part} vs {d.other}"
+
+
+def _dist_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("ompl")
+    except Exception:  # noqa: BLE001
+        return "(unknown version)"
+
+
+def _planner_class(spec: PlannerSpec) -> type[OmplPlanner]:
+    doc = f"`ompl.{spec.ompl_class.lower()}`: OMPL's {spec.ompl_class} with FCL validity, IK goal sets and retiming."
+    return type(spec.ompl_class, (OmplPlanner,), {"spec": spec, "Params": params_model(spec), "__doc__": doc, "__module__": __name__})
+
+
+RRTConnect = _planner_class(PLANNER_SPECS["RRTConnect"])
+RRT = _planner_class(PLANNER_SPECS["RRT"])
+RRTstar = _planner_class(PLANNER_SPECS["RRTstar"])
+InformedRRTstar = _planner_class(PLANNER_SPECS["InformedRRTstar"])
+SORRTstar = _planner_class(PLANNER_SPECS["SORRTstar"])
+PRM = _planner_class(PLANNER_SPECS["PRM"])
+PRMstar = _planner_class(PLANNER_SPECS["PRMstar"])
+LazyPRMstar = _planner_class(PLANNER_SPECS["LazyPRMstar"])
+BITstar = _planner_class(PLANNER_SPECS["BITstar"])
+AORRTC = _planner_class(PLANNER_SPECS["AORRTC"])
+KPIECE1 = _planner_class(PLANNER_SPECS["KPIECE1"])
+BKPIECE1 = _planner_class(PLANNER_SPECS["BKPIECE1"])
+LBKPIECE1 = _planner_class(PLANNER_SPECS["LBKPIECE1"])
+BiTRRT = _planner_class(PLANNER_SPECS["BiTRRT"])

