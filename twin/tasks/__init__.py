@@ -31,17 +31,17 @@ def run_task(
     """Run the configured task once on scene `seed` (default: the config's); `planner` replaces the
     transfer planner; `record` writes a video (.mp4/.gif) from the overview camera. Bad config or
     planner names raise before anything is simulated."""
-    from twin.tasks.cell import Cell
-    from twin.world import World
-
     from twin.recording import Recorder
+    from twin.tasks.cell import Cell, stage_planners
 
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record) if record else None
     t0 = time.perf_counter()
+    planners = stage_planners(settings, planner)
+    from twin.world import World  # pybullet prints a banner on import: only once the input is known good
+
     with World(settings, seed=seed, gui=gui) as world:
-        cell = Cell(settings, world, planner_override=planner, on_stage=on_stage)
-        cell.check_planners()
+        cell = Cell(settings, world, planner_override=planner, on_stage=on_stage, planners=planners)
         if recorder is not None:
             recorder.attach(world)
         if gui:

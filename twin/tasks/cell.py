@@ -20,7 +20,7 @@ from twin.executor import MotionRecord, plan_and_execute
 from twin.planning import limits_from_settings, make_context, make_planner
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 
-__all__ = ["Cell", "StageFailed", "STAGE_GROUPS", "top_down"]
+__all__ = ["Cell", "StageFailed", "STAGE_GROUPS", "stage_block", "stage_planners", "top_down"]
 
 log = logging.getLogger("twin")
 
@@ -52,6 +52,20 @@ def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.nda
     return Pose.from_xyz_rpy(tuple(float(v) for v in xyz), (math.pi, 0.0, float(yaw))).matrix()
 
 
+def stage_block(settings: Settings, group: str, planner_override: str | None = None) -> PlannerBlock:
+    """The planner block of a stage group: `--planner` for transfer, else the config, else the default."""
+    if group == "transfer" and planner_override:
+        return PlannerBlock(name=planner_override)
+    b = settings.planners.get(group)
+    return b if b is not None else PlannerBlock(name=DEFAULT_PLANNERS[group])
+
+
+def stage_planners(settings: Settings, planner_override: str | None = None) -> dict[str, Any]:
+    """Every stage planner, built up front: a bad name or parameter fails before anything is simulated."""
+    context = make_context(settings)
+    return {g: make_planner(stage_block(settings, g, planner_override), context) for g in sorted(set(STAGE_GROUPS.values()))}
+
+
 @dataclass
 class Cell:
     """Everything a task needs to move the robot; built once per run."""
@@ -62,31 +76,24 @@ class Cell:
     on_stage: Callable[[str], None] | None = None
     records: list[MotionRecord] = field(default_factory=list)
 
+    planners: dict[str, Any] = field(default_factory=dict)  # built ahead by `stage_planners`, else lazily
+
     def __post_init__(self) -> None:
         self.context = make_context(self.settings)
         self.kin = self.context.kinematics
         self.scene = PlanningScene.from_settings(self.settings)
         self.limits = limits_from_settings(self.settings)
-        self._planners: dict[str, Any] = {}
         self.held_body: int | None = None
         self.current = ""  # what the task works on, shown beside the stage in progress displays
 
     # ---- planners -------------------------------------------------------------------------------
     def block(self, group: str) -> PlannerBlock:
-        if group == "transfer" and self.planner_override:
-            return PlannerBlock(name=self.planner_override)
-        b = self.settings.planners.get(group)
-        return b if b is not None else PlannerBlock(name=DEFAULT_PLANNERS[group])
+        return stage_block(self.settings, group, self.planner_override)
 
     def planner(self, group: str) -> Any:
-        if group not in self._planners:
-            self._planners[group] = make_planner(self.block(group), self.context)
-        return self._planners[group]
-
-    def check_planners(self) -> None:
-        """Build every stage planner up front, so a bad name or parameter fails before the run starts."""
-        for g in sorted(set(STAGE_GROUPS.values())):
-            self.planner(g)
+        if group not in self.planners:
+            self.planners[group] = make_planner(self.block(group), self.context)
+        return self.planners[group]
 
     # ---- motion ---------------------------------------------------------------------------------
     def move(self, stage: str, goal: JointGoal | PoseGoal, *, time_limit_s: float = 2.0) -> MotionResult:
