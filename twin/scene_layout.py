@@ -23,6 +23,8 @@ from typing import Literal
 
 import numpy as np
 
+from twin.types import rpy_matrix
+
 from twin.config import FixtureSettings, Settings
 from twin.errors import ConfigError
 
@@ -118,19 +120,6 @@ def color_rgba(name: str) -> tuple[float, float, float, float]:
         return COLORS[name.lower()]
     except KeyError:
         raise ConfigError(f"unknown colour {name!r}; known colours: {', '.join(sorted(COLORS))}") from None
-
-
-def rpy_matrix(rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of URDF roll-pitch-yaw (fixed axes x, y, z: R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    r, p, y = (float(a) for a in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def pose_matrix(position: tuple[float, float, float] | np.ndarray, rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:

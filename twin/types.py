@@ -28,6 +28,9 @@ __all__ = [
     "ObjectOutcome",
     "RunSummary",
     "as_q",
+    "rpy_matrix",
+    "matrix_to_quat",
+    "quat_to_matrix",
 ]
 
 
@@ -45,7 +48,9 @@ def as_q(q: Any, what: str = "q") -> np.ndarray:
     return arr
 
 
-def _rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+def rpy_matrix(rpy: Any) -> np.ndarray:
+    """(3, 3) rotation of fixed-axis roll, pitch, yaw (URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    roll, pitch, yaw = (float(a) for a in rpy)
     cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
     return np.array(
         [
@@ -56,7 +61,7 @@ def _rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     )
 
 
-def _matrix_to_quat(R: np.ndarray) -> np.ndarray:
+def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     """x-y-z-w quaternion of a rotation matrix (Shepperd's method)."""
     t = np.trace(R)
     if t > 0:
@@ -75,7 +80,9 @@ def _matrix_to_quat(R: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
+def quat_to_matrix(q: Any) -> np.ndarray:
+    """(3, 3) rotation of a quaternion x-y-z-w (PyBullet's order)."""
+    q = np.asarray(q, dtype=float)
     x, y, z, w = q / np.linalg.norm(q)
     return np.array(
         [
@@ -96,17 +103,17 @@ class Pose:
     @classmethod
     def from_matrix(cls, T: np.ndarray) -> "Pose":
         T = np.asarray(T, dtype=float)
-        return cls(T[:3, 3].copy(), _matrix_to_quat(T[:3, :3]))
+        return cls(T[:3, 3].copy(), matrix_to_quat(T[:3, :3]))
 
     @classmethod
     def from_xyz_rpy(cls, xyz: Any, rpy: Any) -> "Pose":
         """Position and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-        R = _rpy_to_matrix(*[float(a) for a in rpy])
-        return cls(np.array(xyz, dtype=float), _matrix_to_quat(R))
+        R = rpy_matrix(rpy)
+        return cls(np.array(xyz, dtype=float), matrix_to_quat(R))
 
     def matrix(self) -> np.ndarray:
         T = np.eye(4)
-        T[:3, :3] = _quat_to_matrix(np.asarray(self.quat_xyzw, dtype=float))
+        T[:3, :3] = quat_to_matrix(np.asarray(self.quat_xyzw, dtype=float))
         T[:3, 3] = self.position
         return T
 

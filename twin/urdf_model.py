@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twin.types import rpy_matrix
+
 from twin.errors import ConfigError, InvalidRequestError
 
 __all__ = [
@@ -39,15 +41,7 @@ _KNOWN_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating"
 
 def rpy_to_matrix(rpy: Sequence[float]) -> np.ndarray:
     """(3, 3) rotation of URDF roll-pitch-yaw: Rz(yaw) @ Ry(pitch) @ Rx(roll)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    return rpy_matrix(rpy)
 
 
 def pose_from_xyz_rpy(xyz: Sequence[float] = (0.0, 0.0, 0.0), rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:

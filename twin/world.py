@@ -33,6 +33,8 @@ import numpy as np
 import pybullet as pb
 
 from twin.config import PROJECT_ROOT, Settings
+from twin.kinematics import JOINT_NAMES
+from twin.types import matrix_to_quat
 
 if TYPE_CHECKING:
     from twin.camera import Intrinsics, RGBDFrame
@@ -62,14 +64,7 @@ __all__ = [
 
 log = logging.getLogger("twin")
 
-ARM_JOINT_NAMES = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
+ARM_JOINT_NAMES = JOINT_NAMES
 FINGER_JOINT_NAMES = ("left_finger_joint", "right_finger_joint")
 FINGER_TRAVEL_M = 0.0425  # each finger, along tool0 x; the opening is the sum of both
 
@@ -395,7 +390,7 @@ class World:
         if vs < 0:
             raise WorldError(f"could not load the marker quad {obj}")
         T = marker_pose_in_base(self.settings)
-        quat = _quat_from_matrix(T[:3, :3])
+        quat = matrix_to_quat(T[:3, :3])
         self._marker_id = pb.createMultiBody(
             baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=vs,
             basePosition=T[:3, 3].tolist(), baseOrientation=quat.tolist(), physicsClientId=c,
@@ -473,7 +468,7 @@ class World:
             R = R @ rpy_matrix(sp.template.lying_rpy)
         try:
             bid = pb.loadURDF(
-                self._urdf(sp.template.urdf), list(sp.position), _quat_from_matrix(R).tolist(),
+                self._urdf(sp.template.urdf), list(sp.position), matrix_to_quat(R).tolist(),
                 flags=_URDF_FLAGS, physicsClientId=c,
             )
         except pb.error as e:
@@ -800,23 +795,3 @@ class World:
         if link_b is not None:
             kw["linkIndexB"] = link_b
         return self._points(pb.getClosestPoints(body_a, body_b, max_distance_m, physicsClientId=c, **kw))
-
-
-def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Quaternion x-y-z-w of a rotation matrix (Shepperd's method)."""
-    m = R
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
-    q_arr = np.array(q)
-    return q_arr / np.linalg.norm(q_arr)

@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from twin.camera import RGBDFrame
 from twin.errors import InvalidRequestError
 from twin.perception.detection import Detection, SceneCloud, scene_cloud
-from twin.perception.geometry import quat_to_matrix
+from twin.types import quat_to_matrix
 
 __all__ = ["OracleDetector"]
 

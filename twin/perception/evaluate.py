@@ -30,7 +30,7 @@ from twin.config import Settings
 from twin.perception.aruco import Calibration, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, wrist_camera_offset
 from twin.perception.detection import detection_label
-from twin.perception.geometry import quat_to_matrix
+from twin.types import quat_to_matrix
 from twin.perception.robocup import CYLINDERS
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, rpy_matrix
 from twin.types import BoxBounds

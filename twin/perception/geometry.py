@@ -23,7 +23,6 @@ __all__ = [
     "IcpResult",
     "trimmed_icp",
     "rot_z",
-    "quat_to_matrix",
 ]
 
 
@@ -36,18 +35,6 @@ def rot_z(yaw: float) -> np.ndarray:
     """(3, 3) rotation about z."""
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def quat_to_matrix(q_xyzw: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of a quaternion x-y-z-w (PyBullet's order)."""
-    x, y, z, w = np.asarray(q_xyzw, dtype=float) / np.linalg.norm(q_xyzw)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 @dataclass(frozen=True)
