@@ -143,6 +143,20 @@ class MotionPlannerBase:
             return None, MotionResult(Status.INVALID_GOAL, f"no acceptable IK for the goal pose: {res.reason}"), res
         return np.array(res.q), None, res
 
+    def point_to_point_goal(self, request: MotionRequest, scene: PlanningScene) -> tuple[np.ndarray, dict[str, Any]] | MotionResult:
+        """The goal configuration of a MoveJ (start checked, pose goals through the defensive IK, joint goals
+        unwrapped when the planner's `unwrap_joint_goals` asks), or the typed failure."""
+        bad = self.check_start(request, scene)
+        if bad:
+            return bad
+        q_goal, bad, ik = self.goal_configuration(request, scene)
+        if bad:
+            return bad
+        assert q_goal is not None
+        if getattr(self.params, "unwrap_joint_goals", False) and isinstance(request.goal, JointGoal):
+            q_goal = unwrap_goal(request.start, q_goal, self.kin)
+        return q_goal, ({"ik": ik.reason} if ik else {})
+
     def finish(
         self,
         request: MotionRequest,
@@ -198,16 +212,10 @@ class RuckigMoveJ(MotionPlannerBase):
         )
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
-        bad = self.check_start(request, scene)
-        if bad:
-            return bad
-        q_goal, bad, ik = self.goal_configuration(request, scene)
-        if bad:
-            return bad
-        assert q_goal is not None
-        if self.params.unwrap_joint_goals and isinstance(request.goal, JointGoal):
-            q_goal = unwrap_goal(request.start, q_goal, self.kin)
-        info: dict[str, Any] = {"ik": ik.reason} if ik else {}
+        ends = self.point_to_point_goal(request, scene)
+        if isinstance(ends, MotionResult):
+            return ends
+        q_goal, info = ends
         if np.abs(q_goal - request.start).max() <= 1e-12:
             return self.finish(request, scene, stationary(request.start), info=info)
         rt = ruckig_point_to_point(request.start, q_goal, request.limits, synchronization=self.params.synchronization)
@@ -259,16 +267,10 @@ class QuinticMoveJ(MotionPlannerBase):
         )
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
-        bad = self.check_start(request, scene)
-        if bad:
-            return bad
-        q_goal, bad, ik = self.goal_configuration(request, scene)
-        if bad:
-            return bad
-        assert q_goal is not None
-        if self.params.unwrap_joint_goals and isinstance(request.goal, JointGoal):
-            q_goal = unwrap_goal(request.start, q_goal, self.kin)
-        info: dict[str, Any] = {"ik": ik.reason} if ik else {}
+        ends = self.point_to_point_goal(request, scene)
+        if isinstance(ends, MotionResult):
+            return ends
+        q_goal, info = ends
         q0 = request.start
         dq = q_goal - q0
         if np.abs(dq).max() <= 1e-12:
