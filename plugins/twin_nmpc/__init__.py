@@ -1,11 +1,24 @@
-"""Built-in nmpc planners (registered through the `twin` entry-point group)."""
+"""Built-in NMPC planner (seeds 000/001), registered through the `twin` entry-point group.
+
+- `nmpc` (`twin_nmpc.planner:NMPCPlanner`): receding-horizon NMPC over CasADi/IPOPT. Needs the `nmpc`
+  extra (casadi); the name is registered lazily, so `import twin` never imports CasADi.
+"""
 
 from __future__ import annotations
 
 from twin import hookimpl
 from twin.registry import Registry
 
+__all__ = ["twin_register_planners"]
+
 
 @hookimpl
 def twin_register_planners(registry: Registry) -> None:
-    pass
+    """Register `nmpc` as a receding-horizon planner."""
+    registry.add_planner(
+        "nmpc",
+        "twin_nmpc.planner:NMPCPlanner",
+        receding_horizon=True,
+        extra="nmpc",
+        description="warehouse NMPC (CasADi/IPOPT): 30 x 0.08 s horizon, proxy spheres over the obstacle box, first k steps executed",
+    )

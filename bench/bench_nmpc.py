@@ -1,0 +1,139 @@
+"""Benchmark of the `nmpc` planner (issue 6). A plain script: prints numbers, asserts nothing.
+
+    python bench/bench_nmpc.py [--scenes 50] [--seed 0] [--config seed000|seed001|both] [--guesses 20]
+
+On the seeded warehouse transfer scenes of `twin_nmpc.scenarios` (cube grasped, random start, obstacle
+and drop zone inside the workspace; the same scenes as tests/test_nmpc.py, which runs a subset), each
+goal is run through `twin.planning.plan_with` (the receding-horizon loop rolled out on the kinematic model,
+then the FCL re-check of the whole arm against the full scene). Prints, per configuration
+(seed 000: dt 0.08 s, 1 step executed per solve; seed 001: dt 0.1 s, 3 steps):
+- success rate (TCP within 3 cm within 40 solves, and the FCL re-check passed),
+- solves per goal (median, p95, max) and the executed motion duration,
+- solve time, median and p95: cold (first solve of a goal, from the over-the-box guess), warm-started
+  (every later solve), and all solves; the NLP build time (once per planner instance),
+- the independent FCL check of every executed trajectory: smallest proxy-sphere distance to the perceived
+  box and smallest robot/cube distance to the table, and how many trajectories violate either;
+- braking steps at the goal and the peak joint acceleration at the knots,
+- the first solve from the over-the-box guess vs the straight guess (`--guesses N` scenes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+from twin.config import PROJECT_ROOT, PlannerBlock, load_config
+from twin.planning import make_context, make_planner, plan_with
+from twin.types import MotionResult
+from twin_nmpc.scenarios import build_scene, check_trajectory, transfer_scenes
+
+CONFIGS: dict[str, dict[str, Any]] = {
+    "seed000": {"dt": 0.08, "execute_steps": 1},
+    "seed001": {"dt": 0.1, "execute_steps": 3},
+}
+
+
+def pct(a: list[float], q: float) -> float:
+    return float(np.percentile(a, q)) if a else float("nan")
+
+
+def run(name: str, params: dict[str, Any], n: int, seed: int) -> None:
+    settings = load_config(PROJECT_ROOT / "configs" / "warehouse.yaml")
+    scenes = transfer_scenes(n, seed, settings=settings)
+    ctx = make_context(settings)
+    planner = make_planner(PlannerBlock(name="nmpc", params=params), ctx)
+    cold: list[float] = []
+    warm: list[float] = []
+    solves: list[int] = []
+    braking: list[int] = []
+    peak_acc: list[float] = []
+    durations: list[float] = []
+    wall: list[float] = []
+    min_box, min_table, bad_checks, statuses = [], [], 0, {}
+    build = 0.0
+    for ts in scenes:
+        scene = build_scene(settings, ts)
+        t0 = time.perf_counter()
+        res = plan_with(planner, ts.request, scene, ctx)
+        wall.append(time.perf_counter() - t0)
+        log = res.info.get("nmpc_solve_log", [])
+        cold += [e["time_s"] for e in log if not e["warm"]]
+        warm += [e["time_s"] for e in log if e["warm"]]
+        solves.append(int(res.info.get("nmpc_solves", len(log))))
+        braking.append(int(res.info.get("nmpc_braking_steps", 0)))
+        statuses[res.status.value] = statuses.get(res.status.value, 0) + 1
+        if res.trajectory is not None:
+            durations.append(res.trajectory.duration)
+            steps = np.diff(res.trajectory.q, axis=0)  # knots are dt apart
+            peak_acc.append(float(np.abs(np.diff(np.vstack([np.zeros(6), steps]), axis=0)).max()) / planner.params.dt**2)
+            chk = check_trajectory(res.trajectory, ts, planner.proxy_spheres, build_scene(settings, ts, with_fixtures=False), ctx.kinematics)
+            min_box.append(chk.min_sphere_box_m)
+            min_table.append(chk.min_table_m)
+            bad_checks += not chk.ok
+        build = planner.build_time_s
+    ok = statuses.get("success", 0)
+    every = cold + warm
+    print(f"== nmpc {name} {params}  ({len(scenes)} scenes, seed {seed})")
+    print(f"success rate          {ok}/{len(scenes)} = {100.0 * ok / len(scenes):.1f} %   statuses {statuses}")
+    print(f"solves per goal       median {np.median(solves):.1f}  p95 {pct(solves, 95):.1f}  max {max(solves)}")
+    print(f"braking steps at goal median {np.median(braking):.1f}  max {max(braking)}  (along the last plan, no solve)")
+    if durations:
+        print(
+            f"motion duration (s)   median {np.median(durations):.2f}  p95 {pct(durations, 95):.2f};"
+            f"  peak knot acceleration {max(peak_acc):.2f} rad/s^2"
+        )
+    print(f"solve time (ms)       cold  median {1e3 * np.median(cold):7.1f}  p95 {1e3 * pct(cold, 95):7.1f}  (n={len(cold)})")
+    if warm:
+        print(f"                      warm  median {1e3 * np.median(warm):7.1f}  p95 {1e3 * pct(warm, 95):7.1f}  (n={len(warm)})")
+    print(f"                      all   median {1e3 * np.median(every):7.1f}  p95 {1e3 * pct(every, 95):7.1f}")
+    print(f"planning wall time    per goal median {np.median(wall):.2f} s  (incl. FCL re-check); NLP build {build:.2f} s once")
+    if min_box:
+        print(
+            f"FCL check             min sphere-box {1e3 * min(min_box):.1f} mm, min robot/cube-table {1e3 * min(min_table):.1f} mm,"
+            f" trajectories violating: {bad_checks}"
+        )
+    print()
+
+
+def guess_comparison(n: int, seed: int) -> None:
+    """The first (cold) solve of each goal from the over-the-box guess and from the straight one."""
+    settings = load_config(PROJECT_ROOT / "configs" / "warehouse.yaml")
+    scenes = transfer_scenes(n, seed, settings=settings)
+    ctx = make_context(settings)
+    print(f"== first solve from the initial guess ({n} scenes, seed 000 config)")
+    for guess in ("over_box", "straight"):
+        planner = make_planner(PlannerBlock(name="nmpc", params={"initial_guess": guess}), ctx)
+        its, times, ok = [], [], 0
+        for ts in scenes:
+            planner.reset(ts.request, build_scene(settings, ts))
+            out = planner.step(ts.request.start)
+            e = out.info["nmpc_solve_log"][0] if isinstance(out, MotionResult) else out.info
+            its.append(e["iterations"])
+            times.append(e["time_s"])
+            ok += "rejected" not in e
+        print(
+            f"{guess:9s} IPOPT iterations median {np.median(its):.0f} p95 {pct(its, 95):.0f};"
+            f" time median {1e3 * np.median(times):.0f} ms p95 {1e3 * pct(times, 95):.0f} ms; accepted {ok}/{n}"
+        )
+    print()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--config", choices=[*CONFIGS, "both"], default="both")
+    ap.add_argument("--guesses", type=int, default=20, help="scenes for the initial-guess comparison (0: skip)")
+    args = ap.parse_args()
+    names = list(CONFIGS) if args.config == "both" else [args.config]
+    for name in names:
+        run(name, CONFIGS[name], args.scenes, args.seed)
+    if args.guesses:
+        guess_comparison(args.guesses, args.seed)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,380 @@
+"""The NMPC optimal-control problem (CasADi + IPOPT), built once and solved again and again.
+
+Why this shape (see LIBRARY-NOTES, CasADi 3.8): the problem is written directly in SX with every joint
+configuration of the horizon as a decision variable ("multiple shooting" over the trivial integrator
+q_{j+1} = q_j + dq_j), so IPOPT sees a sparse, exactly differentiated NLP; `nlpsol` is called once per
+problem shape and reused with new parameters (start, goal, boxes, held-object spheres) every solve.
+
+Decision variables, stage-major so a solution (and its multipliers) can be shifted by whole stages:
+    x = [q_1, s_1, q_2, s_2, ..., q_N, s_N, s_down]
+q_j (6) joint angles, s_j (1) table-clearance slack of stage j, s_down (1) terminal facing-down slack.
+
+Constraints, stage-major as well (block j):
+    q_j - q_{j-1}                          in [-step, step]           (6, linear)
+    (q_j - q_{j-1}) - (q_{j-1} - q_{j-2})  in [-a dt^2, a dt^2]      (6, linear; q_{-1} from the last
+                                                                       executed step; a: the request's
+                                                                       acceleration limit, or none)
+    sphere-outside-box between consecutive check points a, b (q_{j-1}, `substeps - 1` points between,
+    q_j; joint-linear), every box x every sphere:  d(a) + d(b) - |c(b) - c(a)| >= 2 r   (hard)
+    z_sphere - r_sphere + s_j - z_table    >= clearance                (one per sphere, soft through s_j)
+and after the last block the terminal facing-down row  -R_N[2, 2] + s_down >= cos(tol).
+
+d(p) is the distance of a sphere centre p from an axis-aligned box (centre c, half extents h incl. the
+margin): sqrt(sum_i max(|p_i - c_i| - h_i, 0)^2), the smooth-outside formulation of LIBRARY-NOTES (zero
+gradient inside, so a solve must never start inside: the planner seeds the first solve over the box).
+Why pairs rather than d(a) >= r at each point: at 0.15 rad per step the TCP moves up to ~15 cm per step,
+and a sphere passing over a box edge between two check points dipped 2 cm below them. d is 1-Lipschitz,
+so if the centre travels an arc of about |c(b) - c(a)| between a and b, every point on it is at least
+(d(a) + d(b) - |c(b) - c(a)|) / 2 >= r from the box: the sphere stays out along the whole step, and the
+robot slows down or passes higher only where it is close to the box.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from twin.kinematics import DH_A, DH_ALPHA, DH_D
+
+__all__ = [
+    "ProblemShape",
+    "Weights",
+    "SolveOutput",
+    "NMPCProblem",
+    "TCP_FRAME",
+    "fk_tcp_sx",
+    "fk_frames_sx",
+    "sphere_centres",
+    "sphere_box_clearance",
+    "pair_clearance",
+]
+
+log = logging.getLogger("twin")
+
+TCP_FRAME = 7  # sphere frame code of the TCP (DH frames are 0..6)
+_PAIR_SCALE = 1.0 / 0.05  # sphere-box rows in units of 5 cm
+_EPS2 = 1e-10  # (10 um)^2 under the distance's square root (feasible distances are >= r anyway)
+# under the chord's square root: (1 cm)^2. A robot standing still (the horizon's tail, once at the goal)
+# has zero chords, where sqrt(x^2 + eps) has curvature 1/sqrt(eps): with (10 um)^2 that was 1e5, IPOPT
+# regularised heavily and cycled for ~100 iterations. 1 cm costs at most 5 mm of extra clearance there.
+_CHORD_EPS2 = 1e-4
+
+
+def _exact(v: float) -> float:
+    """cos/sin of the DH twist angles rounded to exact 0/+-1, so SX drops the zero terms."""
+    for e in (-1.0, 0.0, 1.0):
+        if abs(v - e) < 1e-12:
+            return e
+    return v
+
+
+def fk_tcp_sx(q: ca.SX, tcp_offset_m: float) -> tuple[ca.SX, ca.SX]:
+    """Symbolic UR5e forward kinematics (standard DH, SPEC parameters): TCP position (3,) and rotation (3, 3)."""
+    frames = fk_frames_sx(q, tcp_offset_m)
+    return frames[TCP_FRAME][:3, 3], frames[TCP_FRAME][:3, :3]
+
+
+def fk_frames_sx(q: ca.SX, tcp_offset_m: float) -> dict[int, ca.SX]:
+    """Symbolic DH frames 4, 5 and 6 (wrist_2 joint, wrist_3 joint, flange) and the TCP (key TCP_FRAME),
+    (4, 4) each in the base frame."""
+    T = ca.SX.eye(4)
+    out: dict[int, ca.SX] = {}
+    for i in range(6):
+        ct, st = ca.cos(q[i]), ca.sin(q[i])
+        cal, sal = _exact(math.cos(DH_ALPHA[i])), _exact(math.sin(DH_ALPHA[i]))
+        A = ca.SX.zeros(4, 4)
+        A[0, 0], A[0, 1], A[0, 2], A[0, 3] = ct, -st * cal, st * sal, DH_A[i] * ct
+        A[1, 0], A[1, 1], A[1, 2], A[1, 3] = st, ct * cal, -ct * sal, DH_A[i] * st
+        A[2, 1], A[2, 2], A[2, 3] = sal, cal, DH_D[i]
+        A[3, 3] = 1.0
+        T = ca.mtimes(T, A)
+        if i + 1 >= 4:
+            out[i + 1] = T
+    tool = ca.SX.eye(4)
+    tool[2, 3] = tcp_offset_m
+    out[TCP_FRAME] = ca.mtimes(T, tool)
+    return out
+
+
+def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
+    """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
+    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP."""
+    tool = np.eye(4)
+    tool[2, 3] = tcp_offset_m
+    out = np.empty((frames.shape[0], spheres.shape[0], 3))
+    for f in np.unique(spheres[:, 0]).astype(int):
+        F = frames[:, 6] @ tool if f == TCP_FRAME else frames[:, f]
+        sel = spheres[:, 0] == f
+        out[:, sel] = np.einsum("mij,nj->mni", F[:, :3, :3], spheres[sel, 1:4]) + F[:, None, :3, 3]
+    return out
+
+
+def sphere_box_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Signed clearance (m) of spheres (n, 3), radii (n,) from the box [lo, hi]: distance from each centre to
+    the box minus its radius; negative when the sphere enters the box (centres inside give -radius or less)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    d = np.abs(centres - c) - h
+    outside = np.linalg.norm(np.maximum(d, 0.0), axis=-1)
+    inside = np.minimum(d.max(axis=-1), 0.0)
+    return outside + inside - radii
+
+
+def pair_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Numeric twin of the NLP's box rows: for consecutive check points (m, n, 3) of n spheres, the
+    guaranteed clearance (m-1, n) along the way, (d(a) + d(b) - |c(b) - c(a)|) / 2 - r (m; >= 0 is clear)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    d = np.sqrt(np.sum(np.maximum(np.abs(centres - c) - h, 0.0) ** 2, axis=-1) + _EPS2)
+    chord = np.sqrt(np.sum(np.diff(centres, axis=0) ** 2, axis=-1) + _CHORD_EPS2)
+    return 0.5 * (d[:-1] + d[1:] - chord) - radii
+
+
+@dataclass(frozen=True)
+class ProblemShape:
+    """What fixes the NLP's structure: a new shape means a new `nlpsol` (cached by the planner)."""
+
+    horizon: int
+    n_boxes: int
+    n_object_spheres: int
+    substeps: int
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Cost weights: position error (stage; terminal = position * terminal_factor), joint step, slacks."""
+
+    position: float
+    terminal_factor: float
+    step: float
+    table_slack: float
+    facing_down_slack: float
+
+
+@dataclass(frozen=True)
+class SolveOutput:
+    """One IPOPT solve: the knots q (N+1, 6) including the start, the raw primal/dual vectors and stats."""
+
+    q: np.ndarray
+    x: np.ndarray
+    lam_x: np.ndarray
+    lam_g: np.ndarray
+    cost: float
+    status: str
+    converged: bool
+    iterations: int
+    solve_time_s: float
+    warm: bool
+
+
+class NMPCProblem:
+    """The NLP for one `ProblemShape`, with a cold and a warm-started IPOPT instance built once
+    (`cold_options`, `warm_options`: nlpsol options, e.g. {"ipopt.tol": 1e-2}).
+
+    `robot_spheres` (n, 5): (frame, x, y, z, r) with frame a DH frame index (4, 5, 6) or TCP_FRAME.
+    Parameters of a solve (vector `p`): q0 (6), the last executed step q0 - q_{-1} (6), goal (3), tracked
+    point in the TCP frame (3), table z (1),
+    then per box centre (3) and half extents incl. margin (3), then per held-object sphere offset in the TCP
+    frame (3) and radius (1).
+    """
+
+    def __init__(
+        self,
+        shape: ProblemShape,
+        *,
+        robot_spheres: np.ndarray,
+        tcp_offset_m: float,
+        weights: Weights,
+        table_clearance_m: float,
+        facing_down_cos: float,
+        cold_options: dict[str, Any],
+        warm_options: dict[str, Any],
+    ):
+        t0 = time.perf_counter()
+        self.shape = shape
+        N, nb, no, ns_sub = shape.horizon, shape.n_boxes, shape.n_object_spheres, shape.substeps
+        self.robot_spheres = np.asarray(robot_spheres, dtype=float).reshape(-1, 5)
+        nt = self.robot_spheres.shape[0]
+        self.n_spheres = nt + no
+        self.block_x = 7
+        self.nx = N * self.block_x + 1
+        self.n_params = 19 + 6 * nb + 4 * no
+
+        x = ca.SX.sym("x", self.nx)
+        p = ca.SX.sym("p", self.n_params)
+        q0, dq_prev, goal, track, table_z = p[0:6], p[6:12], p[12:15], p[15:18], p[18]
+        boxes = [(p[19 + 6 * b : 22 + 6 * b], p[22 + 6 * b : 25 + 6 * b]) for b in range(nb)]
+        o0 = 19 + 6 * nb
+        obj = [(p[o0 + 4 * s : o0 + 4 * s + 3], p[o0 + 4 * s + 3]) for s in range(no)]
+        spheres_local = [(int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres]
+        spheres_local += [(TCP_FRAME, off, r) for off, r in obj]
+        used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME})
+
+        qs = ca.SX.sym("q", 6)
+        frames = fk_frames_sx(qs, tcp_offset_m)
+        fk = ca.Function("fk", [qs], [frames[f] for f in used])
+
+        def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, ca.SX]], ca.SX, ca.SX]:
+            Fs = dict(zip(used, fk(q)))
+            pts = [(Fs[f][:3, 3] + ca.mtimes(Fs[f][:3, :3], off), r) for f, off, r in spheres_local]
+            T = Fs[TCP_FRAME]
+            return pts, T[:3, 3], T[:3, :3]
+
+        def box_distance(ps: ca.SX, c: ca.SX, h: ca.SX) -> ca.SX:
+            d = ca.fmax(ca.fabs(ps - c) - h, 0)
+            return ca.sqrt(ca.dot(d, d) + _EPS2)
+
+        J = 0
+        g: list[ca.SX] = []
+        lbg: list[np.ndarray] = []
+        ubg: list[np.ndarray] = []
+        q_prev = q0
+        R_last = None
+        prev_pts = sphere_points(q0)[0]
+        for j in range(N):
+            xb = x[j * self.block_x : (j + 1) * self.block_x]
+            qj, sj = xb[0:6], xb[6]
+            dq = qj - q_prev
+            g.append(dq)
+            g.append(dq - dq_prev)
+            lbg.append(np.full(12, -np.inf))  # step and step-change bounds are set per solve
+            ubg.append(np.full(12, np.inf))
+            seq = [prev_pts]
+            for sub in range(1, ns_sub + 1):
+                qm = qj if sub == ns_sub else q_prev + (sub / ns_sub) * dq
+                pts, pj, Rj = sphere_points(qm)
+                seq.append(pts)
+            for c, h in boxes:
+                dist = [[box_distance(ps, c, h) for ps, _ in pts] for pts in seq]
+                for s in range(len(spheres_local)):
+                    r = seq[0][s][1]
+                    for a in range(ns_sub):
+                        chord = ca.sqrt(ca.sumsqr(seq[a + 1][s][0] - seq[a][s][0]) + _CHORD_EPS2)
+                        g.append((dist[a][s] + dist[a + 1][s] - chord - 2 * r) * _PAIR_SCALE)
+                        lbg.append(np.zeros(1))
+                        ubg.append(np.full(1, np.inf))
+            prev_pts = seq[-1]
+            for ps, r in prev_pts:
+                g.append(ps[2] - r + sj - table_z)
+                lbg.append(np.full(1, table_clearance_m))
+                ubg.append(np.full(1, np.inf))
+            e = pj + ca.mtimes(Rj, track) - goal
+            w = weights.position * (weights.terminal_factor if j == N - 1 else 1.0)
+            J += w * ca.dot(e, e) + weights.step * ca.dot(dq, dq) + weights.table_slack * sj * sj
+            q_prev, dq_prev = qj, dq
+            R_last = Rj
+        s_down = x[-1]
+        g.append(-R_last[2, 2] + s_down)
+        lbg.append(np.full(1, facing_down_cos))
+        ubg.append(np.full(1, np.inf))
+        J += weights.facing_down_slack * s_down * s_down
+
+        self.block_g = sum(int(a.size) for a in lbg[:-1]) // N
+        self.ng = sum(int(a.size) for a in lbg)
+        self.lbg = np.concatenate(lbg)
+        self.ubg = np.concatenate(ubg)
+        self._stage_rows_dq = np.concatenate([np.arange(6) + j * self.block_g for j in range(N)])
+        self._stage_rows_ddq = self._stage_rows_dq + 6
+        nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
+        quiet = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
+        self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
+        self._warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, dict(quiet, **warm_options))
+        self.fk = fk
+        self.build_time_s = time.perf_counter() - t0
+        log.debug("nmpc: built NLP %s (%d vars, %d constraints) in %.2f s", shape, self.nx, self.ng, self.build_time_s)
+
+    # ---- layout helpers ---------------------------------------------------------------------------
+    def pack_x(self, q_knots: np.ndarray, slack: np.ndarray | None = None, s_down: float = 0.0) -> np.ndarray:
+        """Decision vector from knots q_1..q_N (N, 6) and optional stage slacks (N,)."""
+        N = self.shape.horizon
+        x = np.zeros(self.nx)
+        blocks = x[:-1].reshape(N, self.block_x)
+        blocks[:, :6] = q_knots
+        if slack is not None:
+            blocks[:, 6] = slack
+        x[-1] = s_down
+        return x
+
+    def knots(self, x: np.ndarray) -> np.ndarray:
+        """(N, 6) q_1..q_N of a decision vector."""
+        return np.asarray(x[:-1]).reshape(self.shape.horizon, self.block_x)[:, :6].copy()
+
+    def shift(self, v: np.ndarray, block: int, k: int) -> np.ndarray:
+        """Stage-major vector `v` (N blocks of `block` + tail) shifted k stages earlier; the last stage repeats."""
+        N = self.shape.horizon
+        body = np.asarray(v[: N * block]).reshape(N, block)
+        k = min(k, N - 1)
+        out = np.concatenate([body[k:], np.repeat(body[-1:], k, axis=0)]).reshape(-1)
+        return np.concatenate([out, np.asarray(v[N * block :])])
+
+    def bounds(
+        self,
+        q_lo: np.ndarray,
+        q_hi: np.ndarray,
+        step: np.ndarray,
+        step_change: np.ndarray | None = None,
+        *,
+        facing_down: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """lbx, ubx (joint limits, slacks >= 0) and lbg, ubg for a solve: per-joint bounds on the step and
+        on its change from one step to the next (acceleration x dt^2; None: unbounded); the terminal
+        facing-down row switched off when `facing_down` is False."""
+        N = self.shape.horizon
+        lbx = np.zeros(self.nx)
+        ubx = np.full(self.nx, np.inf)
+        bl = lbx[:-1].reshape(N, self.block_x)
+        bu = ubx[:-1].reshape(N, self.block_x)
+        bl[:, :6] = q_lo
+        bu[:, :6] = q_hi
+        lbg, ubg = self.lbg.copy(), self.ubg.copy()
+        lbg[self._stage_rows_dq] = np.tile(-step, N)
+        ubg[self._stage_rows_dq] = np.tile(step, N)
+        if step_change is not None:
+            lbg[self._stage_rows_ddq] = np.tile(-step_change, N)
+            ubg[self._stage_rows_ddq] = np.tile(step_change, N)
+        if not facing_down:
+            lbg[-1] = -np.inf
+        return lbx, ubx, lbg, ubg
+
+    # ---- solving ----------------------------------------------------------------------------------
+    def solve(
+        self,
+        x0: np.ndarray,
+        p: np.ndarray,
+        bounds: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        *,
+        lam_x0: np.ndarray | None = None,
+        lam_g0: np.ndarray | None = None,
+    ) -> SolveOutput:
+        """Solve from primal guess x0; with multipliers given, the warm-started IPOPT is used."""
+        lbx, ubx, lbg, ubg = bounds
+        warm = lam_x0 is not None and lam_g0 is not None
+        solver = self._warm if warm else self._cold
+        args = dict(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        if warm:
+            args["lam_x0"] = lam_x0
+            args["lam_g0"] = lam_g0
+        t0 = time.perf_counter()
+        sol = solver(**args)
+        dt = time.perf_counter() - t0
+        stats = solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        converged = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+        x = np.asarray(sol["x"]).reshape(-1)
+        q = np.vstack([p[None, 0:6], self.knots(x)])
+        return SolveOutput(
+            q=q,
+            x=x,
+            lam_x=np.asarray(sol["lam_x"]).reshape(-1),
+            lam_g=np.asarray(sol["lam_g"]).reshape(-1),
+            cost=float(sol["f"]),
+            status=status,
+            converged=converged,
+            iterations=int(stats.get("iter_count", -1)),
+            solve_time_s=dt,
+            warm=warm,
+        )
