@@ -150,6 +150,16 @@ class Cell:
         self.scene.detach()
         self.held_body = None
 
+    def recover(self) -> None:
+        """After a failed stage: let go, forget the held model, rise straight up to 0.3 m if a planner can."""
+        self.release()
+        T = self.kin.fk(self.world.joint_positions())
+        T[2, 3] = max(T[2, 3], 0.30)
+        try:
+            self.move_pose("ascent", T)
+        except StageFailed:
+            log.info("recovery: could not rise from %s", np.round(T[:3, 3], 3).tolist())
+
     # ---- bookkeeping ----------------------------------------------------------------------------
     def metrics(self) -> dict[str, Any]:
         """Planner metrics over the run: per planner, motions, successes, planning and motion time."""

@@ -11,15 +11,21 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.config import Settings
+from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame
 from twin.perception.pipeline import camera_extrinsics, make_detector, perceive_robocup
 from twin.perception.robocup import ObjectEstimate
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, top_down
 from twin.types import ObjectOutcome
+
+if TYPE_CHECKING:
+    from twin.world import World
 
 __all__ = ["run_robocup", "bin_for", "feasible_cube_yaw"]
 
@@ -48,7 +54,7 @@ class _Target:
     true_ids: set[int] = field(default_factory=set)
 
 
-def bin_for(cls: str, color: str | None, settings) -> str:  # noqa: ANN001 (Settings)
+def bin_for(cls: str, color: str | None, settings: Settings) -> str:
     """The fixture name of the bin for a class (a `cube_red`-style key wins over `cube`)."""
     bins = settings.task.robocup.bins
     if color and f"{cls}_{color}" in bins:
@@ -56,8 +62,11 @@ def bin_for(cls: str, color: str | None, settings) -> str:  # noqa: ANN001 (Sett
     return bins.get(cls, settings.task.robocup.default_bin)
 
 
-def _bin_centres(settings) -> dict[str, np.ndarray]:  # noqa: ANN001
-    return {f.name: np.array(f.position) for f in settings.world.fixtures if f.urdf.endswith(("bin_blue.urdf", "bin_green.urdf")) or f.name.startswith("bin")}
+def _bin_centres(settings: Settings) -> dict[str, np.ndarray]:
+    """Centres of the fixtures the class-to-bin map names (a bin named there but missing is a KeyError later)."""
+    task = settings.task.robocup
+    named = set(task.bins.values()) | {task.default_bin}
+    return {f.name: np.array(f.position) for f in settings.world.fixtures if f.name in named}
 
 
 def _in_any_bin(p: np.ndarray, bins: dict[str, np.ndarray]) -> bool:
@@ -75,7 +84,7 @@ def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> 
 
 def _pan_towards(x: float, y: float) -> float:
     """Shoulder pan that faces the point (x, y): with pan 0 the arm reaches towards -x."""
-    return math.atan2(y, x) - math.pi if math.atan2(y, x) > 0 else math.atan2(y, x) + math.pi
+    return float(wrap_to_pi(math.atan2(y, x) + math.pi))
 
 
 def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray, slot_index: int) -> None:
@@ -101,10 +110,13 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray, slot_in
     if cell.world.grasped_object() is None:
         raise StageFailed("ascent", "the object slipped out of the gripper")
     ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
-    side = float(max(ext[0], ext[1]))
-    cell.attach(est.cls, np.array([side, side, ext[2]]), below_tcp_m=z_grasp - ext[2] / 2)
+    short, long_ = sorted((float(ext[0]), float(ext[1])))
+    # the fingers close along the tcp's x axis, across the object's short side
+    cell.attach(est.cls, np.array([short, long_, ext[2]]), below_tcp_m=z_grasp - ext[2] / 2)
+    c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
+    half_xy = 0.5 * np.array([c * short + s * long_, s * short + c * long_])  # its footprint's AABB, world
     # (6) transfer above the bin slot, the object's bottom `place_clearance_m` above the walls
-    slot = np.asarray(bin_xy[:2], dtype=float) + _slot_offset(slot_index, side)
+    slot = np.asarray(bin_xy[:2], dtype=float) + _slot_offset(slot_index, half_xy)
     cell.move_pose("transfer", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
     if cell.world.grasped_object() is None:
         raise StageFailed("transfer", "the object was dropped while carrying it")
@@ -114,9 +126,10 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray, slot_in
     cell.move_pose("ascent", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
 
 
-def _slot_offset(k: int, side_m: float) -> np.ndarray:
-    """Where in the bin the k-th object goes: the four quarters in turn, as far out as its size allows."""
-    reach = max(0.0, min(0.07, _BIN_HALF_M - 0.01 - side_m / 2 - 0.005))
+def _slot_offset(k: int, half_xy: np.ndarray) -> np.ndarray:
+    """Where in the bin the k-th object goes: the four quarters in turn, as far out as its footprint
+    (half extents `half_xy`, world axes) allows inside the walls."""
+    reach = np.clip(_BIN_HALF_M - 0.01 - half_xy - 0.005, 0.0, 0.07)
     signs = [(1, 1), (-1, -1), (1, -1), (-1, 1)][k % 4]
     return reach * np.array(signs, dtype=float)
 
@@ -163,7 +176,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         except StageFailed as e:
             tgt.error = str(e)
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
-            _recover(cell)
+            cell.recover()
         except KeyError:
             tgt.done, tgt.error = True, f"no bin named {bin_for(est.cls, est.color, settings)!r} among the fixtures"
         tgt.cycle_time_s += world.sim_time - t0
@@ -224,21 +237,10 @@ def _target_for(est: ObjectEstimate, targets: list[_Target]) -> _Target:
     return t
 
 
-def _true_match(world, est: ObjectEstimate) -> set[int]:  # noqa: ANN001
+def _true_match(world: "World", est: ObjectEstimate) -> set[int]:
     near = [(float(np.linalg.norm(o.position[:2] - est.position[:2])), o.id) for o in world.objects()]
     d, oid = min(near) if near else (math.inf, -1)
     return {oid} if d < 0.05 else set()
-
-
-def _recover(cell: Cell) -> None:
-    """After a failed stage: let go, forget the held model, rise straight up if possible."""
-    cell.release()
-    T = cell.kin.fk(cell.world.joint_positions())
-    T[2, 3] = max(T[2, 3], 0.30)
-    try:
-        cell.move_pose("ascent", T)
-    except StageFailed:
-        pass
 
 
 def _judge(cell: Cell, truth: dict, targets: list[_Target], bins: dict[str, np.ndarray]) -> list[ObjectOutcome]:
@@ -250,9 +252,12 @@ def _judge(cell: Cell, truth: dict, targets: list[_Target], bins: dict[str, np.n
         c = bins.get(bin_name)
         placed = c is not None and abs(now.position[0] - c[0]) < _BIN_HALF_M and abs(now.position[1] - c[1]) < _BIN_HALF_M and now.position[2] < _BIN_WALL_M + 0.05
         mine = [t for t in targets if oid in t.true_ids]
-        err = None if placed else (mine[-1].error if mine and mine[-1].error else ("not perceived" if not mine else "released, but it did not land in its bin"))
-        if not placed and mine and mine[-1].done and mine[-1].error is None:
-            err = "released, but it did not land in its bin"
+        if placed:
+            err = None
+        elif not mine:
+            err = "not perceived"
+        else:
+            err = mine[-1].error or "released, but it did not land in its bin"
         pose_err = float(np.linalg.norm(mine[0].first_estimate[:2] - o0.position[:2])) if mine and mine[0].first_estimate is not None else None
         out.append(
             ObjectOutcome(

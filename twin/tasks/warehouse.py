@@ -99,7 +99,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
             except StageFailed as e:
                 att.error = str(e)
                 log.info("warehouse: %s cube, attempt %d failed: %s", att.cube.color_label, k + 1, e)
-                _recover(cell)
+                cell.recover()
         att.cycle_time_s = world.sim_time - t0
     try:
         cell.move_joints("home", np.array(settings.robot.home))
@@ -107,18 +107,6 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
     return _judge(cell, truth, attempts, global_error)
-
-
-def _recover(cell: Cell) -> None:
-    """After a failed stage: let go, drop the held model, rise straight up if possible."""
-    cell.release()
-    q = cell.world.joint_positions()
-    T = cell.kin.fk(q)
-    T[2, 3] = max(T[2, 3], 0.30)
-    try:
-        cell.move_pose("ascent", T)
-    except StageFailed:
-        pass
 
 
 def _judge(cell: Cell, truth: dict, attempts: list[_Attempt], global_error: str | None) -> list[ObjectOutcome]:
