@@ -69,10 +69,7 @@ class Cell:
         self.name = name
         self.settings: Settings = load_config(ROOT / "configs" / f"{name}.yaml")
         self.scene = PlanningScene.from_settings(self.settings)
-        for f in self.settings.world.fixtures:
-            if not f.known:
-                for shape in read_fixture_shapes(self.settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
-                    self.scene.add_box(f.name, shape.size, shape.pose)
+        self.scene.add_unknown_fixtures(self.settings)
         if name == "warehouse":
             self.scene.attach_box("cube", [CUBE] * 3, np.eye(4))
         self.ctx = make_context(self.settings)

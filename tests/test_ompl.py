@@ -27,7 +27,6 @@ from twin.errors import ConfigError, DependencyMissing  # noqa: E402
 from twin.planning import first_collision, limits_from_settings, make_context, make_planner, plan_with  # noqa: E402
 from twin.registry import Kind, default_registry  # noqa: E402
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status  # noqa: E402
-from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes  # noqa: E402
 
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])
 FINE_RAD = 0.002  # the independent check: every 0.002 rad of any joint ...
@@ -51,11 +50,7 @@ def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 
 def add_perceived_obstacles(settings: Settings, scene: PlanningScene) -> None:
     """Fixtures marked `known: false` (the warehouse obstacle) as the boxes perception would report."""
-    for f in settings.world.fixtures:
-        if not f.known:
-            for shape in read_fixture_shapes(settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
-                assert shape.kind == "box"
-                scene.add_box(f.name, shape.size, shape.pose)
+    scene.add_unknown_fixtures(settings)
 
 
 class Cell:

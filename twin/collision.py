@@ -712,6 +712,17 @@ class PlanningScene:
         T[:3, 3] = 0.5 * (a + b)
         self.add_box(name, b - a, T)
 
+    def add_unknown_fixtures(self, settings: "Settings") -> None:
+        """Add the fixtures marked `known: false` as a perfect detector would report them: their box
+        shapes at their true poses (for planner tests and benchmarks that leave perception out)."""
+        for f in settings.world.fixtures:
+            if f.known:
+                continue
+            for shape in read_fixture_shapes(settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
+                if shape.kind != "box":
+                    raise InvalidRequestError(f"fixture {f.name!r}: only box shapes can stand in for a perceived obstacle")
+                self.add_box(f.name, shape.size, shape.pose)
+
     def remove(self, name: str) -> None:
         """Remove an environment object (box or fixture) by name."""
         objs = self._env_objects.pop(name, None)

@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from twin.types import MotionRequest
     from twin.world import World
 
-__all__ = ["execute_run", "sample_query", "fixture_bounds", "worker_init", "quiet_imports", "TASKS_UNAVAILABLE"]
+__all__ = ["execute_run", "sample_query", "worker_init", "quiet_imports", "TASKS_UNAVAILABLE"]
 
 log = logging.getLogger("twin")
 
@@ -95,29 +95,6 @@ def quiet_imports() -> None:
         os.close(devnull)
 
 
-def fixture_bounds(settings: "Settings", name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned bounds (lo, hi) (3,) m, base frame, of fixture `name`'s collision shapes: what a
-    perfect detector would report for it."""
-    from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
-
-    fx = next(f for f in settings.world.fixtures if f.name == name)
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for sh in read_fixture_shapes(settings.resolve(fx.urdf), pose_from_xyz_rpy(fx.position, fx.rpy)):
-        size = [float(v) for v in sh.size]
-        if sh.kind == "box":
-            half = np.array(size) / 2
-        elif sh.kind == "sphere":
-            half = np.full(3, size[0])
-        elif sh.kind == "capsule":
-            half = np.array([size[0], size[0], size[0] + size[1] / 2])
-        else:  # cylinder: radius, length along z
-            half = np.array([size[0], size[0], size[1] / 2])
-        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
-        pts = corners @ sh.pose[:3, :3].T + sh.pose[:3, 3]
-        lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
-    return lo, hi
-
-
 def _cell(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Cell:
     key = (config, overrides, unknown_fixtures)
     cell = _CELLS.get(key)
@@ -133,10 +110,7 @@ def _cell(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Ce
         s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
         scene = PlanningScene.from_settings(s)  # without fixtures marked `known: false`
         if unknown_fixtures == "box":  # no perception step in a motion query: report them perfectly
-            for f in s.world.fixtures:
-                if not getattr(f, "known", True):
-                    lo, hi = fixture_bounds(s, f.name)
-                    scene.add_box_bounds(f.name, lo, hi)
+            scene.add_unknown_fixtures(s)
         cell = _CELLS[key] = _Cell(settings=s, scene=scene, kin=UR5e())
     return cell
 
