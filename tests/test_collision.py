@@ -425,3 +425,16 @@ def test_run_time_boxes_are_listed_with_their_bounds_and_the_held_box_with_its_s
     assert name == "cube" and size.tolist() == [0.05, 0.05, 0.05] and pose[2, 3] == 0.02
     scene.detach()
     assert scene.attached_box() is None
+
+
+def test_clearance_ignores_the_shoulder_and_follows_the_arm():
+    from twin.config import load_config
+
+    scene = PlanningScene.from_settings(load_config(PROJECT_ROOT / "configs/robocup.yaml"))
+    home = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    lower = home + np.array([0.0, 0.35, 0.3, 0.0, 0.0, 0.0])  # the gripper closer to the table
+    c_home, c_low = scene.clearance(home), scene.clearance(lower)
+    assert c_home.robot_part not in ("base_link", "shoulder_link")
+    assert c_low.distance < c_home.distance
+    assert c_home.distance >= scene.min_distance(home, include_self=False).distance - 1e-12
+    np.testing.assert_allclose(scene.clearance_batch(np.stack([home, lower])), [c_home.distance, c_low.distance])

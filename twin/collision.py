@@ -408,6 +408,13 @@ class PlanningScene:
         self._moving_manager = fcl.DynamicAABBTreeCollisionManager()
         self._moving_manager.registerObjects(self._moving_objects)
         self._moving_manager.setup()
+        # clearance leaves out the shoulder: it only turns about the base axis, so its distance to the
+        # cell is the same in every configuration and would hide what the arm does
+        turning = {ln for ln in self.model.link_names if self.model.rigid_parent(ln) in ("base_link", "shoulder_link")}
+        self._clear_objects = [objects[i] for i in self._moving if nodes[i] not in turning]
+        self._clear_manager = fcl.DynamicAABBTreeCollisionManager()
+        self._clear_manager.registerObjects(self._clear_objects)
+        self._clear_manager.setup()
         # place every object once (static ones are never moved again) and refit the tree
         self._pack(self._frames_one(np.zeros(6)))
         for i, o in enumerate(objects):
@@ -620,6 +627,33 @@ class PlanningScene:
         for the clearance to the environment alone (obstacle-distance costs and constraints)."""
         self._prepare(self._as_q(q))
         return self._distance_now(include_self)
+
+    def _clearance_now(self) -> DistanceResult:
+        if not self._env_objects or not self._clear_objects:
+            return DistanceResult(math.inf, "", "")
+        self._clear_manager.update()
+        acc = _DistAcc(_FAR)
+        self._clear_manager.distance(self._env, acc, _distance_cb)
+        r = acc.result
+        if r.o1 is None or r.min_distance >= _FAR:
+            return DistanceResult(math.inf, "", "")
+        g1, g2 = (r.o1, r.o2) if self._owner[id(r.o1)][1] else (r.o2, r.o1)
+        return DistanceResult(float(r.min_distance), self._owner[id(g1)][0], self._owner[id(g2)][0])
+
+    def clearance(self, q: np.ndarray) -> DistanceResult:
+        """Signed distance at q (6,) from the arm beyond the shoulder (and a held object) to the environment:
+        the clearance a trajectory keeps. Unlike min_distance it leaves out the base and shoulder links,
+        whose distance to the cell does not depend on the configuration."""
+        self._prepare(self._as_q(q))
+        return self._clearance_now()
+
+    def clearance_batch(self, qs: np.ndarray) -> np.ndarray:
+        """(n,) clearances, m, for (n, 6) configurations (see clearance)."""
+        qs = self._as_qs(qs)
+        out = np.empty(qs.shape[0])
+        for i in self._iter_prepared(qs):
+            out[i] = self._clearance_now().distance
+        return out
 
     def in_collision_batch(self, qs: np.ndarray) -> np.ndarray:
         """(n,) bool for (n, 6) configurations (link poses computed vectorised)."""

@@ -131,8 +131,8 @@ def trajectory_metrics(
         max_jerk = 0.0
     col = settings.collision
     qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
-    d = scene.min_distance_batch(qs, include_self=False)
-    closest = scene.min_distance(qs[int(np.argmin(d))], include_self=False)
+    d = scene.clearance_batch(qs)
+    closest = scene.clearance(qs[int(np.argmin(d))])
     pair = f"{closest.robot_part}->{closest.other}" if closest.robot_part else ""
     return {
         "duration_s": traj.duration,
