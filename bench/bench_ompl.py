@@ -37,92 +37,21 @@ from typing import Any
 
 import numpy as np
 
-from twin.collision import PlanningScene
-from twin.config import PlannerBlock, Settings, load_config
+from twin.config import PlannerBlock
 from twin.errors import DependencyMissing
-from twin.planning import first_collision, limits_from_settings, make_context, make_planner, plan_with
+from twin.planning import first_collision, make_planner, plan_with
 from twin.registry import Kind
-from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
+from twin.types import MotionRequest
 from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
+from twin_ompl.scenarios import QueryCell as Cell
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 MPLIB_VENV = BENCH / ".mplib-venv"
-TOP_DOWN = np.diag([1.0, -1.0, -1.0])
 FINE_RAD, FINE_M = 0.002, 0.002
-CUBE = 0.05
 
 
 # ---- scenes and queries (as in tests/test_ompl.py) --------------------------------------------------------
-def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    T = np.eye(4)
-    T[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ TOP_DOWN
-    T[:3, 3] = (x, y, z)
-    return T
-
-
-class Cell:
-    """Settings, FCL scene (perceived obstacle boxes added, the cube held in the warehouse), context."""
-
-    def __init__(self, name: str):
-        self.name = name
-        self.settings: Settings = load_config(ROOT / "configs" / f"{name}.yaml")
-        self.scene = PlanningScene.from_settings(self.settings)
-        self.scene.add_unknown_fixtures(self.settings)
-        if name == "warehouse":
-            self.scene.attach_box("cube", [CUBE] * 3, np.eye(4))
-        self.ctx = make_context(self.settings)
-        self.kin = self.ctx.kinematics
-        self.limits = limits_from_settings(self.settings)
-        self.home = np.array(self.settings.robot.home)
-
-    def ik_near_home(self, T: np.ndarray) -> np.ndarray | None:
-        sols = self.kin.ik(T, all_wraps=False)
-        if sols.shape[0] == 0:
-            return None
-        for q in sols[np.argsort(np.abs(sols - self.home).max(axis=1))][:2]:
-            if not self.scene.in_collision(q):
-                return q
-        return None
-
-    def goal_configs(self, start: np.ndarray, goal: Any) -> np.ndarray:
-        """The goal as configurations: a joint goal, or every collision-free IK solution, nearest first."""
-        if isinstance(goal, JointGoal):
-            return np.asarray(goal.q)[None]
-        sols = self.kin.ik(goal.pose.matrix(), goal.frame)
-        sols = sols[~self.scene.in_collision_batch(sols)] if sols.shape[0] else sols
-        return sols[np.argsort(np.abs(sols - start).max(axis=1))][:64]
-
-    def blocked(self, start: np.ndarray, goals: np.ndarray) -> bool:
-        return not any(self.scene.check_path(np.stack([start, g]), resolution_rad=0.02).free for g in goals[:3])
-
-    def queries(self, n: int, seed: int, only_blocked: bool) -> list[tuple[np.ndarray, Any, np.ndarray]]:
-        rng = np.random.default_rng(seed)
-        yaw = lambda: rng.uniform(-math.pi, math.pi)  # noqa: E731
-        out: list[tuple[np.ndarray, Any, np.ndarray]] = []
-        while len(out) < n:
-            if self.name == "warehouse":
-                Ta = top_down(rng.uniform(-0.66, -0.55), rng.uniform(0.10, 0.32), rng.uniform(0.05, 0.15), yaw())
-                Tb = top_down(rng.uniform(-0.34, -0.26), rng.uniform(0.10, 0.36), rng.uniform(0.05, 0.15), yaw())
-            else:
-                Ta = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
-                if rng.random() < 0.6:
-                    side = 1.0 if rng.random() < 0.5 else -1.0
-                    Tb = top_down(rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw())
-                else:
-                    Tb = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
-            if rng.random() < 0.5:
-                Ta, Tb = Tb, Ta
-            a, b = self.ik_near_home(Ta), self.ik_near_home(Tb)
-            if a is None or b is None:
-                continue
-            goal = PoseGoal(Pose.from_matrix(Tb)) if len(out) % 2 else JointGoal(b)
-            goals = self.goal_configs(a, goal)
-            if goals.shape[0] == 0 or (only_blocked and not self.blocked(a, goals)):
-                continue
-            out.append((a, goal, goals))
-        return out
 
 
 # ---- our planners ------------------------------------------------------------------------------------------

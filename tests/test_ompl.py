@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-import math
 import subprocess
 import sys
 from typing import Any
@@ -21,89 +20,27 @@ import pytest
 
 pytest.importorskip("ompl", reason="the OMPL planners need the `ompl` extra: pip install -e '.[ompl]'")
 
-from twin.collision import PlanningScene  # noqa: E402
-from twin.config import PlannerBlock, Settings, load_config  # noqa: E402
+from twin.config import PlannerBlock  # noqa: E402
 from twin.errors import ConfigError, DependencyMissing  # noqa: E402
-from twin.planning import first_collision, limits_from_settings, make_context, make_planner, plan_with  # noqa: E402
+from twin.planning import first_collision, make_planner, plan_with  # noqa: E402
 from twin.registry import Kind, default_registry  # noqa: E402
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status  # noqa: E402
+from twin_ompl.scenarios import QueryCell, top_down  # noqa: E402
 
-TOP_DOWN = np.diag([1.0, -1.0, -1.0])
 FINE_RAD = 0.002  # the independent check: every 0.002 rad of any joint ...
 FINE_M = 0.002  # ... and every 1 mm of TCP travel (densify checks every half of max_step_m)
 N_QUERIES = 100
 TIME_LIMIT_S = 1.0
-CUBE = 0.05
 SINGLE_TREE = {"ompl.rrt", "ompl.rrtstar", "ompl.informedrrtstar", "ompl.sorrtstar"}
 OMPL_NAMES = sorted(n for n in default_registry().names([Kind.PLANNER]) if n.startswith("ompl."))
 
 
-# ---- scenes and queries -----------------------------------------------------------------------------------
-def top_down(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    """TCP pose pointing straight down, rotated by `yaw` about z, at (x, y, z) in the base frame."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    T = np.eye(4)
-    T[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ TOP_DOWN
-    T[:3, 3] = (x, y, z)
-    return T
+# ---- scenes and queries (shared with bench/bench_ompl.py) ------------------------------------------------
+class Cell(QueryCell):
+    """QueryCell with (start, goal) pairs, as these tests use them."""
 
-
-def add_perceived_obstacles(settings: Settings, scene: PlanningScene) -> None:
-    """Fixtures marked `known: false` (the warehouse obstacle) as the boxes perception would report."""
-    scene.add_unknown_fixtures(settings)
-
-
-class Cell:
-    """One scene: settings, FCL scene (with the perceived obstacle and the held cube), plugin context."""
-
-    def __init__(self, name: str):
-        self.name = name
-        self.settings = load_config(f"configs/{name}.yaml")
-        self.scene = PlanningScene.from_settings(self.settings)
-        if name == "warehouse":
-            add_perceived_obstacles(self.settings, self.scene)
-            assert "obstacle" in self.scene.names()
-            self.scene.attach_box("cube", [CUBE] * 3, np.eye(4))  # held between the fingertips
-        self.ctx = make_context(self.settings)
-        self.kin = self.ctx.kinematics
-        self.limits = limits_from_settings(self.settings)
-        self.home = np.array(self.settings.robot.home)
-
-    def ik_near_home(self, T: np.ndarray) -> np.ndarray | None:
-        """A collision-free IK solution of T among the two branches nearest the home posture."""
-        sols = self.kin.ik(T, all_wraps=False)
-        if sols.shape[0] == 0:
-            return None
-        for q in sols[np.argsort(np.abs(sols - self.home).max(axis=1))][:2]:
-            if not self.scene.in_collision(q):
-                return q
-        return None
-
-    def queries(self, n: int, seed: int) -> list[tuple[np.ndarray, Any]]:
-        """n feasible (start, goal) pairs from seeded random top-down TCP poses; odd ones are pose goals."""
-        rng = np.random.default_rng(seed)
-        yaw = lambda: rng.uniform(-math.pi, math.pi)  # noqa: E731
-        out: list[tuple[np.ndarray, Any]] = []
-        while len(out) < n:
-            if self.name == "warehouse":
-                # behind the wall (where the cubes lie) <-> in front of it, both below the wall's top
-                Ta = top_down(rng.uniform(-0.66, -0.55), rng.uniform(0.10, 0.32), rng.uniform(0.05, 0.15), yaw())
-                Tb = top_down(rng.uniform(-0.34, -0.26), rng.uniform(0.10, 0.36), rng.uniform(0.05, 0.15), yaw())
-            else:
-                Ta = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
-                if rng.random() < 0.6:  # into a bin, below its rim
-                    side = 1.0 if rng.random() < 0.5 else -1.0
-                    Tb = top_down(rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw())
-                else:
-                    Tb = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
-            if rng.random() < 0.5:
-                Ta, Tb = Tb, Ta
-            a, b = self.ik_near_home(Ta), self.ik_near_home(Tb)
-            if a is None or b is None:
-                continue
-            goal = PoseGoal(Pose.from_matrix(Tb)) if len(out) % 2 else JointGoal(b)
-            out.append((a, goal))
-        return out
+    def queries(self, n: int, seed: int) -> list[tuple[np.ndarray, Any]]:  # type: ignore[override]
+        return [(a, goal) for a, goal, _ in super().queries(n, seed, False)]
 
 
 @pytest.fixture(scope="module")
