@@ -40,9 +40,35 @@ class StraightLine:
         return MotionResult(Status.SUCCESS, "", Trajectory(t, q, qd, np.zeros_like(q)))
 
 
+class Crash:
+    """A receding-horizon planner that ignores the scene: it lowers the shoulder 0.05 rad per segment,
+    straight into the table, and would report success at `lift` rad below its start."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        lift: float = Field(1.6, gt=0)
+
+    def __init__(self, params, context):
+        self.params = params
+
+    def reset(self, request, scene):
+        self.target = request.start + np.array([0.0, self.params.lift, 0.0, 0.0, 0.0, 0.0])
+
+    def step(self, q):
+        from twin.planning import Segment
+
+        d = self.target - q
+        if np.abs(d).max() < 1e-6:
+            return MotionResult(Status.SUCCESS, "arrived", Trajectory(np.zeros(1), q[None], np.zeros((1, 6)), np.zeros((1, 6))))
+        dq = d * min(1.0, 0.05 / np.abs(d).max())
+        t = np.array([0.0, 0.25])
+        return Segment(Trajectory(t, np.stack([q, q + dq]), np.zeros((2, 6)), np.zeros((2, 6))), 1e-4, {})
+
+
 @hookimpl
 def twin_register_planners(registry):
     registry.add_planner("acme.straight", "acme_twin_plugin:StraightLine", description="straight joint line (test plugin)")
+    registry.add_planner("acme.crash", "acme_twin_plugin:Crash", receding_horizon=True, description="drives into the table (test plugin)")
 '''
 
 

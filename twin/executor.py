@@ -1,40 +1,46 @@
-"""Execute trajectories on the simulated arm: joint position control at the physics rate.
+"""Execute checked motion on the simulated arm: joint position control at the physics rate.
 
-One-shot plans are played open-loop (the position controller tracks q(t) with qd(t) as feed-forward);
-receding-horizon planners run closed-loop: every segment starts from the measured joint state.
+Every planner reaches the arm through `CheckedPlanner.drive` (`twin.planning`): a one-shot plan is one
+checked piece, a receding-horizon planner one checked piece per step from the measured joint state. This
+module is the plant on the other side: it plays each piece (the position controller tracks q(t) with
+qd(t) as feed-forward) and watches the contacts as a real cell's protective stop would. A robot link
+touching anything it should not (see `World.unexpected_contacts`) stops the arm where it is and ends
+the motion with `Status.EXECUTION_STOPPED` and a reason ("unexpected contact: forearm_link with table").
 """
 
 from __future__ import annotations
 
 import logging
-import time
-from dataclasses import dataclass, field
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.planning import OneShotPlanner, RecedingHorizonPlanner, plan_with
+from twin.planning import as_checked
 from twin.registry import PluginContext
-from twin.types import MotionRequest, MotionResult, Status, Trajectory
+from twin.types import MotionRequest, MotionResult, Trajectory
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.world import World
 
-__all__ = ["ExecutionReport", "execute", "plan_and_execute", "MotionRecord"]
+__all__ = ["ExecutionReport", "execute", "plan_and_execute", "MotionRecord", "WorldPlant", "CONTACT_CHECK_EVERY"]
 
 log = logging.getLogger("twin")
+
+CONTACT_CHECK_EVERY = 4  # physics steps between two looks at the contacts (1/60 s at 240 Hz)
 
 
 @dataclass(frozen=True)
 class ExecutionReport:
-    """How the arm followed a trajectory: simulated seconds, the worst tracking error, where it ended."""
+    """How the arm followed a trajectory: simulated seconds, the worst tracking error, where it ended, and
+    the unexpected contact that stopped it (None when it ran to the end)."""
 
     sim_duration_s: float
     max_tracking_error_rad: float
     final_q: np.ndarray
-    unexpected_contacts: int
+    stopped_by: str | None = None
 
 
 @dataclass
@@ -48,6 +54,8 @@ class MotionRecord:
     planning_time_s: float
     duration_s: float
     solves: int = 0
+    fallback_steps: int = 0
+    unexpected_contacts: int = 0
     info: dict[str, Any] = field(default_factory=dict)
 
 
@@ -57,35 +65,69 @@ def execute(
     *,
     hold_s: float = 0.0,
     ignore_bodies: tuple[int, ...] = (),
+    fingers_may_touch_objects: bool = False,
+    stop_on_contact: bool = True,
     on_step: Callable[[], None] | None = None,
 ) -> ExecutionReport:
     """Play `traj` on the arm at the physics rate, then hold its last point for `hold_s`.
 
-    Counts steps in which the arm touches something other than `ignore_bodies` (a held object or the
-    object being grasped) as unexpected contacts (sampled every 8 steps); `on_step` is called after
-    every physics step, for callers that measure more.
+    Every `CONTACT_CHECK_EVERY` steps the contacts are read: an unexpected one (anything but
+    `ignore_bodies`; see `World.unexpected_contacts`) stops the arm at its measured position when
+    `stop_on_contact`, and is reported. `on_step` is called after every physics step.
     """
     dt = world.dt
     n = int(np.ceil(traj.duration / dt - 1e-9))
     worst = 0.0
-    contacts = 0
+    stopped: str | None = None
+    steps = 0
     if n:
         qs, qds, _ = traj.sample(np.minimum(np.arange(1, n + 1) * dt, traj.duration) + traj.t[0])
     for k in range(n):
         world.set_joint_targets(qs[k], qds[k])
         world.step()
+        steps += 1
         if on_step is not None:
             on_step()
         worst = max(worst, float(np.abs(world.joint_positions() - qs[k]).max()))
-        if (k + 1) % 8 == 0 and world.robot_contacts(ignore=ignore_bodies):
-            contacts += 1
+        if stop_on_contact and (k + 1) % CONTACT_CHECK_EVERY == 0:
+            hits = world.unexpected_contacts(ignore=ignore_bodies, fingers_may_touch_objects=fingers_may_touch_objects)
+            if hits:
+                stopped = "unexpected contact: " + ", ".join(f"{a} with {b}" for a, b in hits)
+                break
+    if stopped is not None:
+        world.set_joint_targets(world.joint_positions())  # protective stop: hold where it is
+        log.info("execution stopped: %s", stopped)
+        return ExecutionReport(steps * dt, worst, world.joint_positions(), stopped)
     world.set_joint_targets(traj.q[-1])
     hold = int(round(hold_s / dt))
     for _ in range(hold):
         world.step()
         if on_step is not None:
             on_step()
-    return ExecutionReport(n * dt + hold * dt, worst, world.joint_positions(), contacts)
+    return ExecutionReport(n * dt + hold * dt, worst, world.joint_positions())
+
+
+class WorldPlant:
+    """The simulated arm as a plant for `CheckedPlanner.drive`: encoders in, checked pieces out, contacts watched."""
+
+    def __init__(self, world: "World", *, ignore_bodies: tuple[int, ...] = (), fingers_may_touch_objects: bool = False):
+        self.world = world
+        self.ignore_bodies = ignore_bodies
+        self.fingers_may_touch_objects = fingers_may_touch_objects
+        self.duration_s = 0.0
+        self.max_tracking_error_rad = 0.0
+        self.stops: list[str] = []
+
+    def measured_q(self) -> np.ndarray:
+        return self.world.joint_positions()
+
+    def run(self, traj: Trajectory) -> str | None:
+        rep = execute(self.world, traj, ignore_bodies=self.ignore_bodies, fingers_may_touch_objects=self.fingers_may_touch_objects)
+        self.duration_s += rep.sim_duration_s
+        self.max_tracking_error_rad = max(self.max_tracking_error_rad, rep.max_tracking_error_rad)
+        if rep.stopped_by is not None:
+            self.stops.append(rep.stopped_by)
+        return rep.stopped_by
 
 
 def plan_and_execute(
@@ -99,55 +141,19 @@ def plan_and_execute(
     planner_name: str,
     hold_s: float = 0.1,
     ignore_bodies: tuple[int, ...] = (),
+    fingers_may_touch_objects: bool = False,
 ) -> tuple[MotionResult, MotionRecord]:
-    """Plan with a one-shot planner and play the result, or run a receding-horizon planner closed-loop."""
-    if isinstance(planner, RecedingHorizonPlanner) and not isinstance(planner, OneShotPlanner):
-        return _closed_loop(world, planner, request, scene, stage=stage, planner_name=planner_name, hold_s=hold_s, ignore_bodies=ignore_bodies)
-    result = plan_with(planner, request, scene, context)
-    record = MotionRecord(stage, planner_name, result.status.value, result.reason, result.planning_time_s, 0.0)
-    if result.success:
-        assert result.trajectory is not None
-        rep = execute(world, result.trajectory, hold_s=hold_s, ignore_bodies=ignore_bodies)
-        record.duration_s = result.trajectory.duration
-        record.info["max_tracking_error_rad"] = rep.max_tracking_error_rad
-        record.info["unexpected_contacts"] = rep.unexpected_contacts
-    return result, record
-
-
-def _closed_loop(
-    world: "World",
-    planner: RecedingHorizonPlanner,
-    request: MotionRequest,
-    scene: "PlanningScene",
-    *,
-    stage: str,
-    planner_name: str,
-    hold_s: float,
-    ignore_bodies: tuple[int, ...],
-    max_segments: int = 1000,
-) -> tuple[MotionResult, MotionRecord]:
-    t0 = time.perf_counter()
-    planner.reset(request, scene)
-    solve_times: list[float] = []
-    duration = 0.0
-    contacts = 0
-    result: MotionResult | None = None
-    for _ in range(max_segments):
-        out = planner.step(world.joint_positions())
-        if isinstance(out, MotionResult):
-            result = out
-            break
-        solve_times.append(out.solve_time_s)
-        rep = execute(world, out.trajectory, ignore_bodies=ignore_bodies)
-        duration += out.trajectory.duration
-        contacts += rep.unexpected_contacts
-    if result is None:
-        result = MotionResult(Status.NO_SOLUTION, f"no end after {max_segments} segments")
-    if hold_s:
+    """Plan and execute one motion through the single checked loop (`CheckedPlanner.drive`), then hold."""
+    planner = as_checked(planner, context, name=planner_name)
+    plant = WorldPlant(world, ignore_bodies=ignore_bodies, fingers_may_touch_objects=fingers_may_touch_objects)
+    result = planner.drive(request, scene, plant)
+    if hold_s and not plant.stops:
         world.step(int(round(hold_s / world.dt)))
-    elapsed = time.perf_counter() - t0
+    info = result.info
     record = MotionRecord(
-        stage, planner_name, result.status.value, result.reason, float(sum(solve_times)) or elapsed, duration,
-        solves=len(solve_times), info={"solve_times_s": solve_times, "unexpected_contacts": contacts},
+        stage, planner_name, result.status.value, result.reason, result.planning_time_s, plant.duration_s,
+        solves=int(info.get("solves", 0)), fallback_steps=int(info.get("fallback_steps", 0)),
+        unexpected_contacts=len(plant.stops),
+        info={"max_tracking_error_rad": plant.max_tracking_error_rad, "solve_times_s": list(info.get("solve_times_s", []))},
     )
     return result, record

@@ -1,22 +1,25 @@
 """The planning API: one call plans one request with any registered planner, and checks the result.
 
 Planners never touch PyBullet: they get a `MotionRequest`, the kinematics (in their context) and an FCL
-`PlanningScene`. Whatever a planner returns, `plan()` re-checks the trajectory against the scene at a
-resolution of at most `collision.check_resolution_m` of TCP travel and `check_resolution_rad` per joint,
-and checks its endpoints; a colliding trajectory is turned into a COLLISION result, never a success.
+`PlanningScene`. Whatever the registry hands out goes through `make_planner`, which wraps it in a
+`CheckedPlanner`: one-shot trajectories and every receding-horizon segment are re-checked against the
+scene at a resolution of at most `collision.check_resolution_m` of TCP travel and `check_resolution_rad`
+per joint before anything can execute them, and every planner's end state is judged against the goal's
+own tolerances (`goal_miss`). A colliding trajectory or segment becomes a COLLISION result, never a
+success and never a motion. `CheckedPlanner.drive` is the one loop that plans and hands checked pieces to
+a plant: the kinematic model (`plan`) or the simulated arm (`twin.executor`).
 """
 
 from __future__ import annotations
 
 import logging
-
 import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.errors import InvalidRequestError, PlanningError
+from twin.errors import InvalidRequestError, PlanningError, TwinError
 from twin.registry import PluginContext, Registry, default_registry
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 
@@ -26,6 +29,14 @@ if TYPE_CHECKING:
     from twin.kinematics import UR5e
 
 __all__ = [
+    "CheckedPlanner",
+    "as_checked",
+    "GOAL_KINDS",
+    "KinematicPlant",
+    "Plant",
+    "colliding_pair",
+    "describe_goal_kinds",
+    "goal_miss",
     "OneShotPlanner",
     "RecedingHorizonPlanner",
     "Retimer",
@@ -51,11 +62,15 @@ class OneShotPlanner(Protocol):
 
 @dataclass(frozen=True)
 class Segment:
-    """A piece of motion a receding-horizon planner commands before it is asked again."""
+    """A piece of motion a receding-horizon planner commands before it is asked again.
+
+    `fallback`: the planner did not solve for this piece (its solve failed) and follows an earlier plan
+    or its initial guess instead; the checked loop counts such steps (`fallback_steps`)."""
 
     trajectory: Trajectory
     solve_time_s: float
     info: dict[str, Any]
+    fallback: bool = False
 
 
 @runtime_checkable
@@ -76,6 +91,18 @@ class Retimer(Protocol):
     def retime(self, path: np.ndarray, limits: Limits) -> Trajectory: ...
 
 
+# What a goal asks for (`JointGoal.kind`, `PoseGoal.kind`): the joint angles; a pose (position and
+# orientation); a position with the orientation free. A planner class declares the kinds it can reach
+# in its class attribute `goal_kinds` (default: all three).
+GOAL_KINDS: frozenset[str] = frozenset({"joint", "pose", "position"})
+_GOAL_KIND_WORDS = {"joint": "joint goals", "pose": "pose goals with an orientation", "position": "position goals"}
+
+
+def describe_goal_kinds(kinds: "frozenset[str] | set[str]") -> str:
+    """'joint goals, pose goals with an orientation' (sorted, for messages)."""
+    return ", ".join(_GOAL_KIND_WORDS[k] for k in sorted(kinds))
+
+
 def limits_from_settings(settings: "Settings", *, tcp_speed: float | None = None) -> Limits:
     r = settings.robot
     return Limits.uniform(r.max_joint_vel, r.max_joint_acc, r.max_joint_jerk, tcp_speed)
@@ -87,12 +114,15 @@ def make_context(settings: "Settings", registry: Registry | None = None, kinemat
     return PluginContext(settings=settings, kinematics=kinematics or UR5e(), registry=registry or default_registry())
 
 
-def make_planner(block: "PlannerBlock | str", context: PluginContext) -> Any:
-    """Instantiate a planner from a config block `{name, params}` or a bare name."""
+def make_planner(block: "PlannerBlock | str", context: PluginContext) -> "CheckedPlanner":
+    """Instantiate a planner from a config block `{name, params, retimer}` or a bare name, wrapped in the
+    one check every planner gets (`CheckedPlanner`)."""
     from twin.config import PlannerBlock
+    from twin.registry import Kind
 
     if isinstance(block, str):
         block = PlannerBlock(name=block)
+    entry = context.registry.entry(block.name, (Kind.PLANNER, Kind.RECEDING_HORIZON))
     planner = context.registry.planner(block.name, block.params, context)
     if block.retimer is not None:
         if not hasattr(planner, "set_retimer"):
@@ -100,7 +130,7 @@ def make_planner(block: "PlannerBlock | str", context: PluginContext) -> Any:
 
             raise ConfigError(f"planner {block.name!r} produces trajectories itself and takes no retimer")
         planner.set_retimer(context.registry.retimer(block.retimer, block.retimer_params, context))
-    return planner
+    return CheckedPlanner(planner, name=block.name, receding_horizon=entry.kind is Kind.RECEDING_HORIZON, context=context)
 
 
 # ---- trajectory checks ----------------------------------------------------------------------------
@@ -137,44 +167,29 @@ def first_collision(traj: Trajectory, scene: "PlanningScene", kin: "UR5e", *, ma
     return int(idx[0]) if idx.size else None
 
 
-def _goal_error(request: MotionRequest, q_end: np.ndarray, kin: "UR5e") -> float:
-    if isinstance(request.goal, JointGoal):
-        return float(np.abs(q_end - request.goal.q).max())
-    T = kin.fk(q_end, request.goal.frame)
-    G = request.goal.pose.matrix()
-    rot = np.linalg.norm(T[:3, :3] - G[:3, :3])
-    return float(max(np.linalg.norm(T[:3, 3] - G[:3, 3]), rot))
+def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def _goal_position_error(request: MotionRequest, q_end: np.ndarray, kin: "UR5e") -> float:
-    """Distance (m) of the goal frame's origin at q_end from the goal position (a joint goal: its TCP)."""
-    if isinstance(request.goal, JointGoal):
-        target, frame = kin.fk(request.goal.q, "tcp")[:3, 3], "tcp"
-    else:
-        target, frame = np.asarray(request.goal.pose.position, dtype=float), request.goal.frame
-    return float(np.linalg.norm(kin.fk(q_end, frame)[:3, 3] - target))
+def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: "UR5e") -> str | None:
+    """Why `q_end` (6,) does not reach `goal` within the goal's own tolerances, or None when it does.
 
-
-def _rollout(planner: RecedingHorizonPlanner, request: MotionRequest, scene: "PlanningScene", max_segments: int = 1000) -> MotionResult:
-    """Run a receding-horizon planner on the kinematic model (each segment executed exactly)."""
-    planner.reset(request, scene)
-    q = request.start
-    pieces: list[Trajectory] = []
-    solve_times: list[float] = []
-    for _ in range(max_segments):
-        out = planner.step(q)
-        if isinstance(out, MotionResult):
-            traj = _concat(pieces) if pieces else None
-            info = dict(out.info, solve_times_s=solve_times, solves=len(solve_times))
-            if out.status is Status.SUCCESS:
-                if traj is None:
-                    traj = Trajectory(np.zeros(1), q[None], np.zeros((1, 6)), np.zeros((1, 6)))
-                return replace(out, trajectory=traj, info=info)
-            return replace(out, trajectory=None, info=info)
-        pieces.append(out.trajectory)
-        solve_times.append(out.solve_time_s)
-        q = out.trajectory.q[-1]
-    return MotionResult(Status.NO_SOLUTION, f"no end after {max_segments} segments")
+    The one definition of "reached" for every planner: a joint goal, every joint within `tolerance_rad`;
+    a pose goal, the frame's origin within `position_tolerance_m` and (unless free) its rotation within
+    `orientation_tolerance_rad`."""
+    if isinstance(goal, JointGoal):
+        err = float(np.abs(q_end - goal.q).max())
+        return None if err <= goal.tolerance_rad else f"ends {err:.2e} rad from the joint goal (tolerance {goal.tolerance_rad:g} rad)"
+    T = kin.fk(q_end, goal.frame)
+    G = goal.pose.matrix()
+    d = float(np.linalg.norm(T[:3, 3] - G[:3, 3]))
+    if d > goal.position_tolerance_m:
+        return f"ends {d:.4f} m from the goal position (tolerance {goal.position_tolerance_m:g} m)"
+    if goal.orientation_tolerance_rad is not None:
+        a = _rotation_angle(T[:3, :3], G[:3, :3])
+        if a > goal.orientation_tolerance_rad:
+            return f"ends {a:.4f} rad from the goal orientation (tolerance {goal.orientation_tolerance_rad:g} rad)"
+    return None
 
 
 def _concat(pieces: list[Trajectory]) -> Trajectory:
@@ -189,23 +204,218 @@ def _concat(pieces: list[Trajectory]) -> Trajectory:
     return Trajectory(np.concatenate(t), np.concatenate(q), np.concatenate(qd), np.concatenate(qdd))
 
 
-def plan_with(planner: Any, request: MotionRequest, scene: "PlanningScene", context: PluginContext) -> MotionResult:
-    """Plan `request` with an instantiated planner, time it, and check what it returns."""
-    t0 = time.perf_counter()
+def _still(q: np.ndarray) -> Trajectory:
+    return Trajectory(np.zeros(1), np.asarray(q, dtype=float)[None], np.zeros((1, 6)), np.zeros((1, 6)))
+
+
+def colliding_pair(scene: "PlanningScene", q: np.ndarray) -> str:
+    """'forearm_link with table' for the closest (penetrating) pair at q, for failure reasons."""
+    try:
+        d = scene.min_distance(q)
+    except TwinError:
+        return "an unknown pair"
+    return f"{d.robot_part} with {d.other}" if d.robot_part else "an unknown pair"
+
+
+# ---- the one checked path -------------------------------------------------------------------------
+class Plant(Protocol):
+    """Where checked motion goes: the kinematic model (planning only) or the simulated arm (`twin.executor`)."""
+
+    def measured_q(self) -> np.ndarray:
+        """(6,) joint angles now, rad (encoders)."""
+        ...
+
+    def run(self, traj: Trajectory) -> str | None:
+        """Execute a checked trajectory; a reason when execution had to stop (e.g. an unexpected contact)."""
+        ...
+
+
+class KinematicPlant:
+    """The arm as the planner's model has it: every trajectory is followed exactly."""
+
+    def __init__(self, q: np.ndarray):
+        self.q = np.asarray(q, dtype=float).copy()
+
+    def measured_q(self) -> np.ndarray:
+        return self.q
+
+    def run(self, traj: Trajectory) -> str | None:
+        self.q = traj.q[-1].copy()
+        return None
+
+
+class CheckedPlanner:
+    """What `make_planner` hands out: any registered planner, built-in or third-party, checked the same way.
+
+    * One-shot results: the trajectory must start at the request's start, reach the goal within the goal's
+      tolerances (`goal_miss`) and pass the FCL scene (whole arm, gripper, held object, fixtures, perceived
+      boxes, self-collision) every `collision.check_resolution_rad` / `check_resolution_m`.
+    * Receding-horizon segments: each must start at the measured state and pass the same FCL check
+      *before* it is returned (`step`) and so before it is executed; a colliding segment ends the motion
+      with `Status.COLLISION` naming the pair. Segments a planner marks as `fallback` are counted.
+    * `drive(request, scene, plant)` is the single loop for both kinds; `plan` drives the kinematic plant.
+
+    The plugin itself is `inner`; other attributes are read through to it (its params, diagnostics).
+    """
+
+    def __init__(self, inner: Any, *, name: str, receding_horizon: bool, context: PluginContext):
+        if receding_horizon and not isinstance(inner, RecedingHorizonPlanner):
+            raise PlanningError(f"{name!r} is registered as receding-horizon but {type(inner).__name__} has no reset()/step()")
+        if not receding_horizon and not isinstance(inner, OneShotPlanner):
+            raise PlanningError(f"{name!r} is registered as one-shot but {type(inner).__name__} has no plan()")
+        self.inner = inner
+        self.name = name
+        self.receding_horizon = receding_horizon
+        self.context = context
+        self.goal_kinds: frozenset[str] = frozenset(getattr(type(inner), "goal_kinds", GOAL_KINDS))
+        unknown = self.goal_kinds - GOAL_KINDS
+        if unknown:
+            raise PlanningError(f"{name!r} declares unknown goal kinds {sorted(unknown)}; allowed: {sorted(GOAL_KINDS)}")
+        self._request: MotionRequest | None = None
+        self._scene: "PlanningScene | None" = None
+        self._q: np.ndarray | None = None
+        self._fallback_steps = 0
+        self._segments = 0
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__") or attr == "inner":
+            raise AttributeError(attr)
+        return getattr(self.inner, attr)
+
+    def __repr__(self) -> str:
+        return f"CheckedPlanner({self.name!r}, {type(self.inner).__name__})"
+
+    def serves(self, kind: str) -> bool:
+        """Whether the planner declares it can reach goals of this kind ('joint', 'pose', 'position')."""
+        return kind in self.goal_kinds
+
+    # ---- receding horizon, checked --------------------------------------------------------------
+    def reset(self, request: MotionRequest, scene: "PlanningScene") -> None:
+        if not self.receding_horizon:
+            raise PlanningError(f"{self.name} is a one-shot planner: call plan(), not reset()/step()")
+        if request.goal.kind not in self.goal_kinds:
+            raise InvalidRequestError(
+                f"{self.name} cannot reach {describe_goal_kinds({request.goal.kind})}; it serves {describe_goal_kinds(self.goal_kinds)}"
+            )
+        self._request, self._scene, self._q = request, scene, None
+        self._fallback_steps = self._segments = 0
+        self.inner.reset(request, scene)
+
+    def step(self, q: np.ndarray) -> Segment | MotionResult:
+        """The planner's next segment from measured `q`, FCL-checked; or a final MotionResult (judged)."""
+        if self._request is None or self._scene is None:
+            raise PlanningError(f"{self.name}.step() called before reset()")
+        q = np.asarray(q, dtype=float)
+        self._q = q
+        out = self.inner.step(q)
+        info_extra = {"fallback_steps": self._fallback_steps}
+        if isinstance(out, MotionResult):
+            if out.success:
+                q_end = out.trajectory.q[-1] if out.trajectory is not None else q
+                why = goal_miss(self._request.goal, q_end, self.context.kinematics)
+                if why is not None:
+                    return MotionResult(Status.NO_SOLUTION, f"{self.name} reported success but {why}", info=dict(out.info, **info_extra))
+            return replace(out, info=dict(out.info, **info_extra))
+        if not isinstance(out, Segment):
+            raise PlanningError(f"{type(self.inner).__name__}.step returned {type(out).__name__}, not Segment or MotionResult")
+        traj = out.trajectory
+        off = float(np.abs(traj.q[0] - q).max())
+        if off > 1e-6:
+            raise PlanningError(f"{self.name}: segment {self._segments + 1} starts {off:.2e} rad away from the measured state")
+        col = self.context.settings.collision
+        hit = first_collision(traj, self._scene, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+        self._segments += 1
+        if hit is not None:
+            qs = densify(traj, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+            kind = "fallback segment" if out.fallback else "segment"
+            log.warning("%s: %s %d collides; not executed", self.name, kind, self._segments)
+            return MotionResult(
+                Status.COLLISION,
+                f"{kind} {self._segments} would collide ({colliding_pair(self._scene, qs[hit])}); not executed",
+                info=dict(out.info, **info_extra),
+            )
+        if out.fallback:
+            self._fallback_steps += traj.q.shape[0] - 1
+        return out
+
+    # ---- one-shot, checked ----------------------------------------------------------------------
+    def _plan_one_shot(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+        t0 = time.perf_counter()
+        result = self.inner.plan(request, scene)
+        elapsed = time.perf_counter() - t0
+        if not isinstance(result, MotionResult):
+            raise PlanningError(f"{type(self.inner).__name__}.plan returned {type(result).__name__}, not MotionResult")
+        if not result.planning_time_s:
+            result = replace(result, planning_time_s=elapsed)
+        if not result.success:
+            return result
+        return _checked(result, request, scene, self.context)
+
+    # ---- the one loop ---------------------------------------------------------------------------
+    def drive(self, request: MotionRequest, scene: "PlanningScene", plant: Plant, *, max_segments: int = 1000) -> MotionResult:
+        """Plan and hand every checked piece to `plant`: a one-shot plan is one piece, a receding-horizon
+        planner gives one piece per step from the plant's measured state. Nothing unchecked reaches the
+        plant. The result's trajectory is what was commanded; `info` holds `solve_times_s`, `solves`,
+        `fallback_steps` and, when the plant stopped execution, `execution_stop`."""
+        if request.goal.kind not in self.goal_kinds:
+            return MotionResult(
+                Status.INVALID_GOAL,
+                f"{self.name} cannot reach {describe_goal_kinds({request.goal.kind})}; it serves {describe_goal_kinds(self.goal_kinds)}",
+            )
+        if not self.receding_horizon:
+            result = self._plan_one_shot(request, scene)
+            if result.success:
+                assert result.trajectory is not None
+                stop = plant.run(result.trajectory)
+                if stop is not None:
+                    return replace(result, status=Status.EXECUTION_STOPPED, reason=stop, trajectory=None, info=dict(result.info, execution_stop=stop))
+            return result
+        t0 = time.perf_counter()
+        self.reset(request, scene)
+        pieces: list[Trajectory] = []
+        solve_times: list[float] = []
+        final: MotionResult | None = None
+        for _ in range(max_segments):
+            out = self.step(plant.measured_q())
+            if isinstance(out, MotionResult):
+                final = out
+                break
+            solve_times.append(out.solve_time_s)
+            pieces.append(out.trajectory)
+            stop = plant.run(out.trajectory)
+            if stop is not None:
+                final = MotionResult(Status.EXECUTION_STOPPED, stop, info={"execution_stop": stop, "fallback_steps": self._fallback_steps})
+                break
+        if final is None:
+            final = MotionResult(Status.NO_SOLUTION, f"no end after {max_segments} segments", info={"fallback_steps": self._fallback_steps})
+        info = dict(final.info, solve_times_s=solve_times, solves=len(solve_times))
+        planning_time = float(sum(solve_times)) or time.perf_counter() - t0
+        if final.success:
+            traj = _concat(pieces) if pieces else _still(plant.measured_q())
+            return replace(final, trajectory=traj, info=info, planning_time_s=planning_time)
+        return replace(final, trajectory=None, info=info, planning_time_s=planning_time)
+
+    def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+        """Plan `request` without a robot: one-shot as is, receding horizon on the kinematic model."""
+        return self.drive(request, scene, KinematicPlant(request.start))
+
+
+def as_checked(planner: Any, context: PluginContext, *, name: str | None = None) -> CheckedPlanner:
+    """`planner` itself when it came from `make_planner`; a bare plugin instance wrapped in the same check."""
+    if isinstance(planner, CheckedPlanner):
+        return planner
+    label = name or type(planner).__name__
     if isinstance(planner, OneShotPlanner):
-        result = planner.plan(request, scene)
-    elif isinstance(planner, RecedingHorizonPlanner):
-        result = _rollout(planner, request, scene)
-    else:
-        raise PlanningError(f"{type(planner).__name__} has neither plan() nor reset()/step()")
-    elapsed = time.perf_counter() - t0
-    if not isinstance(result, MotionResult):
-        raise PlanningError(f"{type(planner).__name__}.plan returned {type(result).__name__}, not MotionResult")
-    if not result.planning_time_s:
-        result = replace(result, planning_time_s=elapsed)
-    if not result.success:
-        return result
-    return _checked(result, request, scene, context)
+        return CheckedPlanner(planner, name=label, receding_horizon=False, context=context)
+    if isinstance(planner, RecedingHorizonPlanner):
+        return CheckedPlanner(planner, name=label, receding_horizon=True, context=context)
+    raise PlanningError(f"{type(planner).__name__} has neither plan() nor reset()/step()")
+
+
+def plan_with(planner: Any, request: MotionRequest, scene: "PlanningScene", context: PluginContext) -> MotionResult:
+    """Plan `request` with an instantiated planner (from `make_planner`, or a bare plugin instance, which
+    gets the same check) on the kinematic model."""
+    return as_checked(planner, context).plan(request, scene)
 
 
 def _checked(result: MotionResult, request: MotionRequest, scene: "PlanningScene", context: PluginContext) -> MotionResult:
@@ -216,20 +426,14 @@ def _checked(result: MotionResult, request: MotionRequest, scene: "PlanningScene
     start_err = float(np.abs(traj.q[0] - request.start).max())
     if start_err > 1e-6:
         raise PlanningError(f"trajectory starts {start_err:.2e} rad away from the request's start")
-    tol_m = result.info.get("goal_tolerance_m")
-    if tol_m is not None:
-        # a planner that stops near the goal by design (receding horizon: NMPC) declares its TCP tolerance
-        goal_err = _goal_position_error(request, traj.q[-1], kin)
-        if goal_err > float(tol_m) + 1e-9:
-            return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"trajectory ends {goal_err:.4f} m from the goal (tolerance {tol_m} m)")
-    else:
-        goal_err = _goal_error(request, traj.q[-1], kin)
-        if goal_err > 1e-6:
-            return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"trajectory ends {goal_err:.2e} away from the goal")
+    why = goal_miss(request.goal, traj.q[-1], kin)
+    if why is not None:
+        return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"the trajectory {why}")
     hit = first_collision(traj, scene, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
     if hit is not None:
         log.warning("planner returned a colliding trajectory; reported as COLLISION")
-        return replace(result, status=Status.COLLISION, trajectory=None, reason=f"trajectory collides (checked sample {hit})")
+        qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+        return replace(result, status=Status.COLLISION, trajectory=None, reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})")
     return result
 
 
@@ -253,6 +457,4 @@ def plan(
         scene = PlanningScene.from_settings(settings)
     if isinstance(request.goal, PoseGoal) and request.goal.frame not in ("tcp", "flange"):
         raise InvalidRequestError(f"unknown goal frame {request.goal.frame!r}; allowed: tcp, flange")
-    return plan_with(p, request, scene, context)
-
-
+    return p.plan(request, scene)

@@ -28,6 +28,9 @@ __all__ = [
     "ObjectOutcome",
     "RunSummary",
     "as_q",
+    "EXACT_JOINT_TOLERANCE_RAD",
+    "EXACT_POSITION_TOLERANCE_M",
+    "EXACT_ORIENTATION_TOLERANCE_RAD",
     "rpy_matrix",
     "matrix_to_quat",
     "quat_to_matrix",
@@ -118,22 +121,58 @@ class Pose:
         return T
 
 
+# how close "reached" is when a goal does not say: exact for practical purposes (planners that end on an
+# IK solution or on the goal joints are ~1e-12 off; 10 um / 0.1 mrad leave room for float round-off only)
+EXACT_JOINT_TOLERANCE_RAD = 1e-4
+EXACT_POSITION_TOLERANCE_M = 1e-5
+EXACT_ORIENTATION_TOLERANCE_RAD = 1e-4
+
+
+def _check_tolerance(value: float | None, what: str, *, optional: bool = False) -> None:
+    if value is None and optional:
+        return
+    if value is None or not (math.isfinite(value) and value > 0):
+        raise InvalidRequestError(f"{what} must be a positive number{' or None' if optional else ''}, got {value!r}")
+
+
 @dataclass(frozen=True)
 class JointGoal:
-    """Reach these joint angles, (6,) rad."""
+    """Reach these joint angles, (6,) rad: every joint within `tolerance_rad` at the end."""
 
     q: np.ndarray
+    tolerance_rad: float = EXACT_JOINT_TOLERANCE_RAD
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", as_q(self.q, "goal"))
+        _check_tolerance(self.tolerance_rad, "JointGoal.tolerance_rad")
+
+    @property
+    def kind(self) -> str:
+        """'joint' (see `twin.planning.GOAL_KINDS`)."""
+        return "joint"
 
 
 @dataclass(frozen=True)
 class PoseGoal:
-    """Reach this pose of `frame` ('tcp' or 'flange') in the base frame."""
+    """Reach this pose of `frame` ('tcp' or 'flange') in the base frame.
+
+    Reached means: the frame's origin within `position_tolerance_m` of the pose's position and, unless
+    `orientation_tolerance_rad` is None (orientation free: a position goal), its rotation within that
+    angle of the pose's rotation. Every planner is judged by these numbers (`twin.planning`)."""
 
     pose: Pose
     frame: str = "tcp"
+    position_tolerance_m: float = EXACT_POSITION_TOLERANCE_M
+    orientation_tolerance_rad: float | None = EXACT_ORIENTATION_TOLERANCE_RAD
+
+    def __post_init__(self) -> None:
+        _check_tolerance(self.position_tolerance_m, "PoseGoal.position_tolerance_m")
+        _check_tolerance(self.orientation_tolerance_rad, "PoseGoal.orientation_tolerance_rad", optional=True)
+
+    @property
+    def kind(self) -> str:
+        """'pose', or 'position' when the orientation is free (see `twin.planning.GOAL_KINDS`)."""
+        return "position" if self.orientation_tolerance_rad is None else "pose"
 
 
 Goal = JointGoal | PoseGoal
@@ -191,6 +230,7 @@ class Status(enum.Enum):
     COLLISION = "collision"  # the only trajectory found collides (never returned as success)
     IK_FAILED = "ik_failed"  # a waypoint had no acceptable IK solution
     LIMIT_VIOLATION = "limit_violation"  # time parameterisation could not keep the limits
+    EXECUTION_STOPPED = "execution_stopped"  # executing it, the arm touched something unexpected and stopped
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,13 @@ Why these choices:
   never executed: the remaining steps of the last feasible plan are (after the same check; when the very
   first solve of a goal fails, its checked initial guess is that plan), else the planner stops with a
   typed failure and a reason. The solve after a failure starts cold, from a fresh guess.
-* NMPC stops within `goal_tolerance_m` of the goal, not at it: the final MotionResult carries
-  `info["goal_tolerance_m"]` so that `twin.planning` checks the end position against that tolerance.
+* NMPC tracks a position and stops within a tolerance of it (`goal_tolerance_m`, or the goal's own
+  `position_tolerance_m` when that is tighter); it does not track an orientation (only a soft terminal
+  facing-down term) and it does not reach joint goals. So it declares `goal_kinds = {"position"}`: a
+  config that asks it for joint or oriented pose goals fails before anything runs, and `twin.planning`
+  judges its end like every planner's, against the goal's tolerances.
+* Segments that follow an earlier plan or the initial guess after a failed solve are marked
+  `Segment.fallback`; the checked loop FCL-checks and counts them like any other segment.
 """
 
 from __future__ import annotations
@@ -97,7 +102,7 @@ class NMPCParams(BaseModel):
         description="bound the change of the step by the request's max_joint_acc * dt^2 (not in the seed, which"
         " jumps to full speed in one step; the simulated grasp shook the cube loose that way)",
     )
-    goal_tolerance_m: float = Field(0.03, gt=0, description="stop when the TCP is this close to the goal")
+    goal_tolerance_m: float = Field(0.03, gt=0, description="stop when the TCP is this close to the goal (or the goal's tighter tolerance)")
     max_solves: int = Field(40, ge=1, description="give up after this many solves")
     tool_spheres: list[tuple[float, float, float, float]] = Field(
         default_factory=lambda: [tuple(s) for s in DEFAULT_TOOL_SPHERES],
@@ -259,6 +264,7 @@ class NMPCPlanner:
     """Receding-horizon NMPC over CasADi/IPOPT: `reset(request, scene)`, then `step(q)` until a MotionResult."""
 
     Params = NMPCParams
+    goal_kinds = frozenset({"position"})  # see the module docstring
 
     def __init__(self, params: NMPCParams | None, context: "PluginContext"):
         self.params = params if params is not None else NMPCParams()
@@ -383,6 +389,9 @@ class NMPCPlanner:
         self._pending: MotionResult | None = None
         self._goal_candidates = np.zeros((0, 6))
         goal = request.goal
+        self._tolerance = self.params.goal_tolerance_m
+        if isinstance(goal, PoseGoal):
+            self._tolerance = min(self._tolerance, goal.position_tolerance_m)
         if isinstance(goal, JointGoal):
             self._track = np.zeros(3)
             self._target = self.kin.fk(goal.q, "tcp")[:3, 3]
@@ -425,7 +434,7 @@ class NMPCPlanner:
 
     def _final(self, status: Status, reason: str, q: np.ndarray | None = None) -> MotionResult:
         info: dict[str, Any] = {
-            "goal_tolerance_m": self.params.goal_tolerance_m,
+            "goal_tolerance_m": getattr(self, "_tolerance", self.params.goal_tolerance_m),
             "nmpc_solves": getattr(self, "_solves", 0),
             "nmpc_fallbacks": getattr(self, "_fallbacks", 0),
             "nmpc_braking_steps": getattr(self, "_braking_steps", 0),
@@ -460,7 +469,7 @@ class NMPCPlanner:
         sph = self._all_spheres(obj)
         step = np.minimum(P.max_step_rad, self._request.limits.max_joint_vel * P.dt)
         dstep = self._request.limits.max_joint_acc * P.dt**2 if P.limit_acceleration else None
-        if err <= P.goal_tolerance_m:
+        if err <= self._tolerance:
             # within the tolerance the NMPC stops solving; an arm still moving faster than it can stop in one
             # step first brakes along the last plan (which heads for the goal and comes to rest there)
             if dstep is not None and np.any(np.abs(self._dq_prev) > dstep + 1e-9):
@@ -473,7 +482,7 @@ class NMPCPlanner:
             return self._done
         if self._solves >= P.max_solves:
             self._done = self._final(
-                Status.NO_SOLUTION, f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {P.goal_tolerance_m} m)", q
+                Status.NO_SOLUTION, f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {self._tolerance} m)", q
             )
             return self._done
 
@@ -541,7 +550,7 @@ class NMPCPlanner:
         self._plan_idx += knots.shape[0] - 1
         self._ws_offset += knots.shape[0] - 1
         traj = self._segment(knots, dstep)
-        return Segment(traj, solve_time_s, dict(info, position_error_m=err))
+        return Segment(traj, solve_time_s, dict(info, position_error_m=err), fallback=bool(info.get("fallback", False)))
 
     # ---- pieces of step() ---------------------------------------------------------------------------
     def _parameters(self, q: np.ndarray, boxes: list[tuple[str, np.ndarray, np.ndarray]], obj: np.ndarray) -> np.ndarray:
@@ -647,7 +656,7 @@ class NMPCPlanner:
             qd[0] = self._qd_end
         qd[1:] = (ext[2:] - ext[:-2]) / (2 * dt)
         slow = dstep is None or bool(np.all(np.abs(knots[-1] - knots[-2]) <= dstep + 1e-9))
-        if slow and np.linalg.norm(self._tracked(knots[-1]) - self._target) <= self.params.goal_tolerance_m:
+        if slow and np.linalg.norm(self._tracked(knots[-1]) - self._target) <= self._tolerance:
             qd[-1] = 0.0
         qdd = np.zeros_like(qd)
         if m >= 1:
