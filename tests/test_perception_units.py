@@ -216,7 +216,7 @@ def test_ground_truth_reaches_only_detectors_that_declare_it():
     class Spy:
         needs_ground_truth = False
 
-        def detect(self, frame, T, *, cloud=None, ground_truth=None):  # noqa: ANN001
+        def detect(self, frame, T, *, cloud=None, ground_truth=None):
             seen.append(ground_truth)
             return []
 
@@ -235,10 +235,54 @@ def test_perception_code_never_touches_the_simulator_or_its_ground_truth():
     gt_calls = re.compile(r"\.(objects|object_state|object_pose|marker_pose|contacts|body_ids)\(")
     for f in files:
         text = f.read_text()
-        assert not re.search(r"^\s*(import|from)\s+pybullet", text, re.M), f
+        assert not re.search(r"^\s*(import|from)\s+pybullet", text, re.MULTILINE), f
         # scoring reads ground truth after the estimates are made; the labelled oracle is handed it
         if f.name not in ("evaluate.py", "oracle.py"):
             assert not gt_calls.search(text), f
+
+
+# What a World offers as ground truth (World's "ground truth" section, and the fingers' contact with a body).
+GT_READS = re.compile(
+    r"\.(grasped_object|grasp_settled|objects|object_state|object_pose|object_velocity|marker_pose|body_ids)\("
+    r"|true_pose|(?<!needs_)ground_truth\s*="
+)
+# Where ground truth may be read: judging and metrics, and the detector labelled ORACLE.
+GT_ALLOWED = ("judge", "metric", "oracle")
+
+
+def test_tasks_and_planners_decide_without_ground_truth():
+    """Tasks decide "grasped / slipped / placed next" from sensor readings, planners from the planning scene;
+    reading the simulator's truth is for files named judge, metric or oracle."""
+    files = [*(ROOT / "twin" / "tasks").glob("*.py"), *(ROOT / "plugins").rglob("*.py")]
+    checked = []
+    for f in files:
+        if any(a in f.name for a in GT_ALLOWED):
+            continue
+        text = f.read_text()
+        hit = GT_READS.search(text)
+        assert hit is None, f"{f.relative_to(ROOT)} reads ground truth: {hit.group(0)!r}"
+        if f.parent.name == "tasks":  # the project's checker: not even a mention outside the judge
+            for word in ("grasped_object(", ".objects()", "ground_truth", "true_pose"):
+                assert word not in text, f"{f.relative_to(ROOT)} mentions {word!r}"
+        checked.append(f.name)
+    assert {"robocup.py", "warehouse.py", "cell.py"} <= set(checked) and len(checked) > 10
+    # the simulator body between the fingers feeds the contact monitor; no task branches on it
+    for name in ("robocup.py", "warehouse.py"):
+        assert "held_body" not in (ROOT / "twin" / "tasks" / name).read_text(), name
+
+
+def test_the_leak_guard_catches_a_ground_truth_read():
+    """The rule above is not vacuous: each way of reading the truth is caught."""
+    for line in (
+        "if cell.world.grasped_object() is None:",
+        "truth = {o.id: o for o in world.objects()}",
+        "p, q = world.object_pose(oid)",
+        "seen = perceive(frame, ground_truth=gt)",
+        "err = est.true_pose - p",
+    ):
+        assert GT_READS.search(line), line
+    for line in ("needs_ground_truth = False", "opening = world.gripper_opening()", "q = world.joint_positions()"):
+        assert not GT_READS.search(line), line
 
 
 # ---- command line ----------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ Unknown keys are rejected with the file and the dotted path of the key.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, Literal
@@ -18,32 +19,34 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from twin.errors import ConfigError
 
 __all__ = [
-    "Settings",
-    "RobotSettings",
-    "GripperSettings",
-    "FixtureSettings",
-    "ObjectSpec",
-    "ObjectSettings",
-    "WorldSettings",
+    "PROJECT_ROOT",
     "ArucoSettings",
     "CameraSettings",
     "CollisionSettings",
-    "PlannerBlock",
-    "TaskSettings",
-    "RobocupTaskSettings",
-    "WarehouseTaskSettings",
     "DepthNoiseSettings",
     "DetectorBlock",
-    "WarehousePerceptionSettings",
-    "IcpSettings",
+    "FixtureSettings",
     "GraspEntry",
-    "RobocupPerceptionSettings",
+    "GripperSettings",
+    "IcpSettings",
+    "ObjectSettings",
+    "ObjectSpec",
     "PerceptionSettings",
-    "load_config",
-    "read_yaml",
+    "PlannerBlock",
+    "RobocupPerceptionSettings",
+    "RobocupTaskSettings",
+    "RobotSettings",
+    "Settings",
+    "TaskSettings",
+    "WarehousePerceptionSettings",
+    "WarehouseTaskSettings",
+    "WorldSettings",
     "apply_override",
+    "load_config",
+    "one_line",
+    "read_yaml",
     "settings_from_dict",
-    "PROJECT_ROOT",
+    "short_repr",
 ]
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
@@ -75,6 +78,22 @@ class GripperSettings(_Model):
     force_n: float = Field(100.0, ge=20, le=235)
     speed_m_s: float = Field(0.1, gt=0, le=0.15)
     finger_friction: float = Field(1.5, gt=0)
+    # "Object detected", as the 2F-85 reports it: the fingers stopped closing above this opening. Closed on
+    # nothing, the force-limited pads meet at 0 mm (the joint limits) and contact softness leaves well under
+    # 1 mm; the thinnest object (the marker) is 21 mm. 5 mm sits clear of both.
+    object_min_opening_m: float = Field(0.005, gt=0, le=0.02)
+    # How much wider than the width the task expects between the fingers (from the perceived class and
+    # orientation) the stopped opening may be: a box squeezed a few degrees off its face (spam 5 deg off:
+    # +9 mm) and template vs real size. Wider than that, something else (or more) is between the fingers.
+    width_over_tolerance_m: float = Field(0.012, gt=0, le=0.05)
+    # How much narrower: the pads sink into what they squeeze. On a rigid object a real 2F-85 sinks < 1 mm;
+    # PyBullet's soft contacts let the 100 N pads sink 0.2-2 mm into the cans, cubes and spam, and up to
+    # 13 mm into the 15 g marker (which tilts and is pinched), which is still a grasp that holds.
+    width_under_tolerance_m: float = Field(0.015, gt=0, le=0.05)
+    # Slip / drop: the opening fell this far below the one sensed at the grasp (and below the narrowest the
+    # object can be held at). An object that leaves lets the fingers close to 0 within a fraction of a
+    # second; one that stays moves them by about a millimetre under the lift's and transfer's accelerations.
+    slip_tolerance_m: float = Field(0.008, gt=0, le=0.02)
 
 
 class FixtureSettings(_Model):
@@ -361,6 +380,30 @@ class RobocupTaskSettings(_Model):
     hover_m: float = Field(0.20, gt=0, le=0.5)  # pre-grasp hover above the grasp point
     place_clearance_m: float = Field(0.10, ge=0, le=0.5)  # object bottom above the bin walls when released
     retries: int = Field(1, ge=0, le=5)  # a failed object is retried this often from a fresh perception
+    # The run captures at most (retries + 2) x (the most objects seen on the table in one capture) + 3 frames,
+    # and never more than this: a detector that sees phantom objects cannot keep the robot busy for ever.
+    max_captures: int = Field(40, ge=1, le=500)
+    # Per class, a gentler grip than gripper.force_n / speed_m_s, within the 2F-85's 20-235 N and 20-150 mm/s.
+    # The 15 g marker, hit at 100 mm/s and squeezed at 100 N, squirts out of PyBullet's soft contacts (the
+    # pads sink through it); closed at 20 mm/s with 20 N it is held at about 19 of its 21 mm.
+    grip_force_n: dict[str, float] = Field(default_factory=lambda: {"marker": 20.0})
+    grip_speed_m_s: dict[str, float] = Field(default_factory=lambda: {"marker": 0.02})
+
+    @field_validator("grip_force_n")
+    @classmethod
+    def _force_range(cls, v: dict[str, float]) -> dict[str, float]:
+        bad = {k: f for k, f in v.items() if not 20.0 <= f <= 235.0}
+        if bad:
+            raise ValueError(f"grip forces must be 20-235 N (a 2F-85's range), got {bad}")
+        return v
+
+    @field_validator("grip_speed_m_s")
+    @classmethod
+    def _speed_range(cls, v: dict[str, float]) -> dict[str, float]:
+        bad = {k: f for k, f in v.items() if not 0.02 <= f <= 0.15}
+        if bad:
+            raise ValueError(f"grip speeds must be 0.02-0.15 m/s (a 2F-85's range), got {bad}")
+        return v
 
 
 class WarehouseTaskSettings(_Model):
@@ -388,6 +431,9 @@ class TaskSettings(_Model):
     warehouse: WarehouseTaskSettings = Field(default_factory=WarehouseTaskSettings)
     settle_s: float = Field(0.5, ge=0, le=5)  # pause after gripper actions (seed 002: 0.5-0.8 s)
     max_sim_time_s: float = Field(900.0, gt=0)  # a run stops (objects left are failed) after this
+    # the transfer ends above the place point and the place move finishes it: it needs the position within
+    # this distance (the seed-000 NMPC stops within 3 cm), the orientation is free
+    transfer_tolerance_m: float = Field(0.03, gt=0, le=0.1)
 
 
 class Settings(_Model):
@@ -421,74 +467,234 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def read_yaml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
-    path = path.resolve()
+# A config is a handful of levels deep (perception.robocup.grasp.<key>.z_grasp_m; a detector's exclude boxes)
+# and a few hundred values; far beyond that it is a mistake or an attack (YAML aliases can make a small
+# file expand to millions of nodes, and pydantic would walk every one)
+_MAX_DEPTH = 32
+_MAX_NODES = 100_000
+_MAX_INT = 2**63 - 1  # beyond int64 a seed or an id breaks numpy, PyBullet or OpenCV instead of failing here
+
+
+def one_line(text: object, limit: int = 300) -> str:
+    """`text` on one line (every line break and run of white space becomes one space), cut to `limit`
+    characters: error messages quote user input, and a user mistake must print as ONE line."""
+    out = " ".join(str(text).split())
+    return out if len(out) <= limit else out[: limit - 3] + "..."
+
+
+def short_repr(value: object, limit: int = 60) -> str:
+    """repr of a user's value for an error message: one line, at most `limit` characters."""
+    try:
+        r = repr(value)
+    except Exception:  # noqa: BLE001 - a message must never fail
+        r = f"<{type(value).__name__}>"
+    return one_line(r, limit)
+
+
+def _dotted(loc: Iterable[object]) -> str:
+    """'a.b.0.c' for a path of keys; a key that is not a plain printable word is shown as its repr."""
+    parts = []
+    for p in loc:
+        text = str(p)
+        parts.append(text if text and text.isprintable() and not any(c.isspace() for c in text) else short_repr(p, 40))
+    return ".".join(parts)
+
+
+def _check_tree(data: Any, source: str) -> None:
+    """Reject what the models would accept but nothing downstream can use: NaN/inf, integers beyond int64,
+    keys that are not text (a validator would meet an int where it expects a name), nesting deeper than
+    _MAX_DEPTH, more than _MAX_NODES values (aliases counted every time they are used)."""
+    nodes = 0
+    stack: list[tuple[Any, tuple[object, ...]]] = [(data, ())]
+    while stack:
+        node, path = stack.pop()
+        nodes += 1
+        if nodes > _MAX_NODES:
+            raise ConfigError(f"{source}: the config has more than {_MAX_NODES} values (YAML aliases count each time they are used)")
+        if len(path) > _MAX_DEPTH:
+            raise ConfigError(f"{source}: {_dotted(path[:_MAX_DEPTH])}...: nested deeper than {_MAX_DEPTH} levels")
+        if isinstance(node, bool):
+            continue
+        if isinstance(node, float) and not math.isfinite(node):
+            raise ConfigError(f"{source}: {_dotted(path) or '(top level)'}: must be a finite number, got {node}")
+        if isinstance(node, int) and abs(node) > _MAX_INT:
+            raise ConfigError(f"{source}: {_dotted(path) or '(top level)'}: integer {short_repr(node, 30)} is too large (at most 2**63-1)")
+        if isinstance(node, dict):
+            for k in node:
+                if not isinstance(k, str):  # every mapping of a config is keyed by names (YAML allows `1:`, `null:`)
+                    raise ConfigError(
+                        f"{source}: {_dotted(path) or '(top level)'}: key {short_repr(k, 30)} must be a name (text), "
+                        f"got {type(k).__name__}"
+                    )
+            stack.extend((v, path + (k,)) for k, v in node.items())
+        elif isinstance(node, (list, tuple)):
+            stack.extend((v, path + (i,)) for i, v in enumerate(node))
+
+
+def _yaml_error(path: Path, e: yaml.YAMLError, text: str) -> ConfigError:
+    """One line for a YAML error: file, line and column, PyYAML's problem (its message spans several lines)."""
+    mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
+    line = col = None
+    if mark is not None:
+        line, col = mark.line + 1, mark.column + 1
+    problem = getattr(e, "problem", None)
+    if isinstance(e, yaml.reader.ReaderError):  # a control character; no mark, a position in the text
+        pos = int(e.position)
+        line, col = text.count("\n", 0, pos) + 1, pos - (text.rfind("\n", 0, pos) + 1) + 1
+        problem = f"unacceptable character #x{e.character:04x} ({e.reason})" if isinstance(e.character, int) else e.reason
+    context = getattr(e, "context", None)
+    what = f"{problem} ({context})" if problem and context else problem or context or e
+    where = f" at line {line}, column {col}" if line is not None else ""
+    return ConfigError(f"{path}: not valid YAML{where}: {one_line(what)}")
+
+
+def _read_text(path: Path) -> str:
+    """The file as text: UTF-8 (a BOM is allowed); a binary or otherwise encoded file is a ConfigError."""
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise ConfigError(f"cannot read config {path}: {e.strerror or e}") from None
+    if b"\x00" in raw:
+        raise ConfigError(f"{path}: a binary file (it contains NUL bytes), not a YAML config")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); save it as UTF-8") from None
+
+
+def read_yaml(path: str | Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The mapping of a YAML config with its `extends` chain merged in (not validated yet).
+
+    Every problem with the file itself (missing, unreadable, binary, not UTF-8, not YAML, empty, not a
+    mapping, an `extends` cycle) is a ConfigError with a one-line message naming the file.
+    """
+    try:
+        path = Path(path).resolve()
+        is_file = path.is_file()
+    except (OSError, ValueError) as e:  # e.g. an embedded NUL byte or a name too long for the system
+        raise ConfigError(f"config file path {short_repr(str(path), 200)} is not usable: {one_line(e)}") from None
     if path in seen:
         raise ConfigError(f"{path}: `extends` forms a cycle through {' -> '.join(map(str, seen))}")
-    if not path.is_file():
+    if not is_file:
         raise ConfigError(f"config file not found: {path}")
+    text = _read_text(path)
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark else ""
-        raise ConfigError(f"{path}:{where} is not valid YAML ({getattr(e, 'problem', e)})") from None
+        raise _yaml_error(path, e, text) from None
+    except RecursionError:
+        raise ConfigError(f"{path}: nested too deeply for the YAML parser") from None
+    if data is None:
+        raise ConfigError(f"{path}: the config is empty")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a mapping of keys, got {type(data).__name__}")
+    _check_tree(data, str(path))
     parent = data.pop("extends", None)
     if parent is not None:
-        if not isinstance(parent, str):
-            raise ConfigError(f"{path}: `extends` must be a file path, got {parent!r}")
+        if not isinstance(parent, str) or not parent:
+            raise ConfigError(f"{path}: `extends` must be a file path, got {short_repr(parent)}")
         data = _merge(read_yaml(path.parent / parent, seen + (path,)), data)
     return data
 
 
 def apply_override(data: dict[str, Any], override: str) -> None:
+    """Apply one `key.path=value` override in place; the value is parsed as a YAML scalar (or flow
+    collection), so `--set seed=3` gives an int and `--set x=[1,2]` a list; unparsable text stays a string."""
     if "=" not in override:
-        raise ConfigError(f"override {override!r} must look like key.path=value")
+        raise ConfigError(f"override {short_repr(override)} must look like key.path=value")
     key, raw = override.split("=", 1)
-    parts = [p for p in key.strip().split(".")]
+    parts = [p.strip() for p in key.strip().split(".")]
     if not all(parts):
-        raise ConfigError(f"override {override!r}: empty key in dotted path {key!r}")
+        raise ConfigError(f"override {short_repr(override)}: empty key in dotted path {short_repr(key)}")
     try:
         value = yaml.safe_load(raw)
     except yaml.YAMLError:
         value = raw
+    except RecursionError:
+        raise ConfigError(f"override {short_repr(override)}: the value is nested too deeply") from None
     node = data
-    for p in parts[:-1]:
+    for i, p in enumerate(parts[:-1]):
         nxt = node.get(p)
         if nxt is None:
             nxt = node[p] = {}
         if not isinstance(nxt, dict):
-            raise ConfigError(f"override {override!r}: {p!r} is a value, not a section")
+            raise ConfigError(f"override {short_repr(override)}: {'.'.join(parts[: i + 1])!r} is a value, not a section")
         node = nxt
     node[parts[-1]] = value
 
 
 def _format_validation(source: str, err: ValidationError) -> str:
-    e = err.errors()[0]
-    loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
-    more = f" (and {len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
+    """One line for a pydantic error: the dotted path of the first bad key and what is wrong with it."""
+    errors = err.errors()
+    e = errors[0]
+    loc = _dotted(e["loc"]) or "(top level)"
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
     if e["type"] == "extra_forbidden":
-        return f"{source}: unknown key {loc!r}{more}"
-    return f"{source}: {loc}: {e['msg']}{more}"
+        return one_line(f"{source}: unknown key {loc!r}{more}", 500)
+    scalar = isinstance(e.get("input"), (str, int, float)) and e["type"] != "missing"
+    got = f" (got {short_repr(e['input'])})" if scalar else ""
+    return one_line(f"{source}: {loc}: {e['msg']}{got}{more}", 500)
+
+
+# cv2.aruco's predefined dictionaries that are not named DICT_<n>X<n>_<markers>, and their marker counts
+_ARUCO_SIZES = {
+    "DICT_ARUCO_ORIGINAL": 1024, "DICT_APRILTAG_16H5": 30, "DICT_APRILTAG_25H9": 35, "DICT_APRILTAG_36H10": 2320,
+    "DICT_APRILTAG_36H11": 587, "DICT_ARUCO_MIP_36H12": 250,
+}
+
+
+def _check_settings(settings: Settings, source: str) -> None:
+    """Checks across what the models validate field by field, found by fuzzing (tests/test_config_fuzz.py):
+    values the models accept but the world cannot use, caught here with the dotted key instead."""
+    if settings.seed < 0:  # numpy's generators (object layout, noise) take non-negative seeds only
+        raise ConfigError(f"{source}: seed: must be a non-negative integer, got {settings.seed}")
+    name, marker = settings.aruco.dictionary, settings.aruco.id
+    m = re.fullmatch(r"DICT_(\d)X\1_(\d+)", name)
+    size = int(m.group(2)) if m else _ARUCO_SIZES.get(name.upper())
+    if size is not None and marker >= size:  # OpenCV would fail when the marker image is drawn
+        raise ConfigError(f"{source}: aruco.id: {name} has markers 0..{size - 1}, got {marker}")
 
 
 def settings_from_dict(data: dict[str, Any], *, source: str = "<dict>") -> Settings:
     """Validate a plain mapping into Settings; raise ConfigError naming the dotted path on failure."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: the top level must be a mapping of keys, got {type(data).__name__}")
+    _check_tree(data, source)
     try:
-        return Settings.model_validate(data)
+        settings = Settings.model_validate(data)
     except ValidationError as err:
         raise ConfigError(_format_validation(source, err)) from None
+    except RecursionError:
+        raise ConfigError(f"{source}: nested too deeply to validate") from None
+    _check_settings(settings, source)
+    return settings
+
+
+def _check_files(settings: Settings, source: str) -> None:
+    """Every URDF the config names must be a regular file: a directory, a device (/dev/zero never ends)
+    or a missing file would otherwise fail deep inside the scene or the world, or not at all."""
+    named = [("robot.urdf", settings.robot.urdf)] + [(f"world.fixtures.{i}.urdf", f.urdf) for i, f in enumerate(settings.world.fixtures)]
+    for where, name in named:
+        try:
+            resolved = settings.resolve(name)
+            ok = resolved.is_file()
+        except (OSError, ValueError) as e:  # an embedded NUL byte, a name too long for the system
+            raise ConfigError(f"{source}: {where}: unusable path {short_repr(name)} ({one_line(e)})") from None
+        if not ok:
+            what = "is not a file" if resolved.exists() else "not found"
+            raise ConfigError(f"{source}: {where}: {short_repr(name)} {what} (resolved to {short_repr(str(resolved), 200)})")
 
 
 def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:
     """Load a YAML config (following `extends`), apply `a.b=value` overrides, validate.
 
-    Raises ConfigError for a missing file, bad YAML, an unknown key (with its dotted path) or a bad value.
+    Raises ConfigError, with one line naming the file and the dotted key, for a missing, unreadable,
+    binary, non-UTF-8, empty or invalid YAML file, an unknown key, a bad value, or a URDF that is not a file.
     """
     p = Path(path)
     data = read_yaml(p)
     for o in overrides:
         apply_override(data, o)
-    return settings_from_dict(data, source=str(p))
+    settings = settings_from_dict(data, source=str(p))
+    _check_files(settings, str(p))
+    return settings

@@ -212,6 +212,8 @@ class World:
         self._renderer_request = renderer
         self.settings = settings
         self.seed = int(seed)
+        if self.seed < 0:
+            raise InvalidRequestError(f"seed must be a non-negative integer, got {self.seed}")
         self._gui = settings.world.gui if gui is None else bool(gui)
         self._cid = -1
         self._egl = False
@@ -354,7 +356,7 @@ class World:
             try:
                 img = cv2.aruco.generateImageMarker(dictionary, a.id, _MARKER_PX, borderBits=1)
             except cv2.error as e:
-                raise ConfigError(f"aruco.id {a.id} is not in {a.dictionary}: {e}") from None
+                raise ConfigError(f"aruco.id {a.id} is not in {a.dictionary}: {' '.join(str(e).split())}") from None
             m = round(_MARKER_PX * MARKER_MARGIN_FRACTION)
             img = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_CONSTANT, value=255)
             ok, buf = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
@@ -631,18 +633,30 @@ class World:
                 self.robot_id, j, pb.VELOCITY_CONTROL, targetVelocity=-v, force=f, physicsClientId=c
             )
 
+    # Sensor readings: what a real Robotiq 2F-85 reports (finger position from the joint encoders, motor
+    # current). Tasks decide "holding / slipped / dropped" from these alone.
     def gripper_opening(self) -> float:
-        """Current distance between the finger pads, m."""
+        """Sensor reading: the distance between the finger pads from the finger joint encoders, m
+        (0 = fully closed, pads touching)."""
         c = self._check()
         return float(sum(s[0] for s in pb.getJointStates(self.robot_id, self._fingers, physicsClientId=c)))
 
     def gripper_settled(self, *, tol_m_s: float = 2e-3) -> bool:
-        """True when both fingers have stopped (closed on an object, fully closed or at the target)."""
+        """Sensor reading: True when both fingers have stopped (closed on an object, fully closed or at
+        the target), from the finger encoders' velocities."""
         c = self._check()
         return all(abs(s[1]) < tol_m_s for s in pb.getJointStates(self.robot_id, self._fingers, physicsClientId=c))
 
+    def gripper_effort(self) -> float:
+        """Sensor reading: the mean force the two finger motors applied in the last step, N (a Robotiq
+        reports motor current). Squeezing an object or pressing the closed pads together it sits at the
+        force limit, so on its own it does not tell the two apart; the opening does."""
+        c = self._check()
+        return float(np.mean([abs(s[3]) for s in pb.getJointStates(self.robot_id, self._fingers, physicsClientId=c)]))
+
     def grasped_object(self) -> int | None:
-        """Id of the object both fingers touch (contacts of the last step), or None."""
+        """Ground truth (judging, metrics, the simulated safety monitor and tests; never a task's decision):
+        id of the object both fingers touch (contacts of the last step), or None."""
         c = self._check()
         touching = []
         for link in _FINGER_LINKS:
@@ -652,7 +666,7 @@ class World:
         return min(both) if both else None
 
     def grasp_settled(self, *, tol_m_s: float = 2e-3) -> bool:
-        """True when the fingers have stopped on an object that both of them touch."""
+        """Ground truth (tests): True when the fingers have stopped on an object that both of them touch."""
         return self.gripper_settled(tol_m_s=tol_m_s) and self.grasped_object() is not None
 
     # ---- ground truth (metrics and tests only) ----------------------------------------------------
@@ -673,6 +687,14 @@ class World:
         c = self._check()
         pos, quat = pb.getBasePositionAndOrientation(body_id, physicsClientId=c)
         return np.array(pos), np.array(quat)
+
+    def object_velocity(self, body_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """(linear (3,) m/s, angular (3,) rad/s) velocity of an object: the judge's "at rest" test."""
+        c = self._check()
+        if body_id not in self._objects:
+            raise InvalidRequestError(f"{body_id} is not an object id; objects: {self.object_ids()}")
+        lin, ang = pb.getBaseVelocity(body_id, physicsClientId=c)
+        return np.array(lin), np.array(ang)
 
     def object_state(self, body_id: int) -> ObjectState:
         """Ground truth of one object."""
@@ -783,6 +805,27 @@ class World:
         """Contacts between the robot (any link) and any other body except `ignore` (e.g. the grasped object)."""
         skip = set(ignore)
         return [p for p in self.contacts(self.robot_id) if p.body_b not in skip and p.body_b != self.robot_id]
+
+    def unexpected_contacts(self, *, ignore: Sequence[int] = (), fingers_may_touch_objects: bool = False) -> list[tuple[str, str]]:
+        """(robot link, body) names of the robot's contacts in the last step that a protective stop reacts to.
+
+        Not counted: bodies in `ignore` (the held object), the robot with itself, the base link on what it
+        stands on (it is fixed there) and, with `fingers_may_touch_objects`, a finger on a loose object (a
+        finger brushing the object it is about to grasp or has just let go of is part of grasping).
+        This is the simulated cell's safety monitor, read by the executor; tasks never decide with it."""
+        skip = set(ignore)
+        fingers = {self._link_index[n] for n in _FINGER_LINKS}
+        link_name = {i: n for n, i in self._link_index.items()}
+        body_name = {i: n for n, i in self._bodies.items()}
+        out: set[tuple[str, str]] = set()
+        for p in self.contacts(self.robot_id):
+            if p.body_b in skip or p.body_b == self.robot_id or p.link_a == -1:
+                continue
+            if fingers_may_touch_objects and p.link_a in fingers and p.body_b in self._objects:
+                continue
+            name = self._objects[p.body_b].name if p.body_b in self._objects else body_name.get(p.body_b, str(p.body_b))
+            out.add((link_name.get(p.link_a, str(p.link_a)), name))
+        return sorted(out)
 
     def closest_points(
         self, body_a: int, body_b: int, max_distance_m: float, *, link_a: int | None = None, link_b: int | None = None

@@ -2,6 +2,10 @@
 
 `run_task(settings, seed=..., planner=...)` builds the world, runs the configured task
 (`settings.task.kind`: robocup or warehouse) and judges every object by physics ground truth at the end.
+
+The tasks decide with what a real cell senses (camera frames, joint encoders, the gripper's finger
+position); the simulator's ground truth is read only by `twin.tasks.judge` (verdicts, metrics, the
+labelled oracle detector's hand-off).
 """
 
 from __future__ import annotations

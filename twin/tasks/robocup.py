@@ -2,40 +2,124 @@
 
 Per object: capture pose -> perceive -> choose a target -> (1) base-first alignment -> (2) pre-grasp
 hover `hover_m` above (MoveJ) -> (3) descent (MoveL) -> (4) close and settle -> (5) ascent (MoveL) ->
-(6) transfer to the bin of its class (MoveJ) -> (7) release; then home. A failed object is retried from a
-fresh perception (`retries` times), then skipped with its reason; the run goes on.
+(6) transfer to the bin of its class (MoveJ) -> (7) lower it into the bin, release; then home. A failed
+object is retried from a fresh perception (`retries` times), then skipped with its reason; the run goes on.
+
+The task decides with what a real cell senses: camera frames, joint encoders and the gripper's finger
+position (grasped, slipped, dropped: `Cell.close_gripper`, `Cell.check_holding`). Which true object an
+estimate was and whether it ended in its bin is for the judge (twin.tasks.judge) alone.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.config import Settings
+from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame
-from twin.perception.pipeline import camera_extrinsics, make_detector, perceive_robocup
+from twin.perception.pipeline import camera_extrinsics, make_detector
 from twin.perception.robocup import ObjectEstimate
-from twin.scene_layout import OBJECT_TEMPLATES
+from twin.scene_layout import OBJECT_TEMPLATES, pose_matrix
 from twin.tasks.cell import Cell, StageFailed, top_down
+from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
 from twin.types import ObjectOutcome
+from twin.urdf_model import RobotModel, read_fixture_shapes
 
-if TYPE_CHECKING:
-    from twin.world import World
-
-__all__ = ["run_robocup", "bin_for", "feasible_cube_yaw"]
+__all__ = ["BinGeometry", "bin_for", "bin_geometries", "feasible_cube_yaw", "grip_width", "read_bin_geometry", "run_robocup"]
 
 log = logging.getLogger("twin")
 
-_BIN_HALF_M = 0.15  # bins are 0.30 x 0.30 m (urdf/bin_*.urdf)
-_BIN_WALL_M = 0.12
-_BIN_FLOOR_M = 0.01
-_RELEASE_GAP_M = 0.03  # the object's bottom above the bin floor when the gripper opens
+# the object's bottom above the bin floor when the gripper opens: set down, not dropped (a dropped object
+# bounces and may topple against a wall; one hanging from the pads can also wedge them in PyBullet)
+_RELEASE_GAP_M = 0.005
+_RELEASE_OPEN_M = 0.01  # in the bin the fingers open only this much wider than the grasp: clear of the walls
+_WALL_MARGIN_M = 0.005  # a placed object's footprint keeps this from the inner walls and from the others
+_SPOT_STEP_M = 0.005  # the grid of candidate release points in a bin
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
+
+
+@dataclass(frozen=True, eq=False)
+class BinGeometry:
+    """A bin as its URDF's collision boxes describe it, in its own frame, and where it stands.
+
+    `inner_lo`/`inner_hi` (3,): the open inner volume: x and y between the inner wall faces, z from the
+    floor's top to the rims' top. `outer_lo`/`outer_hi` (3,): the whole bin. `pose` (4, 4): the bin frame
+    in the base frame (the fixture's position and rpy).
+    """
+
+    name: str
+    pose: np.ndarray
+    inner_lo: np.ndarray
+    inner_hi: np.ndarray
+    outer_lo: np.ndarray
+    outer_hi: np.ndarray
+
+    def local(self, p: np.ndarray) -> np.ndarray:
+        """(3,) base-frame point in the bin frame."""
+        R, t = self.pose[:3, :3], self.pose[:3, 3]
+        return R.T @ (np.asarray(p, dtype=float)[:3] - t)
+
+    def world(self, p_local: np.ndarray) -> np.ndarray:
+        """(3,) bin-frame point in the base frame."""
+        return self.pose[:3, :3] @ np.asarray(p_local, dtype=float) + self.pose[:3, 3]
+
+    def over(self, p: np.ndarray) -> bool:
+        """True when base-frame point `p` is above or inside the bin's outer footprint."""
+        q = self.local(p)
+        return bool(np.all(q[:2] > self.outer_lo[:2]) and np.all(q[:2] < self.outer_hi[:2]))
+
+    @property
+    def yaw(self) -> float:
+        return math.atan2(self.pose[1, 0], self.pose[0, 0])
+
+
+def read_bin_geometry(name: str, urdf: str, pose: np.ndarray) -> BinGeometry:
+    """A bin's geometry from its URDF: the box with the largest footprint is the floor, the others are
+    walls, each on the side of the bin its thin direction points to. ConfigError if it is not such a bin."""
+    boxes = []
+    for s in read_fixture_shapes(urdf):
+        if s.kind != "box":
+            raise ConfigError(f"{urdf}: a bin is made of boxes, found a {s.kind}")
+        half = np.abs(s.pose[:3, :3]) @ (np.asarray(s.size, dtype=float) / 2.0)
+        boxes.append((s.pose[:3, 3], half))
+    if len(boxes) < 5:
+        raise ConfigError(f"{urdf}: a bin needs a floor and four walls, found {len(boxes)} boxes")
+    outer_lo = np.min([c - h for c, h in boxes], axis=0)
+    outer_hi = np.max([c + h for c, h in boxes], axis=0)
+    mid = (outer_lo + outer_hi) / 2.0
+    k_floor = max(range(len(boxes)), key=lambda k: (boxes[k][1][0] * boxes[k][1][1], -boxes[k][0][2]))
+    floor_c, floor_h = boxes[k_floor]
+    walls = [b for k, b in enumerate(boxes) if k != k_floor]
+    inner_lo, inner_hi = outer_lo.copy(), outer_hi.copy()
+    for axis in (0, 1):
+        other = 1 - axis
+        side = [(c, h) for c, h in walls if h[axis] < h[other]]  # thin along `axis`: a wall facing it
+        hi_faces = [c[axis] - h[axis] for c, h in side if c[axis] > mid[axis]]
+        lo_faces = [c[axis] + h[axis] for c, h in side if c[axis] < mid[axis]]
+        if not hi_faces or not lo_faces:
+            raise ConfigError(f"{urdf}: no wall on both sides of the bin along {'xy'[axis]}")
+        inner_lo[axis], inner_hi[axis] = max(lo_faces), min(hi_faces)
+    inner_lo[2] = floor_c[2] + floor_h[2]
+    inner_hi[2] = max(c[2] + h[2] for c, h in walls)
+    return BinGeometry(name, np.asarray(pose, dtype=float), inner_lo, inner_hi, outer_lo, outer_hi)
+
+
+def bin_geometries(settings: Settings) -> dict[str, BinGeometry]:
+    """The bins the class-to-bin map names, by fixture name (a bin named there but missing is a KeyError
+    later, reported per object)."""
+    task = settings.task.robocup
+    named = set(task.bins.values()) | {task.default_bin}
+    return {
+        f.name: read_bin_geometry(f.name, str(settings.resolve(f.urdf)), pose_matrix(f.position, f.rpy))
+        for f in settings.world.fixtures
+        if f.name in named
+    }
 
 
 @dataclass
@@ -51,7 +135,7 @@ class _Target:
     error: str | None = None
     cycle_time_s: float = 0.0
     first_estimate: np.ndarray | None = None
-    true_ids: set[int] = field(default_factory=set)
+    true_ids: set[int] = field(default_factory=set)  # metrics only (the referee's), never decided on
 
 
 def bin_for(cls: str, color: str | None, settings: Settings) -> str:
@@ -62,15 +146,8 @@ def bin_for(cls: str, color: str | None, settings: Settings) -> str:
     return bins.get(cls, settings.task.robocup.default_bin)
 
 
-def _bin_centres(settings: Settings) -> dict[str, np.ndarray]:
-    """Centres of the fixtures the class-to-bin map names (a bin named there but missing is a KeyError later)."""
-    task = settings.task.robocup
-    named = set(task.bins.values()) | {task.default_bin}
-    return {f.name: np.array(f.position) for f in settings.world.fixtures if f.name in named}
-
-
-def _in_any_bin(p: np.ndarray, bins: dict[str, np.ndarray]) -> bool:
-    return any(abs(p[0] - c[0]) < _BIN_HALF_M and abs(p[1] - c[1]) < _BIN_HALF_M for c in bins.values())
+def _in_any_bin(p: np.ndarray, bins: dict[str, BinGeometry]) -> bool:
+    return any(b.over(p) for b in bins.values())
 
 
 def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> float:
@@ -82,113 +159,239 @@ def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> 
     return yaw - math.pi / 4 if side * math.sqrt(2.0) > max_opening_m else yaw
 
 
+def grip_width(est: ObjectEstimate, max_opening_m: float) -> float:
+    """The width the fingers should stop at on this object, from its perceived class and orientation: the
+    grasp closes across the short side of its footprint (cubes: a face, or the diagonal where it fits)."""
+    ext = OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal")
+    short = min(float(ext[0]), float(ext[1]))
+    if est.cls == "cube" and short * math.sqrt(2.0) <= max_opening_m:
+        return short * math.sqrt(2.0)
+    return short
+
+
+@functools.lru_cache(maxsize=4)
+def _robot_model(urdf: str) -> RobotModel:
+    return RobotModel.from_urdf(urdf)
+
+
+def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(lo (3,), hi (3,)) in the tcp frame of every collision shape of the gripper (the links below tool0)
+    at a finger opening, from the robot's URDF. The tcp's z axis points away from the flange, so when
+    grasping from above a larger z is lower in the world."""
+    model = _robot_model(str(settings.resolve(settings.robot.urdf)))
+    poses = model.link_poses(np.zeros((1, 6)), finger_opening=opening_m)
+    T_inv = np.linalg.inv(poses["tcp"][0])
+    out = []
+    for name in model.link_names:
+        up = name
+        while up is not None and up != "tool0":
+            up = model.parent_link(up)
+        if up is None:  # not on the gripper
+            continue
+        for shape in model.links[name].shapes:
+            if shape.kind == "box":
+                half = np.asarray(shape.size, dtype=float) / 2.0
+            elif shape.kind in ("cylinder", "capsule"):
+                r, length = shape.size[0], shape.size[1] + (2 * shape.size[0] if shape.kind == "capsule" else 0.0)
+                half = np.array([r, r, length / 2.0])
+            elif shape.kind == "sphere":
+                half = np.full(3, shape.size[0])
+            else:
+                raise ConfigError(f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only")
+            T = T_inv @ poses[name][0] @ shape.origin
+            h = np.abs(T[:3, :3]) @ half
+            out.append((T[:3, 3] - h, T[:3, 3] + h))
+    return out
+
+
 def _pan_towards(x: float, y: float) -> float:
     """Shoulder pan that faces the point (x, y): with pan 0 the arm reaches towards -x."""
     return float(wrap_to_pi(math.atan2(y, x) + math.pi))
 
 
-def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_xy: np.ndarray, slot_index: int) -> None:
+@dataclass(frozen=True)
+class _Footprint:
+    """Where the task released an object in a bin: centre (2,) and half extents (2,), bin frame."""
+
+    centre: np.ndarray
+    half: np.ndarray
+
+
+def _turned(half_tcp: np.ndarray, rel_yaw: float) -> np.ndarray:
+    """Half extents (2,) along the bin's axes of a box with half extents `half_tcp` along the tcp's x, y."""
+    c, s = abs(math.cos(rel_yaw)), abs(math.sin(rel_yaw))
+    return np.array([c * half_tcp[0] + s * half_tcp[1], s * half_tcp[0] + c * half_tcp[1]])
+
+
+def _release_spot(
+    bin_: BinGeometry, placed: list[_Footprint], obj_half_tcp: np.ndarray, reach_half_tcp: np.ndarray, grasp_yaw: float
+) -> tuple[np.ndarray, float, _Footprint]:
+    """Where (bin frame xy) and at which tcp yaw to release an object: inside the inner walls with what
+    reaches below the rims (`reach_half_tcp`: the object and the opened fingers, tcp axes), clear of what
+    the task placed in this bin before, as far out towards a corner as it goes (room for the next ones).
+    On the way the object is turned square to the bin's walls (the least turn; a quarter more only if that
+    packs better). If nothing is clear, the spot that overlaps the others least."""
+    centre = (bin_.inner_lo[:2] + bin_.inner_hi[:2]) / 2.0
+    square = grasp_yaw - float(wrap_to_pi(4.0 * (grasp_yaw - bin_.yaw))) / 4.0  # the nearest yaw square to the walls
+    best: tuple[tuple[float, float, float], np.ndarray, float, _Footprint] | None = None
+    for turn in (0.0, math.pi / 2):
+        yaw = square + turn
+        reach = _turned(reach_half_tcp, yaw - bin_.yaw)
+        lo = bin_.inner_lo[:2] + reach + _WALL_MARGIN_M
+        hi = bin_.inner_hi[:2] - reach - _WALL_MARGIN_M
+        lo, hi = np.minimum(lo, centre), np.maximum(hi, centre)  # too big for the bin: its centre at least
+        xs = np.arange(lo[0], hi[0] + 1e-9, _SPOT_STEP_M) if hi[0] > lo[0] else np.array([centre[0]])
+        ys = np.arange(lo[1], hi[1] + 1e-9, _SPOT_STEP_M) if hi[1] > lo[1] else np.array([centre[1]])
+        for x in xs:
+            for y in ys:
+                p = np.array([x, y])
+                overlap = 0.0
+                for f in placed:
+                    d = f.half + reach + _WALL_MARGIN_M - np.abs(p - f.centre)
+                    overlap += float(max(d[0], 0.0) * max(d[1], 0.0))
+                key = (overlap, turn, -float(np.linalg.norm(p - centre)))  # the quarter turn only when it packs better
+                if best is None or key < best[0]:
+                    best = (key, p, yaw, _Footprint(p, _turned(obj_half_tcp, yaw - bin_.yaw)))
+    assert best is not None
+    return best[1], best[2], best[3]
+
+
+def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: list[_Footprint]) -> None:
     task = cell.settings.task.robocup
+    max_opening = cell.settings.gripper.max_opening_m
     x, y, z_grasp, yaw, _, _, w_grip = (float(v) for v in est.grasp)
-    yaw = feasible_cube_yaw(est, yaw, cell.settings.gripper.max_opening_m)
+    yaw = feasible_cube_yaw(est, yaw, max_opening)
     # (1) base-first alignment
     q = cell.world.joint_positions().copy()
     pan = _pan_towards(x, y)
     q[0] = q[0] + (pan - q[0] + math.pi) % (2 * math.pi) - math.pi
     cell.move_joints("align", q)
     # (2) pre-grasp hover, gripper opened to the lookup width
-    cell.open_gripper(min(w_grip, cell.settings.gripper.max_opening_m))
+    cell.open_gripper(min(w_grip, max_opening))
     hover = top_down((x, y, z_grasp + task.hover_m), yaw)
     cell.move_pose("hover", hover)
     # (3) descent
     cell.move_pose("descent", top_down((x, y, z_grasp), yaw))
-    # (4) close and settle
-    if cell.close_gripper() is None:
-        raise StageFailed("grasp", "nothing between the fingers after closing")
+    # (4) close and settle: the finger position says whether the object is between the fingers
+    w = grip_width(est, max_opening)
+    grasp = cell.close_gripper((w, w), force_n=task.grip_force_n.get(est.cls), speed_m_s=task.grip_speed_m_s.get(est.cls))
+    if not grasp.holding:
+        raise StageFailed("grasp", f"{grasp.reason} ({est.label}, {est.orientation})")
     # (5) ascent
     cell.move_pose("ascent", hover)
-    if cell.world.grasped_object() is None:
-        raise StageFailed("ascent", "the object slipped out of the gripper")
+    held = cell.check_holding()
+    if not held.holding:
+        raise StageFailed("ascent", f"the object slipped out of the gripper: {held.reason}")
     ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
     short, long_ = sorted((float(ext[0]), float(ext[1])))
     # the fingers close along the tcp's x axis, across the object's short side
     cell.attach(est.cls, np.array([short, long_, ext[2]]), below_tcp_m=z_grasp - ext[2] / 2)
-    c, s = abs(math.cos(yaw)), abs(math.sin(yaw))
-    half_xy = 0.5 * np.array([c * short + s * long_, s * short + c * long_])  # its footprint's AABB, world
-    # (6) transfer above the bin slot, the object's bottom `place_clearance_m` above the walls
-    slot = np.asarray(bin_xy[:2], dtype=float) + _slot_offset(slot_index, half_xy)
-    cell.move_pose("transfer", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
-    if cell.world.grasped_object() is None:
-        raise StageFailed("transfer", "the object was dropped while carrying it")
+    # what goes below the rims at the release: the object and the parts of the opened gripper that reach
+    # that low, as half extents along the tcp's x (the closing direction) and y. The fingers open a little
+    # wider than the object (not the sensed opening: pads can sink into a light object), not fully.
+    release_w = min(max(grasp.opening_m, w) + _RELEASE_OPEN_M, max_opening)
+    rim_z = bin_.world(bin_.inner_hi)[2]
+    floor_z = bin_.world(bin_.inner_lo)[2]
+    tcp_z = floor_z + _RELEASE_GAP_M + z_grasp
+    obj_half = np.array([short / 2.0, long_ / 2.0])
+    reach_half = obj_half.copy()
+    for lo, hi in gripper_boxes(cell.settings, release_w):
+        if tcp_z - hi[2] < rim_z + _WALL_MARGIN_M:
+            reach_half = np.maximum(reach_half, np.maximum(np.abs(lo[:2]), np.abs(hi[:2])))
+    spot, yaw, footprint = _release_spot(bin_, placed, obj_half, reach_half, yaw)
+    xy = bin_.world(np.array([spot[0], spot[1], 0.0]))[:2]
+    # (6) transfer above the release point, the object's bottom `place_clearance_m` above the rims
+    cell.move_pose("transfer", top_down((xy[0], xy[1], rim_z + task.place_clearance_m + z_grasp), yaw))
+    held = cell.check_holding()
+    if not held.holding:
+        raise StageFailed("transfer", f"the object was dropped while carrying it: {held.reason}")
     # (7) place: lower it into the bin (a tall object dropped from above the walls topples out), release
-    cell.move_pose("place", top_down((slot[0], slot[1], _BIN_FLOOR_M + _RELEASE_GAP_M + z_grasp), yaw))
-    cell.release()
-    cell.move_pose("ascent", top_down((slot[0], slot[1], _BIN_WALL_M + task.place_clearance_m + z_grasp), yaw))
-
-
-def _slot_offset(k: int, half_xy: np.ndarray) -> np.ndarray:
-    """Where in the bin the k-th object goes: the four quarters in turn, as far out as its footprint
-    (half extents `half_xy`, world axes) allows inside the walls."""
-    reach = np.clip(_BIN_HALF_M - 0.01 - half_xy - 0.005, 0.0, 0.07)
-    signs = [(1, 1), (-1, -1), (1, -1), (-1, 1)][k % 4]
-    return reach * np.array(signs, dtype=float)
+    cell.move_pose("place", top_down((xy[0], xy[1], tcp_z), yaw))
+    cell.release(release_w)
+    opened = cell.read_gripper().opening_m
+    if opened < release_w - _WALL_MARGIN_M:
+        raise StageFailed("place", f"the fingers opened only to {1000 * opened:.0f} of {1000 * release_w:.0f} mm: the object is stuck between them")
+    placed.append(footprint)
+    cell.move_pose("ascent", top_down((xy[0], xy[1], rim_z + task.place_clearance_m + z_grasp), yaw))
 
 
 def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     """Sort every object on the table into its bin; one outcome per true object, judged at the end."""
     settings, world = cell.settings, cell.world
     task = settings.task.robocup
-    truth = {o.id: o for o in world.objects()}
-    bins = _bin_centres(settings)
+    referee = RobocupReferee(world, settings)  # ground truth: metrics along the way, the verdicts at the end
+    bins = bin_geometries(settings)
     detector = make_detector(settings)
     targets: list[_Target] = []
-    placed_in: dict[str, int] = {}
+    placed_in: dict[str, list[_Footprint]] = {}  # where the task released what, per bin
     home = np.array(settings.robot.home)
     capture_q = np.array(settings.camera.capture_pose)
-    for _ in range(3 * len(truth) + 3):
+    most_seen = 0  # the most objects perception saw on the table in one capture: sizes the budget
+    captures = 0
+    stopped: str | None = None
+    while True:
+        budget = min(task.max_captures, (task.retries + 2) * most_seen + 3)
+        if captures >= budget:
+            stopped = f"the perception budget of {budget} captures was used up"
+            log.info("robocup: %s", stopped)
+            break
         if world.sim_time > settings.task.max_sim_time_s:
-            log.info("robocup: run time limit reached")
+            stopped = "run time limit reached"
+            log.info("robocup: %s", stopped)
             break
         cell.current = "scene"
         try:
-            cell.move_joints("capture", capture_q)
+            _reach_capture_pose(cell, capture_q)
         except StageFailed as e:
-            log.warning("robocup: cannot reach the capture pose: %s", e)
+            stopped = f"cannot reach the capture pose: {e}"
+            log.warning("robocup: %s", stopped)
             break
         cap = capture_frame(world, settings, move=False)
+        captures += 1
         T_bc = camera_extrinsics(settings, cap, None)
-        gt = world.objects() if getattr(detector, "needs_ground_truth", False) else None
-        seen = perceive_robocup(cap.frame, T_bc, settings, detector, ground_truth=gt, seed=world.seed)
+        seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector)  # an oracle detector gets the truth
+        most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:
             break
         _update_obstacles(cell, seen.objects, est, bins)
         tgt = _target_for(est, targets)
         tgt.attempts += 1
-        tgt.true_ids |= _true_match(world, est)  # metrics only: which true object this was
+        tgt.true_ids |= referee.match(est.position)  # metrics only: which true object this was
         cell.current = est.label
         t0 = world.sim_time
+        bin_name = bin_for(est.cls, est.color, settings)
+        if bin_name not in bins:
+            tgt.done, tgt.error = True, f"bin: no bin named {bin_name!r} among the fixtures"
+            continue
         try:
-            bin_name = bin_for(est.cls, est.color, settings)
-            _pick_and_place(cell, est, bins[bin_name], placed_in.get(bin_name, 0))
-            placed_in[bin_name] = placed_in.get(bin_name, 0) + 1
+            _pick_and_place(cell, est, bins[bin_name], placed_in.setdefault(bin_name, []))
             tgt.done, tgt.error = True, None
         except StageFailed as e:
             tgt.error = str(e)
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
             cell.recover()
-        except KeyError:
-            tgt.done, tgt.error = True, f"no bin named {bin_for(est.cls, est.color, settings)!r} among the fixtures"
         tgt.cycle_time_s += world.sim_time - t0
         try:
             cell.move_joints("home", home)
         except StageFailed as e:
             log.info("robocup: could not return home: %s", e)
     cell.settle(1.0)
-    return _judge(cell, truth, targets, bins)
+    return referee.outcomes(targets, stopped=stopped)
 
 
-def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict) -> None:
+def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
+    """Move to the capture pose; when the move is stopped on the way (an object still stuck to a finger
+    touches something), let go, rise and try once more before the run gives up."""
+    try:
+        cell.move_joints("capture", q)
+    except StageFailed as e:
+        log.info("robocup: capture move failed (%s); recovering and trying again", e)
+        cell.recover()
+        cell.move_joints("capture", q)
+
+
+def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict[str, BinGeometry]) -> None:
     """Every other perceived object on the table becomes a box in the planning scene (the target is left
     out: the fingers close around it)."""
     for name in [n for n in cell.scene.boxes() if n.startswith("seen_")]:
@@ -206,7 +409,7 @@ def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target:
         cell.scene.add_box(f"seen_{i}_{est.label}", np.array([short, long_, ext[2]]), T)
 
 
-def _choose(estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict, retries: int) -> ObjectEstimate | None:
+def _choose(estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict[str, BinGeometry], retries: int) -> ObjectEstimate | None:
     """The most confident estimate that is on the table (not in a bin) and not given up on."""
     best = None
     for est in estimates:
@@ -235,34 +438,3 @@ def _target_for(est: ObjectEstimate, targets: list[_Target]) -> _Target:
         targets.append(t)
     t.position = est.position.copy()
     return t
-
-
-def _true_match(world: "World", est: ObjectEstimate) -> set[int]:
-    near = [(float(np.linalg.norm(o.position[:2] - est.position[:2])), o.id) for o in world.objects()]
-    d, oid = min(near) if near else (math.inf, -1)
-    return {oid} if d < 0.05 else set()
-
-
-def _judge(cell: Cell, truth: dict, targets: list[_Target], bins: dict[str, np.ndarray]) -> list[ObjectOutcome]:
-    settings = cell.settings
-    out = []
-    for oid, o0 in truth.items():
-        now = cell.world.object_state(oid)
-        bin_name = bin_for(o0.cls, o0.color, settings)
-        c = bins.get(bin_name)
-        placed = c is not None and abs(now.position[0] - c[0]) < _BIN_HALF_M and abs(now.position[1] - c[1]) < _BIN_HALF_M and now.position[2] < _BIN_WALL_M + 0.05
-        mine = [t for t in targets if oid in t.true_ids]
-        if placed:
-            err = None
-        elif not mine:
-            err = "not perceived"
-        else:
-            err = mine[-1].error or "released, but it did not land in its bin"
-        pose_err = float(np.linalg.norm(mine[0].first_estimate[:2] - o0.position[:2])) if mine and mine[0].first_estimate is not None else None
-        out.append(
-            ObjectOutcome(
-                id=o0.name, cls=o0.cls, color=o0.color, target_bin=bin_name, placed=bool(placed), error=err,
-                cycle_time_s=sum(t.cycle_time_s for t in mine), pose_error_m=pose_err,
-            )
-        )
-    return out

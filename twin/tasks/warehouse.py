@@ -1,6 +1,11 @@
 """The warehouse sorting task (seeds 000/001): fixed camera, ArUco calibration, DBSCAN perception, pick
 each cube, carry it over the perceived obstacle with the transfer planner (NMPC by default), release it
-at the drop location of its colour."""
+at the drop location of its colour.
+
+The task decides with what a real cell senses: the camera frame, joint encoders and the gripper's finger
+position (grasped, slipped, dropped). Which true cube a perceived one was and whether it ended in its drop
+zone is for the judge (twin.tasks.judge) alone.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +17,8 @@ import numpy as np
 from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame
 from twin.perception.warehouse import LabeledCube, perceive_warehouse
-from twin.tasks.cell import Cell, StageFailed, top_down
+from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
+from twin.tasks.judge import WarehouseReferee
 from twin.types import ObjectOutcome
 
 __all__ = ["run_warehouse"]
@@ -22,12 +28,18 @@ log = logging.getLogger("twin")
 _CUBE_M = 0.05
 _APPROACH_M = 0.06  # the transfer ends this far above the drop point
 _GRASP_YAW = np.pi / 2  # the seed perceives no cube yaw; an 85 mm stroke closes on a 50 mm cube at any yaw
+# With the cube's yaw unknown the fingers may stop across a face (50 mm) or, if it does not turn square
+# in the grip, anywhere up to its diagonal (71 mm).
+_GRIP_WIDTH_M = (_CUBE_M, _CUBE_M * np.sqrt(2.0))
+# A grip within this of the face width is square (under 6 deg off). Wider, the fingers hold the cube by two
+# edges, which turns and slips out under the transfer's accelerations: open, turn and grasp again.
+_SQUARE_TOL_M = 0.005
 
 
 @dataclass
 class _Attempt:
     cube: LabeledCube
-    true_id: int | None
+    true_id: int | None  # metrics only (the referee's), never decided on
     error: str | None = None
     cycle_time_s: float = 0.0
 
@@ -38,28 +50,55 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
     cell.open_gripper()
     cell.move_pose("hover", top_down((c[0], c[1], c[2] + task.hover_m), _GRASP_YAW))
     cell.move_pose("descent", top_down(c, _GRASP_YAW))
-    if cell.close_gripper() is None:
-        raise StageFailed("grasp", "nothing between the fingers after closing")
-    cell.move_pose("ascent", top_down((c[0], c[1], c[2] + task.hover_m), _GRASP_YAW))
-    if cell.world.grasped_object() is None:
-        raise StageFailed("ascent", "the cube slipped out of the gripper")
+    grasp, yaw = _square_grasp(cell, c)
+    if not grasp.holding:
+        raise StageFailed("grasp", grasp.reason)
+    cell.move_pose("ascent", top_down((c[0], c[1], c[2] + task.hover_m), yaw))
+    held = cell.check_holding()
+    if not held.holding:
+        raise StageFailed("ascent", f"the cube slipped out of the gripper: {held.reason}")
     cell.attach("cube", np.full(3, _CUBE_M))
     drop = (zone[0], zone[1], zone[2] + task.release_height_m + _CUBE_M / 2)
     above = (drop[0], drop[1], drop[2] + _APPROACH_M)
     cell.move_pose("transfer", top_down(above, _GRASP_YAW))
-    if cell.world.grasped_object() is None:
-        raise StageFailed("transfer", "the cube was dropped while carrying it")
+    held = cell.check_holding()
+    if not held.holding:
+        raise StageFailed("transfer", f"the cube was dropped while carrying it: {held.reason}")
     # NMPC stops within 3 cm of its goal: finish with a short straight move to the exact drop point
     cell.move_pose("place", top_down(drop, _GRASP_YAW))
     cell.release()
     cell.move_pose("ascent", top_down((drop[0], drop[1], drop[2] + task.hover_m / 2), _GRASP_YAW))
 
 
+def _square_grasp(cell: Cell, c: np.ndarray) -> tuple[GraspCheck, float]:
+    """Close on the cube at `c` (the tcp there at _GRASP_YAW); if the opening says the fingers hold it by
+    two edges (the seed perceives no cube yaw), turn the open gripper by the angle that opening implies and
+    close again, the other way round if that was no better. Decided from the finger opening alone; returns
+    the grasp and the yaw it was made at."""
+    grasp, yaw = cell.close_gripper(_GRIP_WIDTH_M), _GRASP_YAW
+    if not grasp.holding or grasp.opening_m <= _CUBE_M + _SQUARE_TOL_M:
+        return grasp, yaw
+    # across two edges, d off the faces: opening = side * (cos d + sin d) = side * sqrt(2) * sin(d + 45 deg)
+    d = float(np.arcsin(min(1.0, grasp.opening_m / (_CUBE_M * np.sqrt(2.0)))) - np.pi / 4)
+    for turn in (d, -d):
+        log.info("warehouse: the fingers hold the cube by two edges (%.1f mm); turning %+.0f deg to grasp again", 1000 * grasp.opening_m, np.degrees(turn))
+        cell.open_gripper()
+        try:
+            cell.move_pose("descent", top_down(c, _GRASP_YAW + turn))
+            yaw = _GRASP_YAW + turn
+        except StageFailed as e:  # planned, not moved: e.g. the turned gripper would touch the obstacle
+            log.info("warehouse: cannot turn there (%s)", e)
+        grasp = cell.close_gripper(_GRIP_WIDTH_M)
+        if not grasp.holding or grasp.opening_m <= _CUBE_M + _SQUARE_TOL_M:
+            break
+    return grasp, yaw
+
+
 def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     """Sort every cube the camera sees; one outcome per true cube, judged by physics at the end."""
     settings, world = cell.settings, cell.world
     task = settings.task.warehouse
-    truth = {o.id: o for o in world.objects()}
+    referee = WarehouseReferee(world, settings)  # ground truth: metrics along the way, the verdicts at the end
     cubes: tuple[LabeledCube, ...] = ()
     global_error: str | None = None
     capture = capture_frame(world, settings)
@@ -73,12 +112,8 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         else:
             log.warning("warehouse: no obstacle seen; planning without one")
     except MarkerNotFound as e:
-        global_error = f"calibration failed: {e}"
-    attempts: list[_Attempt] = []
-    for cube in cubes:
-        near = min(truth.values(), key=lambda o: float(np.linalg.norm(o.position[:2] - cube.centroid[:2])), default=None)
-        true_id = near.id if near is not None and np.linalg.norm(near.position[:2] - cube.centroid[:2]) < 0.05 else None
-        attempts.append(_Attempt(cube, true_id))
+        global_error = f"calibration: the ArUco marker was not found: {e}"
+    attempts = [_Attempt(cube, referee.match(cube.centroid)) for cube in cubes]
     order = list(task.drop_zones)
     attempts.sort(key=lambda a: (order.index(a.cube.color_label) if a.cube.color_label in order else len(order), float(a.cube.centroid[1])))
     for att in attempts:
@@ -86,10 +121,10 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         cell.current = f"{att.cube.color_label} cube"
         t0 = world.sim_time
         if zone is None:
-            att.error = f"no drop zone for colour {att.cube.color_label!r}; zones: {', '.join(task.drop_zones)}"
+            att.error = f"sorting: no drop zone for colour {att.cube.color_label!r}; zones: {', '.join(task.drop_zones)}"
             continue
         if world.sim_time > settings.task.max_sim_time_s:
-            att.error = "run time limit reached"
+            att.error = "time: the run time limit was reached before this cube"
             continue
         for k in range(task.retries + 1):
             try:
@@ -106,36 +141,4 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     except StageFailed as e:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
-    return _judge(cell, truth, attempts, global_error)
-
-
-def _judge(cell: Cell, truth: dict, attempts: list[_Attempt], global_error: str | None) -> list[ObjectOutcome]:
-    task = cell.settings.task.warehouse
-    by_true = {a.true_id: a for a in attempts if a.true_id is not None}
-    out = []
-    for oid, o0 in truth.items():
-        now = cell.world.object_state(oid)
-        zone = task.drop_zones.get(o0.color or "")
-        placed = zone is not None and float(np.linalg.norm(now.position[:2] - np.array(zone[:2]))) <= task.drop_radius_m and now.position[2] < zone[2] + _CUBE_M
-        att = by_true.get(oid)
-        if att is None:
-            err = global_error or "not perceived"
-        else:
-            err = att.error
-        if placed:
-            err = None
-        elif err is None:
-            err = "released, but it did not come to rest in its drop zone"
-        out.append(
-            ObjectOutcome(
-                id=o0.name,
-                cls=o0.cls,
-                color=o0.color,
-                target_bin=f"drop_{o0.color}",
-                placed=bool(placed),
-                error=err,
-                cycle_time_s=att.cycle_time_s if att else 0.0,
-                pose_error_m=float(np.linalg.norm(att.cube.centroid[:2] - o0.position[:2])) if att else None,
-            )
-        )
-    return out
+    return referee.outcomes(attempts, global_error=global_error)
