@@ -9,7 +9,7 @@ import pytest
 
 from twin import hookimpl
 from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, UnknownNameError
-from twin.registry import Kind, Registry, default_registry, plugin_manager
+from twin.registry import Availability, Kind, Registry, default_registry, plugin_manager
 
 
 class _Echo:
@@ -32,6 +32,28 @@ class _PluginDup:
     @hookimpl
     def twin_register_planners(self, registry):
         registry.add_planner("demo.echo", _Echo)
+
+
+class _Unbound:
+    """A planner whose backend is installed but lacks what it needs; building it would be a failure here."""
+
+    built = 0
+
+    @classmethod
+    def unavailable_reason(cls):
+        return "the frob backend 1.0 does not bind Frobnicator (frob >= 2 does)"
+
+    def __init__(self, params, context):
+        type(self).built += 1
+
+
+class _PluginAvailability:
+    @hookimpl
+    def twin_register_planners(self, registry):
+        registry.add_planner("demo.ok", _Echo)
+        registry.add_planner("demo.nobackend", "twin_missing_backend_xyz:Planner", extra="demo")
+        registry.add_planner("demo.noclass", "twin.errors:NoSuchPlanner")
+        registry.add_planner("demo.unbound", _Unbound)
 
 
 def fresh(*plugins):
@@ -125,3 +147,49 @@ def test_every_hook_is_documented_in_the_readme():
     assert specs == set(HOOKS)
     for hook in specs:
         assert f"`{hook}(registry)`" in readme, f"{hook} is not documented in README.md"
+
+
+def test_availability_is_known_without_building_a_planner():
+    reg = fresh(_PluginAvailability())
+    assert reg.entry("demo.ok").availability() == Availability(True)
+    missing = reg.entry("demo.nobackend").availability()
+    assert not missing and "twin_missing_backend_xyz" in missing.reason and "twin[demo]" in missing.reason
+    noclass = reg.entry("demo.noclass").availability()
+    assert not noclass and "NoSuchPlanner" in noclass.reason
+    unbound = reg.entry("demo.unbound").availability()
+    assert not unbound.available and "Frobnicator" in unbound.reason and "\n" not in unbound.reason
+    assert _Unbound.built == 0
+    # the factory applies the same check: an unavailable planner is a typed error, not a half-built object
+    with pytest.raises(DependencyMissing, match="Frobnicator"):
+        reg.planner("demo.unbound", {}, context=None)
+    assert _Unbound.built == 0
+
+
+def test_ompl_planners_the_bindings_lack_are_unavailable_with_the_reason():
+    og = pytest.importorskip("ompl.geometric")
+    reg = default_registry()
+    assert reg.entry("ompl.rrtconnect").availability()
+    for name, cls in (("ompl.lazyprmstar", "LazyPRMstar"), ("ompl.bitrrt", "BiTRRT"), ("ompl.fmt", "FMT"), ("ompl.bfmt", "BFMT")):
+        a = reg.entry(name).availability()
+        assert a.available == hasattr(og, cls), (name, a)
+        if not a:
+            assert f"ompl.geometric.{cls}" in a.reason and "bindings" in a.reason
+
+
+def test_parameter_errors_are_one_line_whatever_the_value():
+    reg = fresh(_PluginA())
+    from pydantic import BaseModel, ConfigDict
+
+    class _WithParams:
+        class Params(BaseModel):
+            model_config = ConfigDict(extra="forbid")
+            speed: float = 1.0
+
+        def __init__(self, params, context):
+            pass
+
+    reg.add_planner("demo.params", _WithParams)
+    for bad in ({"speed": "fast\nslow\r\n" * 50}, {"speed": {"a\nb": [1] * 1000}}, {"spe\ned": 1}, ["speed"]):
+        with pytest.raises(ConfigError) as info:
+            reg.planner("demo.params", bad, context=None)
+        assert len(str(info.value).splitlines()) == 1 and len(str(info.value)) < 700, str(info.value)

@@ -10,6 +10,7 @@ import argparse
 import json
 import logging
 import math
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,17 +18,59 @@ from typing import Any, NoReturn
 
 from twin.errors import TwinError
 
-__all__ = ["main", "build_parser"]
+__all__ = ["build_parser", "main"]
 
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_USAGE = 0, 1, 2
 
 
+# a comma-separated list of numbers as a user types it, e.g. "-0.5,-1.5708,1.5708" (inf/nan included, so
+# that `_floats` can say what is wrong with them rather than argparse calling the value an option)
+_NUMBER = r"[-+]?(?:\d+\.?\d*(?:[eE][-+]?\d+)?|\.\d+(?:[eE][-+]?\d+)?|inf|infinity|nan)"
+_NUMBER_LIST = re.compile(rf"\s*{_NUMBER}\s*(?:,\s*{_NUMBER}\s*)*,?\s*", re.IGNORECASE)
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and exit 2), like every other user mistake."""
+    """argparse, but a usage error is one line (and exit 2), like every other user mistake, and a vector
+    option takes a value that begins with a minus sign (`--start -0.5,-1.57,...`), as users type it."""
 
     def error(self, message: str) -> NoReturn:
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise SystemExit(EXIT_USAGE)
+
+    def parse_known_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> tuple[Any, list[str]]:
+        """Join `--start -0.5,...` into `--start=-0.5,...` first: argparse reads a separate value that
+        begins with '-' (and is not one plain number) as another option and reports a missing argument."""
+        argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(self._join_vector_values(argv), namespace)
+
+    def _join_vector_values(self, argv: list[str]) -> list[str]:
+        vector_options = {o for o, a in self._option_string_actions.items() if getattr(a.type, "is_vector", False)}
+        if not vector_options:
+            return argv
+        out: list[str] = []
+        i = 0
+        while i < len(argv):
+            arg = argv[i]
+            if arg == "--":  # everything after it is positional
+                out.extend(argv[i:])
+                break
+            option = self._vector_option(arg, vector_options)
+            if option is not None and i + 1 < len(argv) and argv[i + 1].startswith("-") and _NUMBER_LIST.fullmatch(argv[i + 1]):
+                out.append(f"{option}={argv[i + 1]}")
+                i += 2
+                continue
+            out.append(arg)
+            i += 1
+        return out
+
+    def _vector_option(self, arg: str, vector_options: set[str]) -> str | None:
+        """The vector option `arg` names, exactly or as the unique abbreviation argparse would accept."""
+        if arg in vector_options:
+            return arg
+        if not arg.startswith("--") or "=" in arg or not self.allow_abbrev:
+            return None
+        matches = [o for o in self._option_string_actions if o.startswith(arg)]
+        return matches[0] if len(matches) == 1 and matches[0] in vector_options else None
 
 
 def _floats(text: str, n: int, what: str) -> list[float]:
@@ -49,11 +92,28 @@ def _pose_vector(text: str) -> list[float]:
     return _floats(text, 6, "pose x,y,z,roll,pitch,yaw (m, rad)")
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}")
+    if value > 2**63 - 1:
+        raise argparse.ArgumentTypeError(f"must be below 2**63, got {text!r}")
+    return value
+
+
+# argument types whose values are comma-separated numbers: their options accept a leading minus sign
+_joint_vector.is_vector = True  # type: ignore[attr-defined]
+_pose_vector.is_vector = True  # type: ignore[attr-defined]
+
+
 def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="YAML config file (see configs/)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value by dotted key, e.g. --set world.objects.lying_probability=0.5")
-    p.add_argument("--seed", type=int, default=None, help="scene seed (default: the config's seed)")
+    p.add_argument("--seed", type=_seed, default=None, help="scene seed, a non-negative integer (default: the config's seed)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -92,7 +152,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: out/<name> of the config)")
     p.add_argument("--workers", type=int, default=None, metavar="N", help="parallel runs (default: all CPUs; 0: in this process)")
     p.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool (default) or Ray (twin[ray])")
-    p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: skip runs already in results.jsonl")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the sweep in DIR: skip runs already in results.jsonl, rerun those that ended in 'error'")
+    p.add_argument("--force", action="store_true",
+                   help="with --resume: accept a changed config (its changed runs are run anew; old rows leave the summary)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="check every planner block and scenario and count the runs; run and write nothing")
 
     p = sub.add_parser("perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth")
     _add_config_args(p)
@@ -131,14 +196,22 @@ def _cmd_planners(args: argparse.Namespace) -> int:
     from twin.registry import default_registry
 
     entries = default_registry().entries()
+    # asking each entry imports its backend (never builds a planner): a name whose backend is missing
+    # or lacks the class is listed as unavailable, with the reason
+    available = {e.name: e.availability() for e in entries}
     table = Table(title="registered plugins")
-    for col in ("name", "kind", "provided by", "description"):
+    for col in ("name", "kind", "provided by", "available", "description"):
         table.add_column(col)
     for e in entries:
-        table.add_row(e.name, e.kind.value, e.provider, e.description)
-    Console(width=160).print(table)
+        a = available[e.name]
+        table.add_row(e.name, e.kind.value, e.provider, "yes" if a else f"no: {a.reason}", e.description)
+    Console(width=200).print(table)
     if args.json_path:
-        _write_json(args.json_path, [{"name": e.name, "kind": e.kind.value, "provider": e.provider, "description": e.description} for e in entries])
+        _write_json(args.json_path, [
+            {"name": e.name, "kind": e.kind.value, "provider": e.provider, "description": e.description,
+             "available": available[e.name].available, "unavailable_reason": available[e.name].reason or None}
+            for e in entries
+        ])
     return EXIT_OK
 
 
@@ -222,11 +295,33 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:
+    """One line per distinct reason with its count (e.g. every nmpc run on joint-goal queries)."""
+    from collections import Counter
+
+    for reason, n in Counter(r for _, r in skipped).items():
+        print(f"{verb} {n} runs: {reason}")
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from twin.compare import run_comparison
+    from twin.compare import plan_comparison, run_comparison
     from twin.compare.report import summary_table
+
+    if args.dry_run:
+        dry = plan_comparison(args.config, overrides=args.overrides)
+        cases = dry.cases()
+        print(f"{Path(args.config).name}: {dry.total} runs ({len(dry.spec.planners)} planners, {sum(cases.values())} cases, "
+              f"{len(dry.skipped)} pairs skipped); checked every planner block and scenario, ran nothing")
+        print("per planner:")
+        for label, n in dry.per_planner().items():
+            print(f"  {label:32s} {n:6d}")
+        print("per scenario (runs, cases):")
+        for name, n in dry.per_scenario().items():
+            print(f"  {name:32s} {n:6d}  {cases[name]:4d}")
+        _print_skipped(dry.skipped, "would skip")
+        return EXIT_OK
 
     def progress(row: dict[str, Any], done: int, total: int) -> None:
         line = f"[{done}/{total}] {row['run_id']}: {row['status']}"
@@ -236,12 +331,12 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     result = run_comparison(
         args.config, out_dir=args.out, workers=args.workers, backend=args.backend, resume=args.resume,
-        overrides=args.overrides, on_row=progress,
+        force=args.force, overrides=args.overrides, on_row=progress,
     )
     Console(width=200).print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
-    if result.skipped:
-        print(f"skipped {len(result.skipped)} runs: {result.skipped[0][1]}")
-    print(f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before); wrote "
+    _print_skipped(result.skipped, "skipped")
+    again = f", {result.retried} rerun after an error" if result.retried else ""
+    print(f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before{again}); wrote "
           + ", ".join(str(f) for f in result.files))
     return EXIT_OK
 

@@ -3,6 +3,11 @@
 `plugin_manager()` builds a fresh pluggy manager (built-ins and third-party plugins both come from the
 entry-point group `twin`); `Registry.from_plugin_manager(pm)` asks every plugin to register its names.
 `default_registry()` caches the one built from installed entry points.
+
+Whether a name can be created here is a question an entry answers without creating anything
+(`Entry.availability()`): it imports the module and the class, then asks the class's optional
+`unavailable_reason()` classmethod (the OMPL plugin uses it for planners its installed bindings lack).
+`Registry.create` applies the same check before constructing, so every plugin gets it.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import pluggy
 from pydantic import BaseModel, ValidationError
 
+from twin.config import one_line, short_repr
 from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, TwinError, UnknownNameError
 from twin.hookspecs import TwinSpec
 
@@ -24,7 +30,7 @@ if TYPE_CHECKING:
     from twin.config import Settings
     from twin.kinematics import UR5e
 
-__all__ = ["Kind", "Entry", "Registry", "PluginContext", "plugin_manager", "default_registry", "HOOKS"]
+__all__ = ["HOOKS", "Availability", "Entry", "Kind", "PluginContext", "Registry", "default_registry", "plugin_manager"]
 
 HOOKS = ("twin_register_planners", "twin_register_retimers", "twin_register_detectors")
 
@@ -39,6 +45,17 @@ class Kind(enum.Enum):
 
 
 _PLANNER_KINDS = (Kind.PLANNER, Kind.RECEDING_HORIZON)
+
+
+@dataclass(frozen=True)
+class Availability:
+    """Whether a registered name can be created in this installation, and if not, why (one line)."""
+
+    available: bool
+    reason: str = ""
+
+    def __bool__(self) -> bool:
+        return self.available
 
 
 @dataclass(frozen=True)
@@ -67,6 +84,30 @@ class Entry:
         except AttributeError:
             raise TwinError(f"{self.name!r} points at {self.target!r}, but {module} has no {attr!r}") from None
 
+    def availability(self) -> Availability:
+        """Can this name be created here? Imports its module and class (never instantiates it) and asks the
+        class's optional `unavailable_reason()` classmethod (None: usable; else why not), so `twin planners`
+        can tell a registered name from a usable one."""
+        try:
+            reason = _unavailable_reason(self.load())
+        except TwinError as e:
+            reason = str(e)
+        except Exception as e:  # noqa: BLE001 - a broken third-party plugin must not break the listing
+            reason = f"importing {self.target!r} raised {type(e).__name__}: {e}"
+        return Availability(True) if reason is None else Availability(False, one_line(reason, 500))
+
+
+def _unavailable_reason(cls: type) -> str | None:
+    """The plugin class's own answer (its optional classmethod `unavailable_reason() -> str | None`)."""
+    check = getattr(cls, "unavailable_reason", None)
+    if check is None:
+        return None
+    try:
+        reason = check()
+    except TwinError as e:
+        return str(e)
+    return None if reason is None else str(reason)
+
 
 @dataclass(frozen=True)
 class PluginContext:
@@ -81,9 +122,12 @@ def validate_params(entry: Entry, cls: type, params: dict[str, Any] | BaseModel 
     """Validate `params` with the plugin's own `Params` model (if it has one); ConfigError names the key."""
     model = getattr(cls, "Params", None)
     params = params or {}
+    if not isinstance(params, (dict, BaseModel)):
+        raise ConfigError(f"{entry.name}: parameters must be a mapping of names to values, got {type(params).__name__}")
     if model is None:
         if params:
-            raise ConfigError(f"{entry.kind.value} {entry.name!r} takes no parameters, got: {', '.join(sorted(dict(params)))}")
+            names = ", ".join(sorted(map(str, dict(params))))
+            raise ConfigError(one_line(f"{entry.kind.value} {entry.name!r} takes no parameters, got: {names}", 500))
         return None
     if isinstance(params, model):
         return params
@@ -94,8 +138,11 @@ def validate_params(entry: Entry, cls: type, params: dict[str, Any] | BaseModel 
         key = ".".join(str(p) for p in e["loc"]) or "(params)"
         allowed = ", ".join(model.model_fields)
         if e["type"] == "extra_forbidden":
-            raise ConfigError(f"{entry.name}: unknown parameter {key!r}; allowed: {allowed}") from None
-        raise ConfigError(f"{entry.name}: parameter {key!r}: {e['msg']} (got {e.get('input')!r})") from None
+            raise ConfigError(one_line(f"{entry.name}: unknown parameter {key!r}; allowed: {allowed}", 2000)) from None
+        got = f" (got {short_repr(e['input'])})" if "input" in e else ""
+        raise ConfigError(one_line(f"{entry.name}: parameter {key!r}: {e['msg']}{got}", 500)) from None
+    except RecursionError:
+        raise ConfigError(f"{entry.name}: parameters nested too deeply") from None
 
 
 class Registry:
@@ -146,6 +193,9 @@ class Registry:
         """Instantiate the plugin `name` with validated `params`: `cls(params, context)`."""
         entry = self.entry(name, kinds)
         cls = entry.load()
+        reason = _unavailable_reason(cls)
+        if reason is not None:
+            raise DependencyMissing(reason)
         p = validate_params(entry, cls, params)
         return cls(p, context)
 

@@ -157,10 +157,14 @@ def _shape(col: ET.Element, link: str, index: int, where: str) -> Shape | None:
 
 def _parse(source: str | Path, text: str | None = None) -> tuple[str, dict[str, Link], dict[str, Joint]]:
     where = str(source)
+    if text is None and not Path(source).is_file():  # a directory or a device would not parse (or block)
+        raise ConfigError(f"URDF file not found: {where} (not a regular file)")
     try:
         root = ET.fromstring(text) if text is not None else ET.parse(str(source)).getroot()
     except FileNotFoundError:
         raise ConfigError(f"URDF file not found: {where}") from None
+    except OSError as e:
+        raise ConfigError(f"cannot read URDF {where}: {e.strerror or e}") from None
     except ET.ParseError as e:
         raise ConfigError(f"{where}: not valid XML ({e})") from None
     if root.tag != "robot":

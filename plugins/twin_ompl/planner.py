@@ -9,7 +9,8 @@ One `plan(request, scene)`:
    with what);
 2. planning happens on the scene with its environment inflated by `clearance_m` (5 mm; see
    `twin_ompl.validity.padded_scene`), unless the start or every goal lies closer than that;
-3. the straight joint-space motion to one of the nearest goals, when free, is the answer (`try_direct`);
+3. only with `try_direct: true` (off by default: the planner being compared is what plans): the straight
+   joint-space motion to one of the nearest goals, when free, is the answer without sampling;
 4. otherwise OMPL plans in a RealVectorStateSpace(6) whose bounds are `joint_range`: 'compact' by
    default = [-pi, pi] per joint widened to start +- pi and to a joint goal, clipped to the limits. Every
    IK branch keeps a representative within pi of the start in each joint, and the sampled volume is ~1/20
@@ -18,8 +19,9 @@ One `plan(request, scene)`:
 6. a retimer plugin (`toppra` by default, or the config block's `retimer:`) times the path;
 7. the trajectory is checked every `verify_resolution_rad` / `verify_resolution_m` on the inflated
    scene; if a straight segment grazes something between the states checked while planning, that segment
-   is planned again at the fine resolution and spliced in (`max_repairs`); if only the timing spline cuts
-   a corner, the path is re-timed through denser waypoints.
+   is planned again at the fine resolution, by the same planner inside the segment's box widened by 0.3 rad,
+   and spliced in (`max_repairs`); if only the timing spline cuts a corner, the path is re-timed through
+   denser waypoints.
 
 Time: the request's `time_limit_s` (or the smaller `time_limit_s` parameter) bounds the whole call up to
 the final retiming and check: sampling stops early enough to leave up to a quarter of the limit for steps
@@ -33,12 +35,15 @@ same request and scene give the same path. The seed is process-global: do not pl
 threads at once (the FCL scene is not thread-safe either).
 
 OMPL 2.0.1 specifics: planners are found by `getattr(ompl.geometric, name)`; LazyPRMstar and BiTRRT are
-not bound (DependencyMissing says so); the PRM family gets only the nearest goal configuration (see
-`PlannerSpec.single_goal`: its goal-adding helper thread deadlocks with Python callbacks).
+not bound (`unavailable_reason()` says so without building a planner, and creating one raises
+DependencyMissing); the PRM family and BFMT* get only the nearest goal configuration (see
+`PlannerSpec.single_goal`: the PRM goal-adding helper thread deadlocks with Python callbacks, BFMT*
+crashes with a goal set).
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import time
@@ -55,32 +60,39 @@ from twin.errors import ConfigError, DependencyMissing, PlanningError, TwinError
 from twin.kinematics import UR5e
 from twin.planning import make_context
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
-
-from twin_ompl.params import PLANNER_SPECS, OMPL_PARAMS, OmplParams, PlannerSpec, params_model
-from twin_ompl.validity import CheckCounter, SceneMotionValidator, padded_scene, state_validity_checker, trajectory_check_points
+from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
+from twin_ompl.validity import (
+    CheckCounter,
+    SceneMotionValidator,
+    padded_scene,
+    state_validity_checker,
+    trajectory_check_points,
+)
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.registry import PluginContext
 
 __all__ = [
-    "OmplPlanner",
-    "RRTConnect",
-    "RRT",
-    "RRTstar",
-    "InformedRRTstar",
-    "SORRTstar",
-    "PRM",
-    "PRMstar",
-    "LazyPRMstar",
-    "BITstar",
     "AORRTC",
-    "KPIECE1",
+    "BFMT",
     "BKPIECE1",
+    "FMT",
+    "KPIECE1",
     "LBKPIECE1",
+    "PRM",
+    "RRT",
+    "BITstar",
     "BiTRRT",
-    "sampling_bounds",
+    "InformedRRTstar",
+    "LazyPRMstar",
+    "OmplPlanner",
+    "PRMstar",
+    "RRTConnect",
+    "RRTstar",
+    "SORRTstar",
     "path_length",
+    "sampling_bounds",
 ]
 
 log = logging.getLogger("twin")
@@ -93,6 +105,10 @@ _PI = math.pi
 _POST_RESERVE_S = 0.25
 _REPAIR_RESERVE_S = 0.05  # a repaired path needs only retiming and the final check
 _DIRECT_GOALS = 3  # nearest goals tried with a straight motion
+# a repair plans one grazing segment again inside the segment's own box widened by this much per joint: the
+# detour around a graze is local, and a small box keeps batch planners (FMT*, BFMT*), whose edges span
+# their whole sampling box, from checking long edges at the fine resolution
+_REPAIR_MARGIN_RAD = 0.3
 
 
 def sampling_bounds(kin: UR5e, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
@@ -115,7 +131,7 @@ def path_length(path: np.ndarray) -> float:
 def _densify(path: np.ndarray, spacing: float) -> np.ndarray:
     """The polyline through `path` (m, 6) with extra points so no two are more than `spacing` apart (L2)."""
     out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in itertools.pairwise(path):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / spacing - 1e-9))
         out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
     return np.concatenate(out)
@@ -158,15 +174,9 @@ class OmplPlanner:
     Params: type[OmplParams] = params_model(spec)
 
     def __init__(self, params: OmplParams | None = None, context: "PluginContext | None" = None):
-        if not hasattr(og, self.spec.ompl_class):
-            import ompl
-
-            version = getattr(ompl, "__version__", "") or _dist_version()
-            raise DependencyMissing(
-                f"planner {self.name!r} needs ompl.geometric.{self.spec.ompl_class}, which the installed OMPL "
-                f"{version} Python bindings do not expose (upstream ompl/ompl#1419). Install an OMPL build whose "
-                "bindings include it, or pick another ompl.* planner (`twin planners`)."
-            )
+        reason = self.unavailable_reason()
+        if reason is not None:
+            raise DependencyMissing(reason)
         self.params = params if params is not None else self.Params()
         self.context = context
         if context is not None:
@@ -180,6 +190,23 @@ class OmplPlanner:
         self._warm_up()
 
     # ---- configuration ---------------------------------------------------------------------------
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        """None when the installed OMPL bindings expose this planner's class; else why not (the registry
+        asks this for `twin planners` without building a planner)."""
+        if cls.spec.defect is not None:
+            return f"planner 'ompl.{cls.spec.ompl_class.lower()}' is disabled: {cls.spec.defect}"
+        if hasattr(og, cls.spec.ompl_class):
+            return None
+        import ompl
+
+        version = getattr(ompl, "__version__", "") or _dist_version()
+        return (
+            f"planner 'ompl.{cls.spec.ompl_class.lower()}' needs ompl.geometric.{cls.spec.ompl_class}, which the installed OMPL "
+            f"{version} Python bindings do not expose (upstream ompl/ompl#1419). Install an OMPL build whose "
+            "bindings include it, or pick another ompl.* planner (`twin planners`)."
+        )
+
     @property
     def name(self) -> str:
         return f"ompl.{self.spec.ompl_class.lower()}"
@@ -192,9 +219,13 @@ class OmplPlanner:
             value = getattr(self.params, pname)
             if value is None:
                 continue
-            setter = OMPL_PARAMS[pname].setter
-            if not hasattr(cls, setter):
-                raise ConfigError(f"{self.name}: parameter {pname!r} is not settable in this OMPL build ({setter} missing)")
+            names = OMPL_PARAMS[pname].setter
+            candidates = (names,) if isinstance(names, str) else names
+            setter = next((s for s in candidates if hasattr(cls, s)), None)
+            if setter is None:
+                raise ConfigError(
+                    f"{self.name}: parameter {pname!r} is not settable in this OMPL build ({' / '.join(candidates)} missing)"
+                )
             out.append((setter, value))
         return out
 
@@ -293,7 +324,8 @@ class OmplPlanner:
             a, b = path[segment], path[segment + 1]
             fine = p.verify_resolution_rad
             sub = self._attempt(
-                a, b[None], bounds, scene, request.seed + 7919 * repairs, fine, counter, deadline, limit, timings, repair=True
+                a, b[None], _repair_bounds(a, b, bounds), scene, request.seed + 7919 * repairs, fine, counter, deadline, limit,
+                timings, repair=True,
             )
             if sub.path is None:
                 return MotionResult(
@@ -505,6 +537,14 @@ class OmplPlanner:
         return None, last, None
 
 
+def _repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(6, 2) sampling bounds for replanning the segment a -> b: its box widened by _REPAIR_MARGIN_RAD,
+    inside `bounds`."""
+    lo = np.maximum(np.minimum(a, b) - _REPAIR_MARGIN_RAD, bounds[:, 0])
+    hi = np.minimum(np.maximum(a, b) + _REPAIR_MARGIN_RAD, bounds[:, 1])
+    return np.stack([lo, hi], axis=1)
+
+
 def _contact(scene: "PlanningScene", q: np.ndarray) -> str:
     """'a vs b' for the closest (or penetrating) pair at q, for failure reasons."""
     try:
@@ -544,3 +584,5 @@ KPIECE1 = _planner_class(PLANNER_SPECS["KPIECE1"])
 BKPIECE1 = _planner_class(PLANNER_SPECS["BKPIECE1"])
 LBKPIECE1 = _planner_class(PLANNER_SPECS["LBKPIECE1"])
 BiTRRT = _planner_class(PLANNER_SPECS["BiTRRT"])
+FMT = _planner_class(PLANNER_SPECS["FMT"])
+BFMT = _planner_class(PLANNER_SPECS["BFMT"])
