@@ -1,6 +1,8 @@
 """`twin compare`: a sweep writes one row per run with every metric, is deterministic, survives a kill
-(resume finishes it with each run exactly once), gives the same rows on Ray, and reports bad configs in
-one line."""
+(resume finishes it with each run exactly once, reruns error rows, refuses a changed config unless
+forced), gives the same rows on Ray, runs what was asked (the whole planner block, also in task runs),
+compares planners on queries where they must search, dry-runs every shipped config, and reports bad
+configs in one line."""
 
 from __future__ import annotations
 
@@ -16,8 +18,17 @@ from typing import Any
 import pytest
 import yaml
 
-from twin.compare import expand_runs, load_compare_config, read_results, run_comparison
+from twin.compare import (
+    compare_spec_from_dict,
+    expand_runs,
+    latest_rows,
+    load_compare_config,
+    plan_comparison,
+    read_results,
+    run_comparison,
+)
 from twin.compare.metrics import METRIC_KEYS, TIMING_KEYS
+from twin.config import load_config
 from twin.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -42,7 +53,7 @@ def write_spec(path: Path, data: dict[str, Any]) -> Path:
 
 def twin(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-m", "twin", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=timeout)
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=timeout, check=False)
 
 
 def assert_one_line_usage_error(r: subprocess.CompletedProcess, *needles: str) -> None:
@@ -188,8 +199,10 @@ def test_task_scenarios_are_skipped_when_twin_tasks_is_missing(tmp_path, monkeyp
         ],
     }
     result = run_comparison(write_spec(tmp_path / "mixed.yaml", data), out_dir=tmp_path / "out", workers=0, plots=False)
-    assert [r["run_id"] for r in read_results(result.results_path)] == ["ruckig.movej|q#0|seed=0"]
-    assert result.skipped == [("ruckig.movej|sorting|seed=2", "skipped: twin.tasks not available")]
+    [row] = read_results(result.results_path)
+    assert row["run_id"].startswith("ruckig.movej|q#0|seed=0|")
+    [(rid, why)] = result.skipped
+    assert rid.startswith("ruckig.movej|sorting|seed=2|") and why == "skipped: twin.tasks not available"
     assert "skipped: twin.tasks not available" in (result.out_dir / "summary.md").read_text()
 
 
@@ -235,3 +248,265 @@ def test_cli_reports_a_bad_compare_config_in_one_line(tmp_path):
 
     spec = write_spec(tmp_path / "bad2.yaml", dict(SWEEP, seed=3))
     assert_one_line_usage_error(twin("compare", str(spec)), "unknown key 'seed'")
+
+
+# ---- what was asked is what ran ---------------------------------------------------------------------
+QUINTIC = "seed.quintic_movej"
+ONE_QUERY = {"start": [0, -1.6, 1.5, -1.5, -1.57, 0], "goal": [0.3, -1.4, 1.2, -1.4, -1.57, 0.2]}
+
+
+def variants_spec(min_duration_s: float = 3.0) -> dict[str, Any]:
+    """One planner twice: as registered, and slowed down by a param under its own label."""
+    return {
+        "name": "variants",
+        "seeds": [0],
+        "planners": [QUINTIC, {"name": QUINTIC, "params": {"min_duration_s": min_duration_s}, "label": "quintic-slow"}],
+        "scenarios": [{"name": "q", "scene": str(ROOT / "configs" / "robocup.yaml"), "queries": [ONE_QUERY]}],
+    }
+
+
+def test_run_ids_name_the_run_and_hash_its_whole_definition(tmp_path):
+    spec = compare_spec_from_dict(variants_spec())
+    a, b = expand_runs(spec)
+    assert a.run_id.startswith(f"{QUINTIC}|q#0|seed=0|") and b.run_id.startswith("quintic-slow|q#0|seed=0|")
+    assert [r.run_id for r in expand_runs(compare_spec_from_dict(variants_spec()))] == [a.run_id, b.run_id]
+    # a changed param is a different run; the unchanged planner keeps its id
+    c, d = expand_runs(compare_spec_from_dict(variants_spec(min_duration_s=4.0)))
+    assert c.run_id == a.run_id and d.run_id != b.run_id and d.key == b.key
+    # so is a changed retimer, scenario setting, seed or scene config ...
+    other_seed = compare_spec_from_dict(dict(variants_spec(), seeds=[1]))
+    assert expand_runs(other_seed)[0].run_id.split("|")[-1] != a.run_id.split("|")[-1]
+    scene = tmp_path / "robocup-slow.yaml"
+    scene.write_text(f"extends: {ROOT / 'configs' / 'robocup.yaml'}\nrobot: {{max_joint_vel: 1.0}}\n")
+    moved = variants_spec()
+    moved["scenarios"][0]["scene"] = str(scene)
+    assert expand_runs(compare_spec_from_dict(moved))[0].run_id != a.run_id
+    # ... but more queries leave the earlier ones with their ids
+    more = variants_spec()
+    more["scenarios"][0]["queries"] = [ONE_QUERY, dict(ONE_QUERY, goal=[0.2, -1.4, 1.2, -1.4, -1.57, 0.2])]
+    assert [r.run_id for r in expand_runs(compare_spec_from_dict(more))][:2] == [a.run_id, b.run_id]
+
+
+def test_two_variants_of_one_planner_give_their_own_rows(tmp_path):
+    result = run_comparison(compare_spec_from_dict(variants_spec()), out_dir=tmp_path / "out", workers=0, plots=False)
+    plain, slow = result.rows
+    assert plain["planner"] == QUINTIC and slow["planner"] == "quintic-slow" and slow["planner_name"] == QUINTIC
+    assert plain["success"] and slow["success"]
+    assert plain["metrics"]["duration_s"] < 3.0 <= slow["metrics"]["duration_s"]
+
+
+def test_task_runs_take_the_whole_planner_block_as_transfer_planner(monkeypatch):
+    """Params and retimer reach the task (no name-only override), so task rows of two variants differ."""
+    import twin.tasks
+    from twin.compare.worker import execute_run
+    from twin.types import RunSummary
+
+    seen: list[tuple[Any, dict[str, Any]]] = []
+
+    def fake_run_task(settings: Any, **kw: Any) -> RunSummary:
+        seen.append((settings, kw))
+        return RunSummary(config="robocup.yaml", seed=kw["seed"], planner=settings.planners["transfer"].name,
+                          objects=(), sim_time_s=1.0, wall_time_s=0.1)
+
+    monkeypatch.setattr(twin.tasks, "run_task", fake_run_task)
+    block = {"name": "ompl.rrtconnect", "params": {"range": 0.5}, "retimer": "ruckig", "retimer_params": {}}
+    spec = compare_spec_from_dict({
+        "planners": [dict(block, label="rrtc-ruckig")],
+        "scenarios": [{"name": "sorting", "task": str(ROOT / "configs" / "robocup.yaml"), "seeds": [2]}],
+    })
+    [task] = expand_runs(spec)
+    row = execute_run(task)
+    assert row["status"] != "error", row["reason"]
+    [(settings, kw)] = seen
+    assert settings.planners["transfer"].model_dump() == block
+    assert kw.get("planner") is None and kw["seed"] == 2
+    assert settings.planners["movej"] == load_config(ROOT / "configs" / "robocup.yaml").planners["movej"]
+
+
+# ---- resume: changed configs, error rows -----------------------------------------------------------
+def test_resume_with_a_changed_planner_block_names_the_change_unless_forced(tmp_path):
+    spec, out = write_spec(tmp_path / "v.yaml", variants_spec()), tmp_path / "out"
+    first = run_comparison(spec, out_dir=out, workers=0, plots=False)
+    write_spec(spec, variants_spec(min_duration_s=4.0))
+    with pytest.raises(ConfigError, match=r"planner 'quintic-slow': params\.min_duration_s 3\.0 -> 4\.0.*--force"):
+        run_comparison(spec, out_dir=out, workers=0, resume=True, plots=False)
+    r = twin("compare", str(spec), "--out", str(out), "--resume")
+    assert_one_line_usage_error(r, "quintic-slow", "min_duration_s", "--force")
+    assert len(read_results(out / "results.jsonl")) == 2  # nothing was run or lost
+
+    forced = run_comparison(spec, out_dir=out, workers=0, resume=True, force=True, plots=False)
+    assert forced.ran == 1 and forced.resumed == 1  # only the changed variant ran again
+    assert len(read_results(out / "results.jsonl")) == 3  # the old row stays in the file ...
+    slow = forced.rows[1]
+    assert slow["run_id"] != first.rows[1]["run_id"] and slow["metrics"]["duration_s"] >= 4.0
+    over = {r.planner: r for r in forced.summary.overall}["quintic-slow"]
+    assert over.runs == 1 and over.stats["duration_s"].median >= 4.0  # ... but leaves the summary
+
+    assert_one_line_usage_error(twin("compare", str(spec), "--out", str(tmp_path / "o2"), "--force"), "--force", "--resume")
+
+
+def test_rows_that_ended_in_error_are_rerun_on_resume_and_replace_the_old_row(tmp_path):
+    spec, out = write_spec(tmp_path / "v.yaml", variants_spec()), tmp_path / "out"
+    first = run_comparison(spec, out_dir=out, workers=0, plots=False)
+    results = out / "results.jsonl"
+    good = json.loads(results.read_text().splitlines()[1])
+    broken = dict(good, status="error", success=False, reason="PlanningError: a crash")
+    results.write_text(results.read_text().splitlines()[0] + "\n" + json.dumps(broken) + "\n")
+
+    again = run_comparison(spec, out_dir=out, workers=0, resume=True, plots=False)
+    assert again.ran == 1 and again.resumed == 1 and again.retried == 1
+    rows = read_results(results)
+    assert len(rows) == 3 and rows[1]["status"] == "error"  # appended, never rewritten
+    latest = latest_rows(rows)
+    assert len(latest) == 2 and latest[1]["status"] == "success" and latest[1]["run_id"] == broken["run_id"]
+    assert [r["metrics"] for r in again.rows] == [r["metrics"] for r in first.rows]
+    assert all(r.errors == 0 for r in again.summary.overall)
+
+
+# ---- dry run ---------------------------------------------------------------------------------------
+COMPARE_CONFIGS = sorted((ROOT / "configs").glob("compare*.yaml"))
+
+
+@pytest.mark.parametrize("path", COMPARE_CONFIGS, ids=[p.name for p in COMPARE_CONFIGS])
+def test_every_shipped_compare_config_dry_runs(path: Path):
+    """Every planner block is validated and built (a missing backend would show), every scenario loads and
+    draws its first query, and the counts add up."""
+    dry = plan_comparison(path)
+    spec = dry.spec
+    cases = sum(s.case_count() * len(spec.seeds_for(s)) for s in spec.scenarios)
+    # every (planner, case) pair runs, except those the planner declares it cannot serve (nmpc: positions only)
+    assert dry.total + len(dry.skipped) == len(spec.planners) * cases
+    assert dry.total == sum(dry.per_planner().values()) == sum(dry.per_scenario().values())
+    assert all("nmpc cannot reach" in reason for _, reason in dry.skipped)
+    assert {n for label, n in dry.per_planner().items() if label != "nmpc"} == {cases}
+    assert len({r.run_id for r in dry.runs} | {rid for rid, _ in dry.skipped}) == len(spec.planners) * cases
+
+
+def test_every_other_shipped_config_loads():
+    others = [p for p in sorted((ROOT / "configs").glob("*.yaml")) if not p.name.startswith("compare")]
+    assert others
+    for p in others:
+        load_config(p)
+
+
+def test_cli_dry_run_counts_and_writes_nothing(tmp_path):
+    r = twin("compare", "configs/compare-smoke.yaml", "--dry-run", "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    n = plan_comparison(ROOT / "configs" / "compare-smoke.yaml").total
+    assert f"{n} runs" in r.stdout and "would skip 2 runs: nmpc cannot reach pose goals" in r.stdout and "ompl.rrtconnect" in r.stdout and "warehouse-blocked" in r.stdout
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_region_that_cannot_yield_blocked_queries_is_a_config_error_before_any_run(tmp_path):
+    # the default region over the RoboCup table has nothing between start and goal
+    data = {
+        "planners": ["ruckig.movej"],
+        "scenarios": [{"name": "nothing-in-the-way", "scene": str(ROOT / "configs" / "robocup.yaml"),
+                       "random": {"count": 1, "straight": "blocked"}}],
+    }
+    spec = write_spec(tmp_path / "impossible.yaml", data)
+    with pytest.raises(ConfigError, match=r"scenarios\.0 \(nothing-in-the-way\)\.random: .*blocked straight joint motion"):
+        plan_comparison(spec)
+    assert_one_line_usage_error(twin("compare", str(spec), "--out", str(tmp_path / "out")), "nothing-in-the-way", "blocked")
+    assert not (tmp_path / "out").exists()
+
+
+# ---- a comparison that compares ----------------------------------------------------------------------
+def test_straight_option_draws_queries_of_the_asked_difficulty():
+    import numpy as np
+
+    from twin.compare.spec import RandomQueries
+    from twin.compare.worker import cell_for, sample_query, straight_free
+
+    cell = cell_for(str(ROOT / "configs" / "warehouse.yaml"), (), "box")
+    home = np.asarray(cell.settings.robot.home, dtype=float)
+    for straight in ("blocked", "free"):
+        for goal in ("joint", "pose"):
+            spec = RandomQueries(count=1, goal=goal, straight=straight).model_dump()
+            for i in range(3):
+                q = sample_query(spec, np.random.default_rng([i, 7]), scene=cell.scene, kin=cell.kin, home=home)
+                assert straight_free(q, scene=cell.scene, kin=cell.kin, resolution_rad=0.01) is (straight == "free"), (goal, i)
+
+
+OMPL_TRIO = ["ompl.rrtconnect", "ompl.rrtstar", "ompl.bitstar"]
+
+
+def test_on_blocked_queries_ompl_planners_search_and_their_rows_differ(tmp_path):
+    """Three OMPL planners on blocked queries: no row is the straight joint motion, and the planners'
+    trajectories differ (the 720 identical straight-line rows of issue 12 cannot come back)."""
+    pytest.importorskip("ompl", reason="the OMPL planners need the `ompl` extra")
+    import numpy as np
+
+    data = {
+        "name": "blocked-trio",
+        "seeds": [0],
+        "time_limit_s": 0.5,
+        "execute": False,
+        "planners": OMPL_TRIO,
+        "scenarios": [{"name": "wall", "scene": str(ROOT / "configs" / "warehouse.yaml"),
+                       "random": {"count": 3, "goal": "joint", "straight": "blocked"}}],
+    }
+    result = run_comparison(compare_spec_from_dict(data), out_dir=tmp_path / "out", workers=0, plots=False)
+    rows = result.rows
+    assert len(rows) == 9 and all(r["status"] != "error" for r in rows), [r["reason"] for r in rows]
+    assert all(r["straight_free"] is False for r in rows)
+    by_case: dict[str, dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        by_case.setdefault(r["case"], {})[r["planner"]] = r
+    compared = 0
+    for case, per in by_case.items():
+        q = per["ompl.rrtconnect"]["query"]
+        straight = float(np.linalg.norm(np.subtract(q["goal"], q["start"])))
+        ok = {p: r["metrics"] for p, r in per.items() if r["success"]}
+        assert "ompl.rrtconnect" in ok, per["ompl.rrtconnect"]["reason"]  # the fast one always finds a path
+        for p, m in ok.items():
+            assert m["joint_path_length_rad"] > 1.001 * straight, (case, p)  # not the straight motion
+        fingerprints = {(round(m["joint_path_length_rad"], 9), round(m["duration_s"], 9)) for m in ok.values()}
+        assert len(fingerprints) == len(ok), (case, ok)  # no two planners gave the same trajectory
+        compared += len(ok) - 1
+    assert compared >= 1, "the other planners never succeeded: nothing was compared"
+
+
+def test_summary_shows_the_closest_pair_and_the_query_difficulty(tmp_path):
+    data = dict(SWEEP, seeds=[0], scenarios=[
+        {"name": "wall-blocked", "scene": SWEEP["scenarios"][0]["scene"], "random": {"count": 2, "goal": "pose", "straight": "blocked"}},
+        {"name": "wall-free", "scene": SWEEP["scenarios"][0]["scene"], "random": {"count": 2, "goal": "pose", "straight": "free"}},
+    ])
+    result = run_comparison(compare_spec_from_dict(data), out_dir=tmp_path / "out", workers=0, plots=False)
+    ok = [r for r in result.rows if r["success"]]
+    assert ok and all(r["clearance_pair"] and "->" in r["clearance_pair"] for r in ok)
+    md = (tmp_path / "out" / "summary.md").read_text()
+    assert "## Closest approach to the cell" in md
+    closest = min(ok, key=lambda r: r["metrics"]["min_clearance_m"])
+    assert closest["clearance_pair"] in md
+    assert "| wall-blocked | 0/2 | 0% |" in md and "| wall-free | 2/2 | 100% |" in md
+    header = (tmp_path / "out" / "summary.csv").read_text().splitlines()[0].split(",")
+    assert header[-3:] == ["closest_pair", "common_closest_pair", "straight_free_rate"]
+    assert "fallback_steps" in METRIC_KEYS
+
+
+# ---- runs that hang or crash -------------------------------------------------------------------------
+def hang_or_crash(task: Any) -> dict[str, Any]:
+    """Stands in for execute_run in the local workers: case #0 hangs, case #1 kills its worker."""
+    if task.case.endswith("#0"):
+        time.sleep(3600)
+    if task.case.endswith("#1"):
+        os._exit(3)
+    return {"run_id": task.run_id, "status": "success"}
+
+
+def test_a_run_that_hangs_or_kills_its_worker_is_an_error_row_and_the_sweep_goes_on():
+    from dataclasses import replace
+
+    from twin.compare.runner import _run_local
+
+    spec = compare_spec_from_dict(dict(SWEEP, seeds=[0], planners=["ruckig.movej"],
+                                       scenarios=[dict(SWEEP["scenarios"][0], random={"count": 4})]))
+    tasks = [replace(t, timeout_s=2.0) for t in expand_runs(spec)]
+    rows = {r["run_id"]: r for r in _run_local(tasks, 2, run=hang_or_crash)}
+    assert set(rows) == {t.run_id for t in tasks}
+    hung, crashed, *fine = (rows[t.run_id] for t in tasks)
+    assert hung["status"] == "error" and hung["reason"].startswith("RunTimeout: no result after 2 s"), hung
+    assert crashed["status"] == "error" and "WorkerDied" in crashed["reason"] and "exit code 3" in crashed["reason"]
+    assert set(METRIC_KEYS) == set(hung["metrics"]) and hung["planner"] == "ruckig.movej"
+    assert [r["status"] for r in fine] == ["success", "success"]

@@ -29,18 +29,18 @@ if TYPE_CHECKING:
     from twin.world import World
 
 __all__ = [
-    "MetricDef",
     "METRICS",
-    "TIMINGS",
     "METRIC_KEYS",
+    "TIMINGS",
     "TIMING_KEYS",
+    "MetricDef",
     "empty_metrics",
     "empty_timing",
-    "trajectory_metrics",
-    "timing_metrics",
     "execute_in_physics",
-    "task_metrics",
     "finite_or_none",
+    "task_metrics",
+    "timing_metrics",
+    "trajectory_metrics",
 ]
 
 _MAX_FINE_SAMPLES = 200_000
@@ -67,6 +67,7 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("goal_error_m", "m", "TCP position error after execution and settling"),
     MetricDef("goal_error_rad", "rad", "max joint error to the planned final posture after settling"),
     MetricDef("solves", "", "solver calls of a receding-horizon planner", ""),
+    MetricDef("fallback_steps", "", "receding-horizon steps that followed an earlier plan or guess because a solve failed"),
     MetricDef("task_success_rate", "", "objects placed / objects (task runs)", "higher"),
     MetricDef("cycle_time_s", "s", "mean simulated time per placed object (task runs)"),
     MetricDef("sim_time_s", "s", "simulated time of the whole task run"),
@@ -108,7 +109,7 @@ def _fine(traj: Trajectory, dt: float) -> Trajectory:
 
 
 def trajectory_metrics(
-    traj: Trajectory, *, kin: "UR5e", scene: "PlanningScene", settings: "Settings", jerk_dt_s: float = 1e-3
+    traj: Trajectory, *, kin: UR5e, scene: PlanningScene, settings: Settings, jerk_dt_s: float = 1e-3
 ) -> tuple[dict[str, float | None], str]:
     """Duration, joint and TCP path length, max |jerk| and minimum clearance of a planned trajectory,
     and the closest pair 'robot_part->other' (why the clearance is what it is).
@@ -159,7 +160,7 @@ def timing_metrics(result: MotionResult) -> tuple[dict[str, float | None], int |
 
 
 def execute_in_physics(
-    world: "World", traj: Trajectory, request: MotionRequest, *, kin: "UR5e", settle_s: float = 0.5
+    world: World, traj: Trajectory, request: MotionRequest, *, kin: UR5e, settle_s: float = 0.5
 ) -> tuple[dict[str, float | int | None], list[str]]:
     """Execute `traj` in `world` (reset first, so the outcome does not depend on earlier runs).
 
@@ -184,7 +185,9 @@ def execute_in_physics(
             pairs.add(f"{link_name.get(c.link_a, c.link_a)}->{body_name.get(c.body_b, c.body_b)}")
         contact_steps += hit
 
-    execute(world, traj, hold_s=math.ceil(settle_s / dt - 1e-9) * dt, on_step=observe)
+    # a measurement: the whole trajectory is played and every contact counted (a task's protective stop
+    # would end it at the first; here the cell holds only what the planning scene knows)
+    execute(world, traj, hold_s=math.ceil(settle_s / dt - 1e-9) * dt, on_step=observe, stop_on_contact=False)
     q_end = traj.q[-1]
     q_exec = world.joint_positions()
     if isinstance(request.goal, JointGoal):

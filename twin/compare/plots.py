@@ -12,7 +12,7 @@ from typing import Any
 
 from twin.errors import ConfigError, DependencyMissing
 
-__all__ = ["write_plots", "BOX_PLOTS"]
+__all__ = ["BOX_PLOTS", "write_plots"]
 
 log = logging.getLogger("twin")
 

@@ -3,12 +3,19 @@
 Why it looks like this:
 * every run is one call of `twin.compare.worker.execute_run(RunTask) -> row`, the same function in a
   local process pool (default), in-process (`workers=0`, for debugging) and on Ray (`backend="ray"`);
+  the local pool stops a run that outlives its timeout (`run_timeout_s`) and replaces a worker that dies,
+  recording either as an error row, so no planner can hang or end a sweep;
 * the main process alone writes `DIR/results.jsonl`: one JSON line per finished run, flushed and
   fsync'd as it arrives, so a crash loses nothing finished;
 * `resume=True` reads the file (dropping a line cut short by a crash), skips the run ids it holds and
-  appends the rest, so each run ends up in the file exactly once;
-* everything a user can get wrong (an unknown planner name, bad params, a missing scene file) is a
-  ConfigError before the first run starts.
+  appends the rest; a run whose last row ended in status 'error' is run again and its new row replaces
+  the old one (the file only grows: readers take the last row per run id, `latest_rows`);
+* a run id hashes the run's whole definition, so resuming with a changed config would leave old rows
+  beside new ones under the same planner label: that is a ConfigError naming what changed, unless
+  `force=True` (the changed runs are run anew; the old rows stay in the file and leave the summary);
+* everything a user can get wrong (an unknown planner name, bad params, a missing scene file, a query
+  region that cannot yield what it asks for) is a ConfigError before the first run starts, and
+  `plan_comparison` (`twin compare --dry-run`) checks exactly that and counts the runs, running nothing.
 """
 
 from __future__ import annotations
@@ -23,11 +30,32 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from twin.compare.spec import CompareSpec, RunTask, TaskScenario, expand_runs, load_compare_config
-from twin.compare.worker import TASKS_UNAVAILABLE, execute_run, quiet_imports, worker_init
-from twin.errors import ConfigError, DependencyMissing, TwinError, UnknownNameError
+from twin.compare.spec import (
+    CompareSpec,
+    QueryScenario,
+    QuerySpec,
+    RunTask,
+    TaskScenario,
+    definitions,
+    describe_changes,
+    expand_runs,
+    load_compare_config,
+    run_key,
+)
+from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, quiet_imports, worker_init
+from twin.errors import ConfigError, DependencyMissing, UnknownNameError
 
-__all__ = ["CompareResult", "run_comparison", "check_spec", "read_results", "tasks_available", "RESULTS_FILE"]
+__all__ = [
+    "RESULTS_FILE",
+    "CompareResult",
+    "DryRun",
+    "check_spec",
+    "latest_rows",
+    "plan_comparison",
+    "read_results",
+    "run_comparison",
+    "tasks_available",
+]
 
 log = logging.getLogger("twin")
 
@@ -48,10 +76,36 @@ class CompareResult:
     summary: Any  # twin.compare.report.Summary
     files: list[Path] = field(default_factory=list)
     wall_time_s: float = 0.0
+    retried: int = 0  # runs whose earlier row ended in 'error' and that ran again
 
     @property
     def results_path(self) -> Path:
         return self.out_dir / RESULTS_FILE
+
+
+@dataclass(frozen=True)
+class DryRun:
+    """What `run_comparison` would do with a spec that passed every check: the runs, counted."""
+
+    spec: CompareSpec
+    runs: list[RunTask]
+    skipped: list[tuple[str, str]]  # (run_id, reason): runs that cannot run here (see `_runnable`)
+
+    @property
+    def total(self) -> int:
+        return len(self.runs)
+
+    def per_planner(self) -> dict[str, int]:
+        """Runs per planner label, in config order."""
+        return {p.id: sum(1 for r in self.runs if r.planner_id == p.id) for p in self.spec.planners}
+
+    def per_scenario(self) -> dict[str, int]:
+        """Runs per scenario, in config order."""
+        return {s.name: sum(1 for r in self.runs if r.scenario == s.name) for s in self.spec.scenarios}
+
+    def cases(self) -> dict[str, int]:
+        """Cases (queries x seeds, or task seeds) per scenario: what each planner runs there."""
+        return {s.name: s.case_count() * len(self.spec.seeds_for(s)) for s in self.spec.scenarios}
 
 
 # ---- checks before anything runs ----------------------------------------------------------------
@@ -64,11 +118,13 @@ def tasks_available() -> bool:
     return True
 
 
-def check_spec(spec: CompareSpec, *, instantiate: bool = True) -> None:
+def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: bool = True) -> None:
     """Raise ConfigError for an unknown planner or retimer name, bad planner params, or a scenario
     config that does not load, before anything runs. With `instantiate`, each planner is also built
     once here, so a missing backend (DependencyMissing, naming the extra) stops the sweep now rather
-    than turning every one of its runs into an error row."""
+    than turning every one of its runs into an error row. With `draw_queries`, the first random query
+    of each scenario is drawn, so a region that cannot yield what it asks for (`straight: blocked` with
+    nothing in the way) is one error now rather than an error row per run."""
     from twin.config import load_config
     from twin.planning import make_context, make_planner
     from twin.registry import Kind, default_registry, validate_params
@@ -102,6 +158,31 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True) -> None:
                 make_planner(p.block(), make_context(settings[0], registry))
         except (ConfigError, DependencyMissing) as e:
             raise type(e)(f"{source}: planners.{i} ({p.id}): {e}") from None
+    if draw_queries:
+        _draw_first_queries(spec, source)
+
+
+def _draw_first_queries(spec: CompareSpec, source: str) -> None:
+    """Draw the first random query of every query scenario (first seed), as the worker would."""
+    import numpy as np
+
+    from twin.compare.worker import cell_for, sample_query
+
+    for i, sc in enumerate(spec.scenarios):
+        if not isinstance(sc, QueryScenario) or sc.random is None:
+            continue
+        seed = spec.seeds_for(sc)[0]
+        task = RunTask(run_id="", planner_id="", planner={}, scenario=sc.name, case="", kind="query", seed=seed,
+                       config=sc.scene, overrides=tuple(sc.overrides), query_index=0)
+        cell = cell_for(sc.scene, tuple(sc.overrides), sc.unknown_fixtures)
+        try:
+            sample_query(
+                sc.random.model_dump(), np.random.default_rng(task.random_seed()), scene=cell.scene, kin=cell.kin,
+                home=np.asarray(cell.settings.robot.home, dtype=float),
+                resolution_rad=cell.settings.collision.check_resolution_rad,
+            )
+        except ConfigError as e:
+            raise ConfigError(f"{source}: scenarios.{i} ({sc.name}).random: {e}") from None
 
 
 # ---- results file ---------------------------------------------------------------------------------
@@ -144,11 +225,32 @@ def read_results(path: str | Path, *, repair: bool = False) -> list[dict[str, An
     return rows
 
 
+def latest_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The last row of each run id (a rerun replaces an earlier row), in the order run ids first appear."""
+    out: dict[str, dict[str, Any]] = {}
+    for row in rows:
+        out[row["run_id"]] = row
+    return list(out.values())
+
+
+def _row_key(row: dict[str, Any]) -> str:
+    return run_key(str(row.get("planner")), str(row.get("case")), int(row.get("seed", 0)))
+
+
+def _previous_definitions(path: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    defs = data.get("definitions") if isinstance(data, dict) else None
+    return defs if isinstance(defs, dict) else None
+
+
 class _Appender:
     """Appends one JSON line per row and makes it durable before the next one (flush + fsync)."""
 
     def __init__(self, path: Path) -> None:
-        self._f = open(path, "a", encoding="utf-8")
+        self._f = open(path, "a", encoding="utf-8")  # noqa: SIM115 - held open for the whole sweep, closed by close()
 
     def write(self, row: dict[str, Any]) -> None:
         self._f.write(json.dumps(row, allow_nan=False) + "\n")
@@ -171,24 +273,107 @@ def _run_inline(todo: Sequence[RunTask]) -> Iterator[dict[str, Any]]:
         yield execute_run(t)
 
 
-def _run_local(todo: Sequence[RunTask], workers: int) -> Iterator[dict[str, Any]]:
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
+@dataclass
+class _Worker:
+    """One worker process of the local backend, the pipe to it, and the run it is busy with."""
 
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=worker_init)
+    process: Any
+    conn: Any
+    task: RunTask | None = None
+    started: float = 0.0
+
+
+def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]]) -> None:
+    """A local worker: run each task it is sent and send its row back, until it is sent None."""
+    worker_init()
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        conn.send(run(task))
+
+
+def _run_local(
+    todo: Sequence[RunTask], workers: int, run: Callable[[RunTask], dict[str, Any]] = execute_run
+) -> Iterator[dict[str, Any]]:
+    """Run `todo` on `workers` processes. A run that outlives its `timeout_s` (a planner ignoring its time
+    limit in native code, where nothing else can interrupt it) or whose worker dies (a crash in a native
+    library) becomes an error row; its worker is replaced and the sweep goes on."""
+    from multiprocessing.connection import wait
+
+    ctx = _mp_context()
+    queue = list(reversed(todo))
+    pool: list[_Worker] = []
+
+    def spawn() -> _Worker:
+        parent, child = ctx.Pipe()
+        proc = ctx.Process(target=_worker_loop, args=(child, run), daemon=True)
+        proc.start()
+        child.close()
+        return _Worker(proc, parent)
+
+    def give(w: _Worker) -> None:
+        w.task, w.started = (queue.pop(), time.monotonic()) if queue else (None, 0.0)
+        if w.task is not None:
+            w.conn.send(w.task)
+
+    def replace(w: _Worker) -> _Worker:
+        w.process.kill()
+        w.process.join(5)
+        w.conn.close()
+        fresh = spawn()
+        pool[pool.index(w)] = fresh
+        return fresh
+
     try:
-        pending = {pool.submit(execute_run, t) for t in todo}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                try:
-                    yield fut.result()
-                except BrokenProcessPool as e:
-                    raise TwinError(
-                        f"a worker process died ({e}); finished runs are saved, rerun with --resume"
-                    ) from None
+        for _ in range(min(workers, len(queue))):
+            pool.append(spawn())
+            give(pool[-1])
+        while True:
+            busy = [w for w in pool if w.task is not None]
+            if not busy:
+                return
+            now = time.monotonic()
+            wait_s = max(0.0, min(w.started + w.task.timeout_s for w in busy if w.task) - now)
+            ready = wait([w.conn for w in busy], timeout=wait_s)
+            for w in busy:
+                task = w.task
+                assert task is not None
+                if w.conn in ready:
+                    try:
+                        row = w.conn.recv()
+                    except (EOFError, OSError):  # the worker died while running it
+                        w.process.join(5)
+                        code = w.process.exitcode
+                        log.warning("run %s: its worker process died (exit code %s)", task.run_id, code)
+                        row = error_row(task, f"WorkerDied: the worker process died running this (exit code {code})",
+                                        wall_time_s=time.monotonic() - w.started)
+                        w = replace(w)
+                elif time.monotonic() - w.started >= task.timeout_s:
+                    log.warning("run %s: no result after %.0f s; stopping it", task.run_id, task.timeout_s)
+                    row = error_row(task, f"RunTimeout: no result after {task.timeout_s:g} s (the run was stopped; "
+                                          "a planner that ignores its time limit?)", wall_time_s=task.timeout_s)
+                    w = replace(w)
+                else:
+                    continue
+                give(w)
+                yield row
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for w in pool:
+            if w.task is None and w.process.is_alive():
+                try:
+                    w.conn.send(None)
+                except OSError:
+                    pass
+        for w in pool:
+            w.process.join(2 if w.task is None else 0)
+            if w.process.is_alive():
+                w.process.kill()
+                w.process.join(5)
+            w.conn.close()
 
 
 def _run_ray(todo: Sequence[RunTask], workers: int, address: str | None) -> Iterator[dict[str, Any]]:
@@ -200,7 +385,7 @@ def _run_ray(todo: Sequence[RunTask], workers: int, address: str | None) -> Iter
         ) from e
     started = False
     if not ray.is_initialized():
-        kw: dict[str, Any] = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
+        kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
         address = address or os.environ.get("RAY_ADDRESS")
         if address:
             ray.init(address=address, **kw)
@@ -227,6 +412,62 @@ def _default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _load(spec: CompareSpec | str | Path, overrides: Iterable[str]) -> CompareSpec:
+    if not isinstance(spec, CompareSpec):
+        return load_compare_config(spec, overrides)
+    if overrides:
+        raise ConfigError("overrides apply to a config file; pass the path, or change the CompareSpec itself")
+    return spec
+
+
+def _goal_kind(run: RunTask) -> str | None:
+    """The kind of goal a query run asks for ('joint', 'pose', 'position'); None for a task run."""
+    if run.kind != "query":
+        return None
+    if run.query is not None:
+        return QuerySpec.model_validate(run.query).goal_kind
+    assert run.random is not None
+    return str(run.random["goal"])
+
+
+def _runnable(runs: Sequence[RunTask]) -> tuple[list[RunTask], list[tuple[str, str]]]:
+    """(runs that can run here, (run_id, reason) of the others): task runs when twin.tasks is missing, and
+    query runs whose goal kind the planner declares it cannot reach (`goal_kinds`, e.g. nmpc: positions
+    only). Such a pair is not a failure of the planner; it is not a comparison at all."""
+    from twin.planning import GOAL_KINDS, describe_goal_kinds
+    from twin.registry import default_registry
+
+    have_tasks = tasks_available()
+    kinds: dict[str, frozenset[str]] = {}
+    ok: list[RunTask] = []
+    skipped: list[tuple[str, str]] = []
+    for r in runs:
+        if r.kind == "task" and not have_tasks:
+            skipped.append((r.run_id, TASKS_UNAVAILABLE))
+            continue
+        kind = _goal_kind(r)
+        if kind is not None:
+            name = r.planner["name"]
+            if name not in kinds:
+                kinds[name] = frozenset(getattr(default_registry().entry(name).load(), "goal_kinds", GOAL_KINDS))
+            if kind not in kinds[name]:
+                skipped.append((r.run_id, f"{r.planner_id} cannot reach {describe_goal_kinds({kind})} (it serves {describe_goal_kinds(kinds[name])})"))
+                continue
+        ok.append(r)
+    return ok, skipped
+
+
+def plan_comparison(spec: CompareSpec | str | Path, *, overrides: Iterable[str] = ()) -> DryRun:
+    """Check a comparison as `run_comparison` would before its first run (every planner block validated
+    and built once, every scenario config loaded, the first query of each random scenario drawn) and
+    count its runs. Runs nothing and writes nothing; raises ConfigError / DependencyMissing."""
+    spec = _load(spec, overrides)
+    check_spec(spec)
+    runs = expand_runs(spec)
+    runs, skipped = _runnable(runs)
+    return DryRun(spec=spec, runs=runs, skipped=skipped)
+
+
 def run_comparison(
     spec: CompareSpec | str | Path,
     *,
@@ -234,6 +475,7 @@ def run_comparison(
     workers: int | None = None,
     backend: Backend = "local",
     resume: bool = False,
+    force: bool = False,
     overrides: Iterable[str] = (),
     ray_address: str | None = None,
     plots: bool = True,
@@ -244,66 +486,65 @@ def run_comparison(
     `out_dir`: default `out/<spec name>`. `workers`: parallel runs (default: the CPUs this process
     may use; 0 runs in this process). `backend`: "local" (process pool) or "ray" (`ray.init()` locally
     unless `ray_address` or RAY_ADDRESS names a cluster; the extra `twin[ray]`). `resume`: continue the
-    sweep in out_dir, skipping finished run ids; without it an existing non-empty results.jsonl is a
-    ConfigError. `on_row(row, done, total)` is called as each run finishes (the CLI prints progress).
+    sweep in out_dir, skipping finished run ids and rerunning those whose row ended in 'error'; without
+    it an existing non-empty results.jsonl is a ConfigError. A resume whose config changed a planner
+    block or scenario that already has rows is a ConfigError naming the change, unless `force`.
+    `on_row(row, done, total)` is called as each run finishes (the CLI prints progress).
     """
     t_start = time.perf_counter()
-    if not isinstance(spec, CompareSpec):
-        spec = load_compare_config(spec, overrides)
-    elif overrides:
-        raise ConfigError("overrides apply to a config file; pass the path, or change the CompareSpec itself")
+    spec = _load(spec, overrides)
     if backend not in ("local", "ray"):
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
     if workers is not None and workers < 0:
         raise ConfigError(f"workers must be >= 0, got {workers}")
+    if force and not resume:
+        raise ConfigError("--force goes with --resume (it accepts a changed config); to start over, choose another --out")
     check_spec(spec)
     out = Path(out_dir) if out_dir is not None else Path("out") / spec.name
+    results = out / RESULTS_FILE
+    spec_path = out / SPEC_FILE
+    defs = definitions(spec)
+    runs = expand_runs(spec, defs)
+    wanted = {r.run_id for r in runs}
+
+    existing: list[dict[str, Any]] = []
+    if resume:
+        existing = latest_rows(read_results(results, repair=False))
+        have = {row["run_id"] for row in existing}
+        by_key = {r.key: r for r in runs if r.run_id not in have}
+        changed = [row for row in existing if row["run_id"] not in wanted and _row_key(row) in by_key]
+        if changed and not force:
+            previous = _previous_definitions(spec_path)
+            what = describe_changes(previous, defs) if previous is not None else []
+            if not what:
+                what = [f"{len(changed)} runs (e.g. {_row_key(changed[0])!r}) were made with a different definition"]
+            raise ConfigError(
+                f"{out}: the comparison config changed since this sweep started: {'; '.join(what)}. "
+                f"Pass --force to run the changed runs anew (their old rows stay in {RESULTS_FILE} and leave "
+                "the summary), or choose another --out"
+            )
+    elif results.is_file() and results.stat().st_size > 0:
+        raise ConfigError(
+            f"{results} already holds results; pass --resume to continue that sweep, or choose another --out"
+        )
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ConfigError(f"cannot create the output folder {out}: {e.strerror}") from None
-    results = out / RESULTS_FILE
-
-    runs = expand_runs(spec)
-    spec_json = spec.model_dump(mode="json")
-    spec_path = out / SPEC_FILE
     if resume:
-        existing = read_results(results, repair=True)
-        if spec_path.is_file():
-            try:
-                if json.loads(spec_path.read_text()) != spec_json:
-                    log.warning("%s: resuming with a different comparison config than the one that started it", out)
-            except ValueError:
-                pass
-    else:
-        if results.is_file() and results.stat().st_size > 0:
-            raise ConfigError(
-                f"{results} already holds results; pass --resume to continue that sweep, or choose another --out"
-            )
-        existing = []
-    spec_path.write_text(json.dumps(spec_json, indent=1))
+        read_results(results, repair=True)  # a line cut short by a crash goes before anything is appended
+    spec_path.write_text(json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs}, indent=1))
 
-    wanted = {r.run_id for r in runs}
-    finished: dict[str, dict[str, Any]] = {}
-    for row in existing:
-        if row["run_id"] in wanted and row["run_id"] not in finished:
-            finished[row["run_id"]] = row
-    skipped: list[tuple[str, str]] = []
-    have_tasks = tasks_available()
-    todo: list[RunTask] = []
-    for r in runs:
-        if r.run_id in finished:
-            continue
-        if r.kind == "task" and not have_tasks:
-            skipped.append((r.run_id, TASKS_UNAVAILABLE))
-            continue
-        todo.append(r)
+    finished = {row["run_id"]: row for row in existing if row["run_id"] in wanted and row.get("status") != "error"}
+    retried = sum(1 for row in existing if row["run_id"] in wanted and row.get("status") == "error")
+    runnable, skipped = _runnable([r for r in runs if r.run_id not in finished])
+    todo = runnable
     if skipped:
-        log.warning("%d task runs %s", len(skipped), TASKS_UNAVAILABLE)
+        log.info("%d runs skipped, e.g. %s", len(skipped), skipped[0][1])
     n_workers = _default_workers() if workers is None else workers
     n_workers = min(n_workers, len(todo)) if todo else 0
-    log.info("compare %s: %d runs, %d finished before, %d to run on %s with %d workers",
-             spec.name, len(runs), len(finished), len(todo), backend, n_workers)
+    log.info("compare %s: %d runs, %d finished before (%d errors to rerun), %d to run on %s with %d workers",
+             spec.name, len(runs), len(finished), retried, len(todo), backend, n_workers)
 
     new_rows: list[dict[str, Any]] = []
     if todo:
@@ -327,7 +568,9 @@ def run_comparison(
                 close()
 
     order = {r.run_id: i for i, r in enumerate(runs)}
-    rows = sorted(list(finished.values()) + new_rows, key=lambda r: order[r["run_id"]])
+    latest = dict(finished)
+    latest.update({row["run_id"]: row for row in new_rows})  # a rerun replaces its 'error' row
+    rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
     from twin.compare.report import summarize, write_summary
 
     summary = summarize(rows, planners=[p.id for p in spec.planners], skipped=skipped)
@@ -341,5 +584,5 @@ def run_comparison(
             log.warning("no plots: %s", e)
     return CompareResult(
         out_dir=out, rows=rows, ran=len(new_rows), resumed=len(finished), skipped=skipped, summary=summary,
-        files=files, wall_time_s=time.perf_counter() - t_start,
+        files=files, wall_time_s=time.perf_counter() - t_start, retried=retried,
     )

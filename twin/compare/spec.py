@@ -10,9 +10,9 @@ path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
       - {name: toppra.movel, params: {...}}           # ... or a planner block
       - {name: ompl.rrtconnect, retimer: toppra, label: rrtconnect+toppra}
     scenarios:
-      - name: warehouse-random                        # motion queries in a scene config
+      - name: warehouse-blocked                       # motion queries in a scene config
         scene: warehouse.yaml                         # relative to this file
-        random: {count: 3, goal: joint}
+        random: {count: 3, goal: joint, straight: blocked}   # only queries a straight line cannot solve
       - name: robocup-fixed
         scene: robocup.yaml
         queries:
@@ -23,12 +23,16 @@ path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
         seeds: [0, 1]                                 # this scenario's own seeds
 
 Why the cross product is expanded here: every run gets its `run_id` from (planner, case, seed), where a
-case is one query of a query scenario (`name#i`) or a task scenario (`name`), so run ids are stable
-across reruns, resumes and backends.
+case is one query of a query scenario (`name#i`) or a task scenario (`name`), plus a hash of everything
+that defines the run (the whole planner block and label, the scenario's settings and its loaded config,
+the seed), e.g. `rrtconnect|robocup-blocked#3|seed=1|a1b2c3d4`. So run ids are stable across reruns,
+resumes and backends, and a run whose definition changed is a different run, never a stale row.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import zlib
 from collections.abc import Iterable
@@ -53,16 +57,20 @@ from twin.errors import ConfigError
 
 __all__ = [
     "ComparePlanner",
+    "CompareSpec",
+    "QueryScenario",
     "QuerySpec",
     "RandomQueries",
-    "QueryScenario",
-    "TaskScenario",
-    "CompareSpec",
     "RunTask",
-    "load_compare_config",
+    "TaskScenario",
     "compare_spec_from_dict",
+    "definitions",
+    "describe_changes",
+    "digest",
     "expand_runs",
+    "load_compare_config",
     "run_id",
+    "run_key",
 ]
 
 _NAME_PATTERN = r"^[A-Za-z0-9_.+\-]+$"  # no '|', '#' or spaces: they delimit run ids
@@ -95,17 +103,29 @@ class ComparePlanner(PlannerBlock):
 
 class QuerySpec(_Model):
     """One explicit motion query: start (6,) rad and either a joint goal (6,) rad or a TCP pose goal
-    `goal_pose` = x, y, z, roll, pitch, yaw (m, rad; base frame) of `frame`."""
+    `goal_pose` = x, y, z, roll, pitch, yaw (m, rad; base frame) of `frame`.
+
+    A pose goal is reached exactly (twin.types' default tolerances) unless `orientation_free` makes it a
+    position goal, reached within `position_tolerance_m` (default 3 cm, as the warehouse transfer asks)."""
 
     start: Q6
     goal: Q6 | None = None
     goal_pose: tuple[float, float, float, float, float, float] | None = None
     frame: Literal["tcp", "flange"] = "tcp"
+    orientation_free: bool = False
+    position_tolerance_m: float | None = Field(None, gt=0, le=0.1)
+
+    @property
+    def goal_kind(self) -> str:
+        """'joint', 'pose' or 'position' (see `twin.planning.GOAL_KINDS`)."""
+        return "joint" if self.goal is not None else "position" if self.orientation_free else "pose"
 
     @model_validator(mode="after")
-    def _one_goal(self) -> "QuerySpec":
+    def _one_goal(self) -> QuerySpec:
         if (self.goal is None) == (self.goal_pose is None):
             raise ValueError("give exactly one of `goal` (joint angles) or `goal_pose` (x, y, z, roll, pitch, yaw)")
+        if self.goal is not None and (self.orientation_free or self.position_tolerance_m is not None):
+            raise ValueError("`orientation_free` and `position_tolerance_m` apply to `goal_pose` only")
         vals = list(self.start) + list(self.goal or ()) + list(self.goal_pose or ())
         if not all(math.isfinite(v) for v in vals):
             raise ValueError("start and goal must be finite numbers")
@@ -114,25 +134,40 @@ class QuerySpec(_Model):
 
 class RandomQueries(_Model):
     """Seeded random queries: `count` per seed, start and goal with the TCP pointing down at a random
-    yaw (+-90 deg) inside a box (base frame, m), IK branch nearest the home posture, at least `min_clearance_m`
-    from the environment and `min_travel_m` apart.
+    yaw (+-90 deg) inside a box (base frame, m), at least `min_clearance_m` from the environment and
+    `min_travel_m` apart. The start takes the IK branch nearest the home posture, the goal the IK
+    solution nearest the start.
+
+    `goal`: the goal configuration (`joint`), the TCP pose reached exactly (`pose`), or the TCP position
+    within `position_tolerance_m` with the orientation free (`position`: what receding-horizon planners
+    such as `nmpc`, which track a position, can be compared on).
+
+    `straight` says how hard a query is: `blocked` keeps only queries whose straight joint motion from
+    the start to the goal configuration collides (so a planner has to search), `free` only those where
+    it does not, `any` takes what comes. The goal is drawn in `goal_region_*` when given (else in the
+    same box as the start): narrow passages, such as into a bin from beside another one.
 
     The default box is the work area in front of the arm, over the table; in the warehouse scene it
     straddles the obstacle wall, so straight-line planners meet it.
     """
 
     count: int = Field(ge=1, le=10_000)
-    goal: Literal["joint", "pose"] = "joint"
+    goal: Literal["joint", "pose", "position"] = "joint"
+    position_tolerance_m: float = Field(0.03, gt=0, le=0.1)  # `goal: position` only: the TCP within this
+    straight: Literal["free", "blocked", "any"] = "any"
     region_x: tuple[float, float] = (-0.65, -0.25)
     region_y: tuple[float, float] = (-0.35, 0.35)
     region_z: tuple[float, float] = (0.05, 0.40)
+    goal_region_x: tuple[float, float] | None = None
+    goal_region_y: tuple[float, float] | None = None
+    goal_region_z: tuple[float, float] | None = None
     min_clearance_m: float = Field(0.02, ge=0)
     min_travel_m: float = Field(0.10, ge=0)
 
-    @field_validator("region_x", "region_y", "region_z")
+    @field_validator("region_x", "region_y", "region_z", "goal_region_x", "goal_region_y", "goal_region_z")
     @classmethod
-    def _ordered(cls, v: tuple[float, float]) -> tuple[float, float]:
-        if not v[0] <= v[1]:
+    def _ordered(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not v[0] <= v[1]:
             raise ValueError(f"range must be [min, max] with min <= max, got {list(v)}")
         return v
 
@@ -157,7 +192,7 @@ class QueryScenario(_Model):
     unknown_fixtures: Literal["box", "ignore"] = "box"
 
     @model_validator(mode="after")
-    def _one_source(self) -> "QueryScenario":
+    def _one_source(self) -> QueryScenario:
         if bool(self.queries) == (self.random is not None):
             raise ValueError("give exactly one of `queries` (a list) or `random` ({count: N, ...})")
         return self
@@ -203,6 +238,8 @@ class CompareSpec(_Model):
 
     `execute`: run each trajectory in PyBullet (contacts, goal error after `settle_s`).
     `jerk_dt_s`: the resampling step for max |jerk| (finite differences of qdd).
+    `run_timeout_s`: a run that has not returned after this long (a planner that ignores its time limit)
+    is stopped and recorded as an error row (local backend); default `default_run_timeout`.
     """
 
     name: str = Field("compare", pattern=_NAME_PATTERN)
@@ -213,6 +250,7 @@ class CompareSpec(_Model):
     execute: bool = True
     settle_s: float = Field(0.5, ge=0, le=10)
     jerk_dt_s: float = Field(1e-3, gt=0, le=0.01)
+    run_timeout_s: float | None = Field(None, gt=0)
     _source: str | None = PrivateAttr(None)
 
     @property
@@ -235,7 +273,7 @@ class CompareSpec(_Model):
         return v
 
     @model_validator(mode="after")
-    def _unique_names(self) -> "CompareSpec":
+    def _unique_names(self) -> CompareSpec:
         ids = [p.id for p in self.planners]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
@@ -254,9 +292,71 @@ class CompareSpec(_Model):
 
 
 # ---- runs ----------------------------------------------------------------------------------------
-def run_id(planner: str, case: str, seed: int) -> str:
-    """The unique, deterministic id of one run: 'planner|case|seed=N'."""
+def digest(obj: Any, n: int = 8) -> str:
+    """A short stable hash of JSON-able data (key order does not matter)."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:n]
+
+
+def config_digest(path: str | Path, overrides: Iterable[str] = ()) -> str:
+    """Hash of a scene/task config as loaded (after `extends` and overrides), so an edit to the file that
+    changes what a run does changes the run ids, and a comment or a moved checkout does not."""
+    from twin.config import load_config
+
+    return digest(load_config(path, list(overrides)).model_dump(mode="json"), 16)
+
+
+def planner_definition(p: ComparePlanner) -> dict[str, Any]:
+    """What defines a planner's runs: the whole block and its label."""
+    return p.model_dump(mode="json")
+
+
+def scenario_definitions(spec: CompareSpec) -> dict[str, dict[str, Any]]:
+    """What defines each scenario's runs (name -> dict): its settings as written (minus the seeds and the
+    config's path), the loaded config's hash, and the comparison settings its runs use."""
+    out: dict[str, dict[str, Any]] = {}
+    for sc in spec.scenarios:
+        path = sc.task if isinstance(sc, TaskScenario) else sc.scene
+        d = sc.model_dump(mode="json", exclude={"seeds", "scene", "task"})
+        d["kind"] = sc.kind
+        d["config"] = {"file": Path(path).name, "sha256": config_digest(path, sc.overrides)}
+        if isinstance(sc, QueryScenario):
+            d["time_limit_s"] = sc.time_limit_s or spec.time_limit_s
+            d.update(execute=spec.execute, settle_s=spec.settle_s, jerk_dt_s=spec.jerk_dt_s)
+        out[sc.name] = d
+    return out
+
+
+def definitions(spec: CompareSpec) -> dict[str, Any]:
+    """Planner and scenario definitions of a spec, as `compare.json` stores them for `--resume` to diff."""
+    return {
+        "planners": {p.id: planner_definition(p) for p in spec.planners},
+        "scenarios": scenario_definitions(spec),
+    }
+
+
+def _case_definition(scenario: dict[str, Any], index: int | None) -> dict[str, Any]:
+    """A scenario's definition narrowed to one case: adding queries or raising `count` leaves the runs
+    that were there before with their ids."""
+    d = dict(scenario)
+    if d.get("queries"):
+        d["queries"] = [d["queries"][index or 0]]
+    if d.get("random"):
+        d["random"] = {k: v for k, v in d["random"].items() if k != "count"}
+    d["case_index"] = index
+    return d
+
+
+def run_key(planner: str, case: str, seed: int) -> str:
+    """The readable part of a run id, 'planner|case|seed=N': which cell of the sweep a run fills."""
     return f"{planner}|{case}|seed={seed}"
+
+
+def run_id(planner: str, case: str, seed: int, definition: dict[str, Any] | None = None) -> str:
+    """The unique, deterministic id of one run: 'planner|case|seed=N|hash', the hash over the full
+    definition (planner block and label, scenario case, seed), so a changed block is a different run."""
+    key = run_key(planner, case, seed)
+    return key if definition is None else f"{key}|{digest(definition)}"
 
 
 @dataclass(frozen=True)
@@ -280,35 +380,91 @@ class RunTask:
     settle_s: float = 0.5
     jerk_dt_s: float = 1e-3
     unknown_fixtures: Literal["box", "ignore"] = "box"
+    timeout_s: float = 3600.0  # stop the run (an error row) if it has not returned after this long
+
+    @property
+    def key(self) -> str:
+        """'planner|case|seed=N' (the run id without its hash)."""
+        return run_key(self.planner_id, self.case, self.seed)
 
     def random_seed(self) -> list[int]:
         """Seed sequence of a random query: independent per (scenario, seed, index), stable across processes."""
         return [int(self.seed) & 0xFFFFFFFF, zlib.crc32(self.scenario.encode()), int(self.query_index or 0)]
 
 
-def expand_runs(spec: CompareSpec) -> list[RunTask]:
-    """The cross product planners x cases x seeds, in a fixed order (scenario, case, seed, planner)."""
+def default_run_timeout(kind: str, time_limit_s: float) -> float:
+    """How long a run may take before it is stopped: a motion query plans within its time limit and then
+    executes a few seconds of motion (60 s + 10 x the limit leaves room for a loaded machine); a task
+    run simulates a whole sorting task (an hour)."""
+    return 60.0 + 10.0 * time_limit_s if kind == "query" else 3600.0
+
+
+def expand_runs(spec: CompareSpec, defs: dict[str, Any] | None = None) -> list[RunTask]:
+    """The cross product planners x cases x seeds, in a fixed order (scenario, case, seed, planner).
+
+    `defs`: `definitions(spec)` when the caller has them already (they load every scenario's config)."""
+    defs = definitions(spec) if defs is None else defs
     out: list[RunTask] = []
     for sc in spec.scenarios:
         for seed in spec.seeds_for(sc):
             for i in range(sc.case_count()):
-                case = f"{sc.name}#{i}" if isinstance(sc, QueryScenario) else sc.name
+                query_case = isinstance(sc, QueryScenario)
+                case = f"{sc.name}#{i}" if query_case else sc.name
+                case_def = _case_definition(defs["scenarios"][sc.name], i if query_case else None)
                 for p in spec.planners:
-                    common: dict[str, Any] = dict(
-                        run_id=run_id(p.id, case, seed), planner_id=p.id, planner=p.block().model_dump(),
-                        scenario=sc.name, case=case, seed=seed, overrides=tuple(sc.overrides),
-                    )
+                    rid = run_id(p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed})
+                    common: dict[str, Any] = {
+                        "run_id": rid, "planner_id": p.id, "planner": p.block().model_dump(),
+                        "scenario": sc.name, "case": case, "seed": seed, "overrides": tuple(sc.overrides),
+                    }
                     if isinstance(sc, QueryScenario):
+                        limit = sc.time_limit_s or spec.time_limit_s
                         out.append(RunTask(
                             kind="query", config=sc.scene, query_index=i,
                             query=sc.queries[i].model_dump() if sc.queries else None,
                             random=sc.random.model_dump() if sc.random is not None else None,
-                            time_limit_s=sc.time_limit_s or spec.time_limit_s, execute=spec.execute,
+                            time_limit_s=limit, execute=spec.execute,
                             settle_s=spec.settle_s, jerk_dt_s=spec.jerk_dt_s,
-                            unknown_fixtures=sc.unknown_fixtures, **common,
+                            unknown_fixtures=sc.unknown_fixtures,
+                            timeout_s=spec.run_timeout_s or default_run_timeout("query", limit), **common,
                         ))
                     else:
-                        out.append(RunTask(kind="task", config=sc.task, **common))
+                        out.append(RunTask(kind="task", config=sc.task,
+                                           timeout_s=spec.run_timeout_s or default_run_timeout("task", 0.0), **common))
+    return out
+
+
+def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(d, dict) and d:
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+        return out
+    return {prefix: d}
+
+
+def _short(v: Any, n: int = 60) -> str:
+    text = repr(v)
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+def describe_changes(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """What differs between two `definitions()` for the planners and scenarios both have, one phrase
+    each: "planner 'rrtconnect': params.range 1.0 -> 0.5". Added or removed ones are not changes."""
+    out: list[str] = []
+    for what in ("planners", "scenarios"):
+        a, b = old.get(what) or {}, new.get(what) or {}
+        for name in [n for n in b if n in a]:
+            fa, fb = _flat(a[name]), _flat(b[name])
+            keys = sorted(k for k in set(fa) | set(fb) if fa.get(k, "<unset>") != fb.get(k, "<unset>"))
+            if keys:
+                parts = []
+                for k in keys:
+                    if k == "config.sha256":
+                        parts.append(f"the content of {fb.get('config.file', 'its config')}")
+                    else:
+                        parts.append(f"{k} {_short(fa.get(k, '<unset>'))} -> {_short(fb.get(k, '<unset>'))}")
+                out.append(f"{what[:-1]} {name!r}: " + ", ".join(parts))
     return out
 
 

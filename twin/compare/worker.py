@@ -38,12 +38,13 @@ if TYPE_CHECKING:
     from twin.types import MotionRequest
     from twin.world import World
 
-__all__ = ["execute_run", "sample_query", "worker_init", "quiet_imports", "TASKS_UNAVAILABLE"]
+__all__ = ["TASKS_UNAVAILABLE", "cell_for", "error_row", "execute_run", "quiet_imports", "sample_query", "straight_free", "worker_init"]
 
 log = logging.getLogger("twin")
 
 TASKS_UNAVAILABLE = "skipped: twin.tasks not available"
-_SAMPLE_TRIES = 2000
+_SAMPLE_TRIES = 2000  # draws for one valid configuration
+_PAIR_TRIES = 300  # valid (start, goal) pairs tried for a `straight: blocked|free` condition
 
 
 @dataclass
@@ -51,10 +52,10 @@ class _Cell:
     """A scene config's static cell, built once per worker: settings without loose objects, the FCL
     scene, kinematics, and (on first execution) the PyBullet world."""
 
-    settings: "Settings"
-    scene: "PlanningScene"
-    kin: "UR5e"
-    world: "World | None" = None
+    settings: Settings
+    scene: PlanningScene
+    kin: UR5e
+    world: World | None = None
 
 
 _CELLS: dict[tuple[str, tuple[str, ...], str], _Cell] = {}
@@ -95,7 +96,8 @@ def quiet_imports() -> None:
         os.close(devnull)
 
 
-def _cell(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Cell:
+def cell_for(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Cell:
+    """The static cell of a scene config (built on first use in this process, then reused)."""
     key = (config, overrides, unknown_fixtures)
     cell = _CELLS.get(key)
     if cell is None:
@@ -115,7 +117,7 @@ def _cell(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Ce
     return cell
 
 
-def _world(cell: _Cell) -> "World":
+def _world(cell: _Cell) -> World:
     if cell.world is None:
         from twin.world import World
 
@@ -123,54 +125,118 @@ def _world(cell: _Cell) -> "World":
     return cell.world
 
 
+def _box(random: dict[str, Any], prefix: str) -> tuple[np.ndarray, np.ndarray]:
+    rx, ry, rz = (random.get(f"{prefix}region_{a}") or random[f"region_{a}"] for a in "xyz")
+    return np.array([rx[0], ry[0], rz[0]]), np.array([rx[1], ry[1], rz[1]])
+
+
+def _region_text(random: dict[str, Any], prefix: str = "") -> str:
+    lo, hi = _box(random, prefix)
+    return " ".join(f"{a}=[{lo[i]:g}, {hi[i]:g}]" for i, a in enumerate("xyz"))
+
+
 def sample_query(
-    random: dict[str, Any], rng: np.random.Generator, *, scene: "PlanningScene", kin: "UR5e", home: np.ndarray
+    random: dict[str, Any],
+    rng: np.random.Generator,
+    *,
+    scene: PlanningScene,
+    kin: UR5e,
+    home: np.ndarray,
+    resolution_rad: float = 0.01,
 ) -> dict[str, Any]:
     """A random query (as a QuerySpec dict): start and goal with the TCP pointing down at a random yaw
-    (+-90 deg) in the region, the IK branch nearest `home`, clear of the environment and of itself.
+    (+-90 deg), the start in `region_*` on the IK branch nearest `home`, the goal in `goal_region_*`
+    (default: the same box) on the IK solution nearest the start, both clear of the environment and of
+    the arm itself; with `straight: blocked|free`, pairs are drawn until the straight joint motion between
+    them collides (or does not), checked every `resolution_rad`.
 
-    Raises ConfigError when the region yields no valid pair in a few thousand draws.
+    Raises ConfigError when the region yields no valid configuration in a few thousand draws, or no pair
+    with the asked straight motion in a few hundred valid pairs.
     """
     from twin.types import Pose
 
-    lo = np.array([random["region_x"][0], random["region_y"][0], random["region_z"][0]])
-    hi = np.array([random["region_x"][1], random["region_y"][1], random["region_z"][1]])
+    start_box, goal_box = _box(random, ""), _box(random, "goal_")
+    want = random.get("straight", "any")
 
-    def one() -> tuple[np.ndarray, np.ndarray] | None:
-        p = rng.uniform(lo, hi)
+    def one(box: tuple[np.ndarray, np.ndarray], near: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        p = rng.uniform(box[0], box[1])
         yaw = float(rng.uniform(-0.5 * math.pi, 0.5 * math.pi))  # a parallel gripper is symmetric under pi
         T = Pose.from_xyz_rpy(p, (math.pi, 0.0, yaw)).matrix()
         sols = kin.ik(T)
         if sols.shape[0] == 0:
             return None
-        q = sols[int(np.argmin(np.linalg.norm(sols - home, axis=1)))]
+        q = sols[int(np.argmin(np.linalg.norm(sols - near, axis=1)))]
         if scene.in_collision(q) or scene.min_distance(q, include_self=False).distance < random["min_clearance_m"]:
             return None
         return q, np.array([*p, math.pi, 0.0, yaw])
 
-    start = goal = None
-    for _ in range(_SAMPLE_TRIES):
-        if start is None:
-            start = one()
-            continue
-        goal = one()
-        if goal is not None and np.linalg.norm(goal[1][:3] - start[1][:3]) >= random["min_travel_m"]:
-            break
-        goal = None
-    if start is None or goal is None:
-        raise ConfigError(
-            f"no collision-free random query in region x={list(random['region_x'])} y={list(random['region_y'])} "
-            f"z={list(random['region_z'])} after {_SAMPLE_TRIES} draws; widen it or lower min_clearance_m"
+    def no_query(what: str) -> ConfigError:
+        return ConfigError(
+            f"no collision-free random {what} in region {_region_text(random, 'goal_' if what == 'goal' else '')} "
+            f"after {_SAMPLE_TRIES} draws; widen it or lower min_clearance_m (now {random['min_clearance_m']:g})"
         )
-    out: dict[str, Any] = {"start": start[0].tolist(), "goal": None, "goal_pose": None, "frame": "tcp"}
+
+    for _ in range(_PAIR_TRIES):
+        start = None
+        for _ in range(_SAMPLE_TRIES):
+            start = one(start_box, home)
+            if start is not None:
+                break
+        if start is None:
+            raise no_query("start")
+        goal = None
+        for _ in range(_SAMPLE_TRIES):
+            goal = one(goal_box, start[0])
+            if goal is not None and np.linalg.norm(goal[1][:3] - start[1][:3]) >= random["min_travel_m"]:
+                break
+            goal = None
+        if goal is None:
+            raise no_query("goal")
+        if want == "any":
+            break
+        free = scene.check_path(np.stack([start[0], goal[0]]), resolution_rad=resolution_rad).free
+        if free == (want == "free"):
+            break
+    else:
+        where = _region_text(random)
+        if any(random.get(f"goal_region_{a}") for a in "xyz"):
+            where += f" to goal region {_region_text(random, 'goal_')}"
+        raise ConfigError(
+            f"random queries in {where}: none of {_PAIR_TRIES} collision-free pairs has a {want} straight joint "
+            f"motion; move the regions (blocked: start and goal on either side of an obstacle) or use straight: any"
+        )
+    out: dict[str, Any] = {
+        "start": start[0].tolist(), "goal": None, "goal_pose": None, "frame": "tcp", "orientation_free": False, "position_tolerance_m": None,
+    }
     if random["goal"] == "joint":
         out["goal"] = goal[0].tolist()
+    elif random["goal"] == "position":
+        out["goal_pose"] = goal[1].tolist()
+        out["orientation_free"], out["position_tolerance_m"] = True, random["position_tolerance_m"]
     else:
         out["goal_pose"] = goal[1].tolist()
     return out
 
 
-def _request(task: RunTask, query: dict[str, Any], settings: "Settings") -> "MotionRequest":
+def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: UR5e, resolution_rad: float) -> bool | None:
+    """Whether the straight joint motion from the query's start to its goal is collision-free (checked
+    every `resolution_rad`); for a pose goal, to the IK solution nearest the start. None when a pose goal
+    has no IK solution."""
+    from twin.types import Pose
+
+    start = np.asarray(query["start"], dtype=float)
+    if query.get("goal") is not None:
+        goal = np.asarray(query["goal"], dtype=float)
+    else:
+        x, y, z, r, p, yw = query["goal_pose"]
+        sols = kin.ik(Pose.from_xyz_rpy((x, y, z), (r, p, yw)).matrix(), query.get("frame", "tcp"))
+        if sols.shape[0] == 0:
+            return None
+        goal = sols[int(np.argmin(np.linalg.norm(sols - start, axis=1)))]
+    return bool(scene.check_path(np.stack([start, goal]), resolution_rad=resolution_rad).free)
+
+
+def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> MotionRequest:
     from twin.planning import limits_from_settings
     from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
 
@@ -178,7 +244,14 @@ def _request(task: RunTask, query: dict[str, Any], settings: "Settings") -> "Mot
         goal: Any = JointGoal(query["goal"])
     else:
         x, y, z, r, p, yw = query["goal_pose"]
-        goal = PoseGoal(Pose.from_xyz_rpy((x, y, z), (r, p, yw)), frame=query.get("frame", "tcp"))
+        pose = Pose.from_xyz_rpy((x, y, z), (r, p, yw))
+        if query.get("orientation_free"):
+            tol = query.get("position_tolerance_m") or 0.03
+            goal = PoseGoal(pose, frame=query.get("frame", "tcp"), position_tolerance_m=tol, orientation_tolerance_rad=None)
+        elif query.get("position_tolerance_m"):
+            goal = PoseGoal(pose, frame=query.get("frame", "tcp"), position_tolerance_m=query["position_tolerance_m"])
+        else:
+            goal = PoseGoal(pose, frame=query.get("frame", "tcp"))
     return MotionRequest(
         start=query["start"], goal=goal, limits=limits_from_settings(settings),
         time_limit_s=task.time_limit_s, seed=task.seed,
@@ -189,7 +262,7 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     from twin.config import PlannerBlock
     from twin.planning import make_context, make_planner, plan_with
 
-    cell = _cell(task.config, task.overrides, task.unknown_fixtures)
+    cell = cell_for(task.config, task.overrides, task.unknown_fixtures)
     settings = cell.settings.model_copy(update={"seed": task.seed})
     if task.query is not None:
         query = dict(task.query)
@@ -197,8 +270,14 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
         assert task.random is not None
         rng = np.random.default_rng(task.random_seed())
         home = np.asarray(settings.robot.home, dtype=float)
-        query = sample_query(task.random, rng, scene=cell.scene, kin=cell.kin, home=home)
+        query = sample_query(
+            task.random, rng, scene=cell.scene, kin=cell.kin, home=home,
+            resolution_rad=settings.collision.check_resolution_rad,
+        )
     row["query"] = query
+    row["straight_free"] = straight_free(
+        query, scene=cell.scene, kin=cell.kin, resolution_rad=settings.collision.check_resolution_rad
+    )
     request = _request(task, query, settings)
     context = make_context(settings, kinematics=cell.kin)
     planner = make_planner(PlannerBlock(**task.planner), context)
@@ -209,6 +288,8 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     row["reason"] = result.reason
     row["success"] = result.success
     row["metrics"]["solves"] = solves
+    fallback = result.info.get("fallback_steps") if isinstance(result.info, dict) else None
+    row["metrics"]["fallback_steps"] = None if fallback is None else int(fallback)
     if not result.success or result.trajectory is None:
         return
     traj = result.trajectory
@@ -228,13 +309,14 @@ def _run_task(task: RunTask, row: dict[str, Any]) -> None:
     except ImportError:
         row["status"], row["reason"], row["success"] = "skipped", TASKS_UNAVAILABLE, None
         return
-    from twin.config import load_config
+    from twin.config import PlannerBlock, load_config
 
+    # the whole planner block (params, retimer) is the transfer planner, so two variants of one planner
+    # are two different task runs
     settings = load_config(task.config, task.overrides)
-    block = task.planner
-    if block.get("params") or block.get("retimer"):
-        log.warning("task runs take a planner name only; params/retimer of %s are not passed on", task.planner_id)
-    summary = run_task(settings, seed=task.seed, planner=block["name"])
+    block = PlannerBlock(**task.planner)
+    settings = settings.model_copy(update={"planners": {**settings.planners, "transfer": block}})
+    summary = run_task(settings, seed=task.seed, config_name=os.path.basename(task.config))
     m = task_metrics(summary)
     row["metrics"].update(m)
     row["success"] = summary.success_rate >= 1.0
@@ -271,7 +353,33 @@ def execute_run(task: RunTask) -> dict[str, Any]:
     the message, so one bad run never stops a sweep.
     """
     t0 = time.perf_counter()
-    row: dict[str, Any] = {
+    row = _new_row(task)
+    try:
+        if task.kind == "query":
+            _run_query(task, row)
+        else:
+            _run_task(task, row)
+    except Exception as e:  # noqa: BLE001 - one failing run is a result, not the end of the sweep
+        if isinstance(e, TwinError):  # a typed error says what is wrong; its traceback is noise
+            log.warning("run %s failed: %s", task.run_id, e)
+        else:
+            log.warning("run %s failed: %s\n%s", task.run_id, e, traceback.format_exc())
+        row["status"], row["reason"], row["success"] = "error", f"{type(e).__name__}: {e}", False
+    if row["timing"].get("wall_time_s") is None:
+        row["timing"]["wall_time_s"] = time.perf_counter() - t0
+    return json_safe(row)
+
+
+def error_row(task: RunTask, reason: str, *, wall_time_s: float | None = None) -> dict[str, Any]:
+    """The row of a run that never returned its own (its worker was stopped or died): status 'error'."""
+    row = _new_row(task)
+    row["status"], row["reason"], row["success"] = "error", reason, False
+    row["timing"]["wall_time_s"] = wall_time_s
+    return json_safe(row)
+
+
+def _new_row(task: RunTask) -> dict[str, Any]:
+    return {
         "run_id": task.run_id,
         "planner": task.planner_id,
         "planner_name": task.planner["name"],
@@ -283,23 +391,10 @@ def execute_run(task: RunTask) -> dict[str, Any]:
         "reason": "",
         "success": False,
         "query": task.query,
+        "straight_free": None,
         "metrics": empty_metrics(),
         "timing": empty_timing(),
         "clearance_pair": None,
         "contact_pairs": [],
         "task": None,
     }
-    try:
-        if task.kind == "query":
-            _run_query(task, row)
-        else:
-            _run_task(task, row)
-    except Exception as e:  # one failing run is a result, not the end of the sweep
-        if isinstance(e, TwinError):  # a typed error says what is wrong; its traceback is noise
-            log.warning("run %s failed: %s", task.run_id, e)
-        else:
-            log.warning("run %s failed: %s\n%s", task.run_id, e, traceback.format_exc())
-        row["status"], row["reason"], row["success"] = "error", f"{type(e).__name__}: {e}", False
-    if row["timing"].get("wall_time_s") is None:
-        row["timing"]["wall_time_s"] = time.perf_counter() - t0
-    return json_safe(row)
