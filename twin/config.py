@@ -11,7 +11,7 @@ import math
 import re
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -386,24 +386,8 @@ class RobocupTaskSettings(_Model):
     # Per class, a gentler grip than gripper.force_n / speed_m_s, within the 2F-85's 20-235 N and 20-150 mm/s.
     # The 15 g marker, hit at 100 mm/s and squeezed at 100 N, squirts out of PyBullet's soft contacts (the
     # pads sink through it); closed at 20 mm/s with 20 N it is held at about 19 of its 21 mm.
-    grip_force_n: dict[str, float] = Field(default_factory=lambda: {"marker": 20.0})
-    grip_speed_m_s: dict[str, float] = Field(default_factory=lambda: {"marker": 0.02})
-
-    @field_validator("grip_force_n")
-    @classmethod
-    def _force_range(cls, v: dict[str, float]) -> dict[str, float]:
-        bad = {k: f for k, f in v.items() if not 20.0 <= f <= 235.0}
-        if bad:
-            raise ValueError(f"grip forces must be 20-235 N (a 2F-85's range), got {bad}")
-        return v
-
-    @field_validator("grip_speed_m_s")
-    @classmethod
-    def _speed_range(cls, v: dict[str, float]) -> dict[str, float]:
-        bad = {k: f for k, f in v.items() if not 0.02 <= f <= 0.15}
-        if bad:
-            raise ValueError(f"grip speeds must be 0.02-0.15 m/s (a 2F-85's range), got {bad}")
-        return v
+    grip_force_n: dict[str, Annotated[float, Field(ge=20.0, le=235.0)]] = Field(default_factory=lambda: {"marker": 20.0})
+    grip_speed_m_s: dict[str, Annotated[float, Field(ge=0.02, le=0.15)]] = Field(default_factory=lambda: {"marker": 0.02})
 
 
 class WarehouseTaskSettings(_Model):
