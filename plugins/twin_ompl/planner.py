@@ -58,7 +58,7 @@ import ompl.util as ou
 from twin.config import Settings
 from twin.errors import ConfigError, DependencyMissing, PlanningError, TwinError
 from twin.kinematics import UR5e
-from twin.planning import make_context
+from twin.planning import colliding_pair, make_context
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
 from twin_ompl.validity import (
@@ -277,7 +277,7 @@ class OmplPlanner:
             j = int(np.argmax(np.maximum(lo - start, start - hi)))
             return MotionResult(Status.INVALID_START, f"start joint {j + 1} = {start[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]", info=info)
         if scene.in_collision(start):
-            return MotionResult(Status.INVALID_START, f"the start configuration is in collision ({_contact(scene, start)})", info=info)
+            return MotionResult(Status.INVALID_START, f"the start configuration is in collision ({colliding_pair(scene, start)})", info=info)
         joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
         bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
         goals, failure = self._goal_set(request, scene, bounds)
@@ -361,7 +361,7 @@ class OmplPlanner:
             if not kin.within_limits(q):
                 return None, (Status.INVALID_GOAL, "the joint goal is outside the joint limits")
             if scene.in_collision(q):
-                return None, (Status.INVALID_GOAL, f"the joint goal is in collision ({_contact(scene, q)})")
+                return None, (Status.INVALID_GOAL, f"the joint goal is in collision ({colliding_pair(scene, q)})")
             return q[None], None
         assert isinstance(goal, PoseGoal)
         if goal.frame not in ("tcp", "flange"):
@@ -377,7 +377,7 @@ class OmplPlanner:
         hits = scene.in_collision_batch(sols)
         free = sols[~hits]
         if free.shape[0] == 0:
-            return None, (Status.INVALID_GOAL, f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {_contact(scene, sols[0])})")
+            return None, (Status.INVALID_GOAL, f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {colliding_pair(scene, sols[0])})")
         return free[: self.params.max_goal_states], None
 
     def _attempt(
@@ -533,7 +533,7 @@ class OmplPlanner:
             if not check.free:
                 assert check.segment is not None
                 return None, f"path segment {check.segment} collides at {p.verify_resolution_rad:g} rad", check.segment
-            last = f"the timed trajectory collides ({_contact(scene, qs[hit])}) while its path is free"
+            last = f"the timed trajectory collides ({colliding_pair(scene, qs[hit])}) while its path is free"
         return None, last, None
 
 
@@ -543,17 +543,6 @@ def _repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarr
     lo = np.maximum(np.minimum(a, b) - _REPAIR_MARGIN_RAD, bounds[:, 0])
     hi = np.minimum(np.maximum(a, b) + _REPAIR_MARGIN_RAD, bounds[:, 1])
     return np.stack([lo, hi], axis=1)
-
-
-def _contact(scene: "PlanningScene", q: np.ndarray) -> str:
-    """'a vs b' for the closest (or penetrating) pair at q, for failure reasons."""
-    try:
-        d = scene.min_distance(q)
-    except Exception:  # noqa: BLE001 - a reason must never fail the planner
-        return "colliding pair unknown"
-    if not d.robot_part:
-        return "colliding pair unknown"
-    return f"{d.robot_part} vs {d.other}"
 
 
 def _dist_version() -> str:
