@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 __all__ = [
     "CheckedPlanner",
     "as_checked",
+    "cannot_reach",
+    "declared_goal_kinds",
     "GOAL_KINDS",
     "KinematicPlant",
     "Plant",
@@ -101,6 +103,16 @@ _GOAL_KIND_WORDS = {"joint": "joint goals", "pose": "pose goals with an orientat
 def describe_goal_kinds(kinds: "frozenset[str] | set[str]") -> str:
     """'joint goals, pose goals with an orientation' (sorted, for messages)."""
     return ", ".join(_GOAL_KIND_WORDS[k] for k in sorted(kinds))
+
+
+def declared_goal_kinds(planner_class: type) -> frozenset[str]:
+    """The goal kinds a planner class declares it can reach (`goal_kinds`; all of them when it says nothing)."""
+    return frozenset(getattr(planner_class, "goal_kinds", GOAL_KINDS))
+
+
+def cannot_reach(name: str, kind: str, kinds: frozenset[str]) -> str:
+    """The one message for a goal kind a planner does not serve."""
+    return f"{name} cannot reach {describe_goal_kinds({kind})}; it serves {describe_goal_kinds(kinds)}"
 
 
 def limits_from_settings(settings: "Settings", *, tcp_speed: float | None = None) -> Limits:
@@ -267,13 +279,12 @@ class CheckedPlanner:
         self.name = name
         self.receding_horizon = receding_horizon
         self.context = context
-        self.goal_kinds: frozenset[str] = frozenset(getattr(type(inner), "goal_kinds", GOAL_KINDS))
+        self.goal_kinds = declared_goal_kinds(type(inner))
         unknown = self.goal_kinds - GOAL_KINDS
         if unknown:
             raise PlanningError(f"{name!r} declares unknown goal kinds {sorted(unknown)}; allowed: {sorted(GOAL_KINDS)}")
         self._request: MotionRequest | None = None
         self._scene: "PlanningScene | None" = None
-        self._q: np.ndarray | None = None
         self._fallback_steps = 0
         self._segments = 0
 
@@ -294,10 +305,8 @@ class CheckedPlanner:
         if not self.receding_horizon:
             raise PlanningError(f"{self.name} is a one-shot planner: call plan(), not reset()/step()")
         if request.goal.kind not in self.goal_kinds:
-            raise InvalidRequestError(
-                f"{self.name} cannot reach {describe_goal_kinds({request.goal.kind})}; it serves {describe_goal_kinds(self.goal_kinds)}"
-            )
-        self._request, self._scene, self._q = request, scene, None
+            raise InvalidRequestError(cannot_reach(self.name, request.goal.kind, self.goal_kinds))
+        self._request, self._scene = request, scene
         self._fallback_steps = self._segments = 0
         self.inner.reset(request, scene)
 
@@ -306,7 +315,6 @@ class CheckedPlanner:
         if self._request is None or self._scene is None:
             raise PlanningError(f"{self.name}.step() called before reset()")
         q = np.asarray(q, dtype=float)
-        self._q = q
         out = self.inner.step(q)
         info_extra = {"fallback_steps": self._fallback_steps}
         if isinstance(out, MotionResult):
@@ -358,10 +366,7 @@ class CheckedPlanner:
         plant. The result's trajectory is what was commanded; `info` holds `solve_times_s`, `solves`,
         `fallback_steps` and, when the plant stopped execution, `execution_stop`."""
         if request.goal.kind not in self.goal_kinds:
-            return MotionResult(
-                Status.INVALID_GOAL,
-                f"{self.name} cannot reach {describe_goal_kinds({request.goal.kind})}; it serves {describe_goal_kinds(self.goal_kinds)}",
-            )
+            return MotionResult(Status.INVALID_GOAL, cannot_reach(self.name, request.goal.kind, self.goal_kinds))
         if not self.receding_horizon:
             result = self._plan_one_shot(request, scene)
             if result.success:

@@ -434,7 +434,7 @@ def _runnable(runs: Sequence[RunTask]) -> tuple[list[RunTask], list[tuple[str, s
     """(runs that can run here, (run_id, reason) of the others): task runs when twin.tasks is missing, and
     query runs whose goal kind the planner declares it cannot reach (`goal_kinds`, e.g. nmpc: positions
     only). Such a pair is not a failure of the planner; it is not a comparison at all."""
-    from twin.planning import GOAL_KINDS, describe_goal_kinds
+    from twin.planning import cannot_reach, declared_goal_kinds
     from twin.registry import default_registry
 
     have_tasks = tasks_available()
@@ -449,9 +449,9 @@ def _runnable(runs: Sequence[RunTask]) -> tuple[list[RunTask], list[tuple[str, s
         if kind is not None:
             name = r.planner["name"]
             if name not in kinds:
-                kinds[name] = frozenset(getattr(default_registry().entry(name).load(), "goal_kinds", GOAL_KINDS))
+                kinds[name] = declared_goal_kinds(default_registry().entry(name).load())
             if kind not in kinds[name]:
-                skipped.append((r.run_id, f"{r.planner_id} cannot reach {describe_goal_kinds({kind})} (it serves {describe_goal_kinds(kinds[name])})"))
+                skipped.append((r.run_id, cannot_reach(r.planner_id, kind, kinds[name])))
                 continue
         ok.append(r)
     return ok, skipped
