@@ -4,6 +4,7 @@
      +-- ConfigError            invalid or missing configuration (file, key, value)
      +-- UnknownNameError       a planner/retimer/detector name that is not registered (also LookupError)
      +-- DuplicateNameError     two plugins registered the same name
+     +-- PluginError            a plugin implements a hook twin does not have (a misspelling)
      +-- DependencyMissing      an optional backend is not installed (also ImportError)
      +-- InvalidRequestError    a malformed motion request or bad argument (also ValueError)
      +-- PlanningError          a planner broke its contract (not "no solution": that is a status)
@@ -22,6 +23,7 @@ __all__ = [
     "ConfigError",
     "UnknownNameError",
     "DuplicateNameError",
+    "PluginError",
     "DependencyMissing",
     "InvalidRequestError",
     "PlanningError",
@@ -55,6 +57,10 @@ class UnknownNameError(TwinError, LookupError):
             msg += f" Did you mean {close[0]!r}?"
         msg += f" Registered: {', '.join(self.known) if self.known else '(none)'}. {hint}"
         super().__init__(msg)
+
+
+class PluginError(TwinError):
+    """A plugin does not fit twin's hooks (an implementation of a hook that does not exist)."""
 
 
 class DuplicateNameError(TwinError):

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import math
 
+from dataclasses import dataclass
+
 import numpy as np
 import ur_analytic_ik
 
 from twin.errors import InvalidRequestError
 
-__all__ = ["UR5e", "dh_frames", "jacobians", "jacobian_one", "DH_D", "DH_A", "DH_ALPHA", "JOINT_NAMES", "JOINT_LIMITS", "TCP_OFFSET_M", "wrap_to_pi"]
+__all__ = ["UR5e", "DHParameters", "dh_frames", "jacobians", "jacobian_one", "DH_D", "DH_A", "DH_ALPHA", "JOINT_NAMES", "JOINT_LIMITS", "TCP_OFFSET_M", "wrap_to_pi"]
 
 JOINT_NAMES = (
     "shoulder_pan_joint",
@@ -122,6 +124,15 @@ def jacobian_one(q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     return np.array(cols).T
 
 
+@dataclass(frozen=True)
+class DHParameters:
+    """The standard Denavit-Hartenberg parameters of the arm, per joint (6,): d and a in m, alpha in rad."""
+
+    d: np.ndarray
+    a: np.ndarray
+    alpha: np.ndarray
+
+
 def _tool(frame: str, tcp_offset_m: float) -> np.ndarray:
     if frame not in _FRAMES:
         raise InvalidRequestError(f"unknown frame {frame!r}; allowed: {', '.join(_FRAMES)}")
@@ -165,6 +176,23 @@ class UR5e:
     def dh_frames(self, qs: np.ndarray) -> np.ndarray:
         """(n, 7, 4, 4) DH frames 0..6 in the base frame for (n, 6) configurations."""
         return dh_frames(qs)
+
+    @property
+    def dh(self) -> DHParameters:
+        """The DH parameters (copies), for plugins that build their own symbolic kinematics (NMPC)."""
+        return DHParameters(DH_D.copy(), DH_A.copy(), DH_ALPHA.copy())
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return JOINT_NAMES
+
+    def tool_transform(self, frame: str = "tcp") -> np.ndarray:
+        """(4, 4) transform of `frame` ('tcp' or 'flange') in the flange frame."""
+        return self._tool_for(frame).copy()
+
+    def jacobians_from_frames(self, frames: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """(n, 6, 6) Jacobians of `frame` from DH frames already computed by `dh_frames` (saves a second FK)."""
+        return jacobians(frames, self._tool_for(frame))
 
     def jacobian_batch(self, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(n, 6, 6) geometric Jacobians for (n, 6) configurations (rows vx, vy, vz, wx, wy, wz)."""

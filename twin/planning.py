@@ -15,13 +15,13 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
 from twin.errors import InvalidRequestError, PlanningError, TwinError
 from twin.registry import PluginContext, Registry, default_registry
-from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
+from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
@@ -34,6 +34,9 @@ __all__ = [
     "cannot_reach",
     "declared_goal_kinds",
     "GOAL_KINDS",
+    "PathPlanner",
+    "SceneView",
+    "accepts_retimer",
     "KinematicPlant",
     "Plant",
     "colliding_pair",
@@ -53,6 +56,33 @@ __all__ = [
 ]
 
 log = logging.getLogger("twin")
+
+
+@runtime_checkable
+class SceneView(Protocol):
+    """What a planner may ask of the planning scene it is given (`twin.collision.PlanningScene` is the one
+    implementation): read-only collision and distance queries for joint configurations (6,) / (n, 6)."""
+
+    padding_m: float
+
+    def in_collision(self, q: np.ndarray) -> bool: ...
+
+    def in_collision_batch(self, qs: np.ndarray) -> np.ndarray: ...
+
+    def first_collision(self, qs: np.ndarray) -> int | None: ...
+
+    def min_distance(self, q: np.ndarray, *, include_self: bool = True) -> Any: ...
+
+    def min_distance_batch(self, qs: np.ndarray, *, include_self: bool = True) -> np.ndarray: ...
+
+    def names(self) -> list[str]: ...
+
+    def box_bounds(self) -> dict[str, BoxBounds]: ...
+
+    def attached_box(self) -> tuple[str, np.ndarray, np.ndarray] | None: ...
+
+    @property
+    def gripper_opening(self) -> float: ...
 
 
 @runtime_checkable
@@ -91,6 +121,24 @@ class Retimer(Protocol):
     """Turns a geometric joint path (m, 6) into a trajectory under joint limits."""
 
     def retime(self, path: np.ndarray, limits: Limits) -> Trajectory: ...
+
+
+class PathPlanner:
+    """Base class of one-shot planners that return a geometric path and let a retimer plugin time it
+    (a config block's `retimer:`). Subclassing declares `accepts_retimer`; `self.retimer` is the retimer
+    the config chose, or None (the planner then uses its own default)."""
+
+    accepts_retimer: ClassVar[bool] = True
+    retimer: "Retimer | None" = None
+
+    def set_retimer(self, retimer: "Retimer") -> None:
+        self.retimer = retimer
+
+
+def accepts_retimer(planner_class: type) -> bool:
+    """Does this planner class take a retimer? Declared by the class attribute `accepts_retimer` (default
+    False; `PathPlanner` sets it)."""
+    return bool(getattr(planner_class, "accepts_retimer", False))
 
 
 # What a goal asks for (`JointGoal.kind`, `PoseGoal.kind`): the joint angles; a pose (position and
@@ -137,7 +185,7 @@ def make_planner(block: "PlannerBlock | str", context: PluginContext) -> "Checke
     entry = context.registry.entry(block.name, (Kind.PLANNER, Kind.RECEDING_HORIZON))
     planner = context.registry.planner(block.name, block.params, context)
     if block.retimer is not None:
-        if not hasattr(planner, "set_retimer"):
+        if not accepts_retimer(type(planner)):
             from twin.errors import ConfigError
 
             raise ConfigError(f"planner {block.name!r} produces trajectories itself and takes no retimer")

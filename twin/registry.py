@@ -23,7 +23,7 @@ import pluggy
 from pydantic import BaseModel, ValidationError
 
 from twin.config import one_line, short_repr
-from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, TwinError, UnknownNameError
+from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, PluginError, TwinError, UnknownNameError
 from twin.hookspecs import TwinSpec
 
 if TYPE_CHECKING:
@@ -232,7 +232,23 @@ def plugin_manager(*, entry_points: bool = True, plugins: Iterable[object] = ())
         pm.load_setuptools_entrypoints("twin")
     for p in plugins:
         pm.register(p)
+    _check_hooks(pm)
     return pm
+
+
+def _check_hooks(pm: pluggy.PluginManager) -> None:
+    """A `@hookimpl` whose name is not one of twin's hooks would be ignored silently; refuse it instead."""
+    try:
+        pm.check_pending()
+    except pluggy.PluginValidationError as e:
+        hooks = sorted(name for name in dir(TwinSpec) if name.startswith("twin_"))
+        plugin = getattr(e.plugin, "__name__", None) or type(e.plugin).__name__
+        unknown = sorted(
+            name
+            for name, caller in vars(pm.hook).items()
+            if not caller.has_spec() and any(impl.plugin is e.plugin for impl in caller.get_hookimpls())
+        )
+        raise PluginError(f"plugin {plugin!r} implements unknown hook(s) {', '.join(unknown) or '?'}; twin's hooks are: {', '.join(hooks)}") from None
 
 
 @lru_cache(maxsize=1)

@@ -297,6 +297,8 @@ class MotionResult:
     planning_time_s: float = 0.0
     path: np.ndarray | None = None  # (m, 6) geometric waypoints before time parameterisation, if any
     info: dict[str, Any] = field(default_factory=dict)
+    # A planner that stops near a goal rather than on it (NMPC) says how near it aimed (m); None: exact.
+    goal_tolerance_m: float | None = None
 
     @property
     def success(self) -> bool:

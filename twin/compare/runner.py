@@ -126,7 +126,7 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
     of each scenario is drawn, so a region that cannot yield what it asks for (`straight: blocked` with
     nothing in the way) is one error now rather than an error row per run."""
     from twin.config import load_config
-    from twin.planning import make_context, make_planner
+    from twin.planning import accepts_retimer, make_context, make_planner
     from twin.registry import Kind, default_registry, validate_params
 
     source = spec.source or "<compare config>"
@@ -147,7 +147,7 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
         try:
             validate_params(entry, cls, p.params)
             if p.retimer is not None:
-                if not hasattr(cls, "set_retimer"):
+                if not accepts_retimer(cls):
                     raise ConfigError(f"planner {p.name!r} produces trajectories itself and takes no retimer")
                 try:
                     rentry = registry.entry(p.retimer, (Kind.RETIMER,))

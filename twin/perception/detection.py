@@ -20,7 +20,7 @@ from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
 if TYPE_CHECKING:
     from twin.config import RobocupPerceptionSettings
 
-__all__ = ["Detection", "Detector", "SceneCloud", "scene_cloud", "CLASSES", "detection_label"]
+__all__ = ["Detection", "Detector", "needs_ground_truth", "SceneCloud", "scene_cloud", "CLASSES", "detection_label"]
 
 CLASSES = ("bottle", "can", "spam", "marker", "cube")
 """Object classes; cubes are further told apart by colour (cube_red, cube_blue, ...): 8 detection classes."""
@@ -66,6 +66,11 @@ class Detector(Protocol):
         """Detections in `frame`; `T_base_camera` (4, 4) is the estimated camera pose; `cloud` the
         frame-wide base-frame cloud when the caller has it already (else the detector builds it)."""
         ...
+
+
+def needs_ground_truth(detector: Any) -> bool:
+    """Does this detector (instance or class) declare `needs_ground_truth = True` (default False)?"""
+    return bool(getattr(detector, "needs_ground_truth", False))
 
 
 @dataclass(frozen=True)

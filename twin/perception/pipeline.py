@@ -16,7 +16,7 @@ import numpy as np
 from twin.camera import RGBDFrame
 from twin.config import Settings
 from twin.perception.capture import Capture, wrist_camera_offset
-from twin.perception.detection import Detection, Detector, scene_cloud
+from twin.perception.detection import Detection, Detector, needs_ground_truth, scene_cloud
 from twin.perception.robocup import ObjectEstimate, estimate_object
 
 __all__ = ["RobocupResult", "make_detector", "perceive_robocup", "camera_extrinsics"]
@@ -61,7 +61,7 @@ def perceive_robocup(
     cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
     timings.update(cloud.timings_s)
     t0 = time.perf_counter()
-    gt = ground_truth if getattr(detector, "needs_ground_truth", False) else None
+    gt = ground_truth if needs_ground_truth(detector) else None
     detections = detector.detect(frame, T_base_camera, cloud=cloud, ground_truth=gt)
     timings["detect"] = time.perf_counter() - t0
     timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from twin.perception.detection import needs_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.types import ObjectOutcome, quat_to_matrix
 
@@ -299,7 +300,7 @@ def body_between_fingers(world: World) -> int | None:
 def oracle_ground_truth(world: World, detector: object) -> list[ObjectState] | None:
     """ORACLE: the simulator's true objects for a detector that declares `needs_ground_truth` (the labelled
     `oracle` detector); None for every real detector."""
-    return world.objects() if getattr(detector, "needs_ground_truth", False) else None
+    return world.objects() if needs_ground_truth(detector) else None
 
 
 def perceive_robocup_scene(world: World, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector) -> RobocupResult:

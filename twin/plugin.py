@@ -1,0 +1,170 @@
+"""The public API for plugin authors: everything a planner, retimer, detector or task plugin needs, in one
+import (`from twin.plugin import ...`), the way pytest plugins import from `pytest` rather than `_pytest`.
+
+Built-in plugins import only from here (a test enforces it); names not listed here are internals that may
+change. Heavy modules (FCL, OpenCV) load on first use of a name that needs them.
+
+Contracts are declared, not probed:
+- a planner class may declare `goal_kinds` (subset of `GOAL_KINDS`, default all) and `Params` (a pydantic
+  model validating its parameters); a path planner that takes a retimer subclasses `PathPlanner`;
+- a planner that stops near its goal rather than on it says how near in `MotionResult.goal_tolerance_m`;
+- a detector that must be handed ground truth declares `needs_ground_truth = True` (only `oracle` does);
+- an optional classmethod `unavailable_reason() -> str | None` says why a registered name cannot run here.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from twin.errors import (
+    ConfigError,
+    DependencyMissing,
+    DuplicateNameError,
+    InvalidRequestError,
+    PlanningError,
+    PluginError,
+    TwinError,
+    UnknownNameError,
+    WorldError,
+)
+from twin.hookspecs import hookimpl
+
+# name -> module it lives in; imported on first access
+_LAZY: dict[str, str] = {
+    # registry and context
+    "Registry": "twin.registry",
+    "PluginContext": "twin.registry",
+    "Kind": "twin.registry",
+    # requests, results, trajectories
+    "Pose": "twin.types",
+    "JointGoal": "twin.types",
+    "PoseGoal": "twin.types",
+    "Goal": "twin.types",
+    "Limits": "twin.types",
+    "MotionRequest": "twin.types",
+    "MotionResult": "twin.types",
+    "Status": "twin.types",
+    "Trajectory": "twin.types",
+    "BoxBounds": "twin.types",
+    "as_q": "twin.types",
+    "EXACT_JOINT_TOLERANCE_RAD": "twin.types",
+    "EXACT_POSITION_TOLERANCE_M": "twin.types",
+    "EXACT_ORIENTATION_TOLERANCE_RAD": "twin.types",
+    # transforms
+    "rpy_matrix": "twin.types",
+    "quat_to_matrix": "twin.types",
+    "matrix_to_quat": "twin.types",
+    "pose_from_xyz_rpy": "twin.urdf_model",
+    # planner contracts and the checks every planner's output gets
+    "Segment": "twin.planning",
+    "PathPlanner": "twin.planning",
+    "OneShotPlanner": "twin.planning",
+    "RecedingHorizonPlanner": "twin.planning",
+    "Retimer": "twin.planning",
+    "SceneView": "twin.planning",
+    "GOAL_KINDS": "twin.planning",
+    "densify": "twin.planning",
+    "first_collision": "twin.planning",
+    "colliding_pair": "twin.planning",
+    "goal_miss": "twin.planning",
+    "limits_from_settings": "twin.planning",
+    "make_context": "twin.planning",
+    "make_planner": "twin.planning",
+    # kinematics
+    "UR5e": "twin.kinematics",
+    "DHParameters": "twin.kinematics",
+    "wrap_to_pi": "twin.kinematics",
+    # the collision world
+    "PlanningScene": "twin.collision",
+    "FixtureSpec": "twin.collision",
+    # settings
+    "Settings": "twin.config",
+    "load_config": "twin.config",
+    # perception, for detectors
+    "RGBDFrame": "twin.camera",
+    "Detection": "twin.perception.detection",
+    "Detector": "twin.perception.detection",
+    "SceneCloud": "twin.perception.detection",
+    "scene_cloud": "twin.perception.detection",
+    "CLASSES": "twin.perception.detection",
+    "cluster_points": "twin.perception.segmentation",
+    "footprint": "twin.perception.segmentation",
+    "color_distance": "twin.perception.colors",
+    "palette": "twin.perception.colors",
+    "OBJECT_TEMPLATES": "twin.scene_layout",
+}
+
+__all__ = [
+    "hookimpl",
+    "ConfigError",
+    "DependencyMissing",
+    "DuplicateNameError",
+    "InvalidRequestError",
+    "PlanningError",
+    "PluginError",
+    "TwinError",
+    "UnknownNameError",
+    "WorldError",
+    *_LAZY,
+]
+
+if TYPE_CHECKING:
+    from twin.camera import RGBDFrame
+    from twin.collision import FixtureSpec, PlanningScene
+    from twin.config import Settings, load_config
+    from twin.kinematics import DHParameters, UR5e, wrap_to_pi
+    from twin.perception.colors import color_distance, palette
+    from twin.perception.detection import CLASSES, Detection, Detector, SceneCloud, scene_cloud
+    from twin.perception.segmentation import cluster_points, footprint
+    from twin.planning import (
+        GOAL_KINDS,
+        OneShotPlanner,
+        PathPlanner,
+        RecedingHorizonPlanner,
+        Retimer,
+        SceneView,
+        Segment,
+        colliding_pair,
+        densify,
+        first_collision,
+        goal_miss,
+        limits_from_settings,
+        make_context,
+        make_planner,
+    )
+    from twin.registry import Kind, PluginContext, Registry
+    from twin.scene_layout import OBJECT_TEMPLATES
+    from twin.types import (
+        EXACT_JOINT_TOLERANCE_RAD,
+        EXACT_ORIENTATION_TOLERANCE_RAD,
+        EXACT_POSITION_TOLERANCE_M,
+        BoxBounds,
+        Goal,
+        JointGoal,
+        Limits,
+        MotionRequest,
+        MotionResult,
+        Pose,
+        PoseGoal,
+        Status,
+        Trajectory,
+        as_q,
+        matrix_to_quat,
+        quat_to_matrix,
+        rpy_matrix,
+    )
+    from twin.urdf_model import pose_from_xyz_rpy
+
+
+def __getattr__(name: str) -> Any:
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'twin.plugin' has no attribute {name!r}")
+    value = getattr(importlib.import_module(mod), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
