@@ -10,8 +10,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
+# Written against the plugin API the README documented before `twin.plugin` existed (`from twin import
+# hookimpl`, `twin.types`, `twin.planning`): it must keep working. The task `acme.wave` is the newer hook.
 ACME_PLUGIN = '''
-"""A throwaway third-party twin plugin: a straight joint-space planner with constant velocity."""
+"""A throwaway third-party twin plugin: a straight joint-space planner with constant velocity, a crashing
+receding-horizon planner, and a task that waves the arm and places nothing."""
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -63,6 +66,28 @@ class Crash:
         dq = d * min(1.0, 0.05 / np.abs(d).max())
         t = np.array([0.0, 0.25])
         return Segment(Trajectory(t, np.stack([q, q + dq]), np.zeros((2, 6)), np.zeros((2, 6))), 1e-4, {})
+
+
+class Wave:
+    """A task: to the capture pose and home again, `times` times; it places nothing."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        times: int = Field(1, ge=1, le=3)
+
+    def __init__(self, params, context):
+        self.params = params
+
+    def run(self, cell):
+        for _ in range(self.params.times):
+            cell.move_joints("capture", np.array(cell.settings.camera.capture_pose))
+            cell.move_joints("home", np.array(cell.settings.robot.home))
+        return []
+
+
+@hookimpl
+def twin_register_tasks(registry):
+    registry.add_task("acme.wave", "acme_twin_plugin:Wave", description="waves the arm (test plugin)")
 
 
 @hookimpl

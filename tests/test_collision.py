@@ -438,3 +438,98 @@ def test_clearance_ignores_the_shoulder_and_follows_the_arm():
     assert c_low.distance < c_home.distance
     assert c_home.distance >= scene.min_distance(home, include_self=False).distance - 1e-12
     np.testing.assert_allclose(scene.clearance_batch(np.stack([home, lower])), [c_home.distance, c_low.distance])
+
+
+# ---- padded copies --------------------------------------------------------------------------------
+def _padded_pair(settings, extra=0.02):
+    """A scene with a run-time box, a held box and a half-open gripper, and its padded copy."""
+    s = _fresh(settings)
+    s.add_box_bounds("block", (-0.55, -0.1, 0.0), (-0.35, 0.1, 0.328))
+    s.set_gripper_opening(0.05)
+    s.attach_box("cube", (0.04, 0.04, 0.04), _pose((0.0, 0.0, 0.03)))
+    return s, s.padded(extra)
+
+
+def test_padded_copy_collides_within_the_extra_margin_and_is_clear_where_both_are(settings):
+    q_near = _q_for_tcp((-0.45, 0.0, 0.35))  # fingertips 1 cm above the block
+    q_far = _q_for_tcp((-0.45, 0.0, 0.45))  # 11 cm above it
+    plain = _fresh(settings)
+    plain.add_box_bounds("block", (-0.55, -0.1, 0.0), (-0.35, 0.1, 0.328))
+    big = plain.padded(0.02)
+    assert not plain.in_collision(q_near) and big.in_collision(q_near)
+    assert not plain.in_collision(q_far) and not big.in_collision(q_far)
+    assert big.padding_m == pytest.approx(plain.padding_m + 0.02)
+
+
+def test_padded_copy_shrinks_environment_distances_by_the_extra_margin(settings):
+    s, p = _padded_pair(settings, 0.015)
+    # on a face the distance shrinks by exactly the extra margin (fingertips 1 cm above the block top)
+    q = _q_for_tcp((-0.45, 0.0, 0.35))
+    bare = _fresh(settings)
+    bare.add_box_bounds("block", (-0.55, -0.1, 0.0), (-0.35, 0.1, 0.328))
+    d = bare.min_distance(q, include_self=False)
+    assert d.other == "block"
+    d_padded = bare.padded(0.004).min_distance(q, include_self=False).distance
+    assert d_padded == pytest.approx(d.distance - 0.004, abs=1e-9)
+    # everywhere: by at least the margin (more near box edges and cylinder rims, as padding_m is defined),
+    # and exactly as much as in a scene built from scratch with the larger padding
+    qs = _sample(np.random.default_rng(21), 300)
+    d0, d1 = s.min_distance_batch(qs, include_self=False), p.min_distance_batch(qs, include_self=False)
+    ok = d0 > 0.02
+    assert ok.sum() > 50
+    assert np.all(d1[ok] <= d0[ok] - 0.015 + 1e-6)  # FCL GJK tolerance
+    wider = settings.collision.model_copy(update={"padding_m": s.padding_m + 0.015})
+    rebuilt = PlanningScene.from_settings(settings.model_copy(update={"collision": wider}))
+    rebuilt.add_box_bounds("block", (-0.55, -0.1, 0.0), (-0.35, 0.1, 0.328))
+    rebuilt.set_gripper_opening(0.05)
+    rebuilt.attach_box("cube", (0.04, 0.04, 0.04), _pose((0.0, 0.0, 0.03)))
+    np.testing.assert_allclose(d1, rebuilt.min_distance_batch(qs, include_self=False), atol=1e-12)
+    np.testing.assert_allclose(p.min_distance_batch(qs), rebuilt.min_distance_batch(qs), atol=1e-12)
+    # self-collision is not padded: the robot-robot minimum at home is the same
+    home = np.array(settings.robot.home)
+    empty = _fresh(settings)
+    assert empty.min_distance(home).self_collision
+    assert empty.padded(0.02).min_distance(home).distance == pytest.approx(empty.min_distance(home).distance, abs=1e-12)
+
+
+def test_padded_copy_keeps_boxes_held_object_opening_and_rules_and_leaves_the_original(settings):
+    s, p = _padded_pair(settings)
+    assert p.names() == s.names()
+    assert p.excluded_pairs == s.excluded_pairs
+    assert p.allowed_self_pairs() == s.allowed_self_pairs()
+    assert p.gripper_opening == s.gripper_opening == 0.05
+    assert p.attached == "cube" and np.array_equal(p.attached_box()[2], s.attached_box()[2])
+    assert {n: (a.tolist(), b.tolist()) for n, (a, b) in p.boxes().items()} == {
+        n: (a.tolist(), b.tolist()) for n, (a, b) in s.boxes().items()
+    }
+    assert p.model is s.model  # the parsed robot is shared, not read again
+    # the original is unchanged: same padding and the same answers as an identically built scene
+    twin_scene = _fresh(settings)
+    twin_scene.add_box_bounds("block", (-0.55, -0.1, 0.0), (-0.35, 0.1, 0.328))
+    twin_scene.set_gripper_opening(0.05)
+    twin_scene.attach_box("cube", (0.04, 0.04, 0.04), _pose((0.0, 0.0, 0.03)))
+    qs = _sample(np.random.default_rng(22), 200)
+    assert s.padding_m == twin_scene.padding_m
+    np.testing.assert_array_equal(s.min_distance_batch(qs), twin_scene.min_distance_batch(qs))
+    # edits of the copy do not reach the original, and the reverse
+    p.remove("block")
+    p.detach()
+    assert "block" in s.names() and s.attached == "cube"
+    s.set_gripper_opening(0.0)
+    assert p.gripper_opening == 0.05
+
+
+def test_padded_zero_is_an_equal_copy(settings):
+    s, p = _padded_pair(settings, 0.0)
+    qs = _sample(np.random.default_rng(23), 300)
+    assert p.padding_m == s.padding_m
+    np.testing.assert_array_equal(p.in_collision_batch(qs), s.in_collision_batch(qs))
+    np.testing.assert_allclose(p.min_distance_batch(qs), s.min_distance_batch(qs), atol=1e-12)
+    np.testing.assert_allclose(p.clearance_batch(qs), s.clearance_batch(qs), atol=1e-12)
+
+
+def test_padded_rejects_a_total_padding_out_of_range(settings):
+    s = _fresh(settings)
+    for bad in (-0.01, 1.5, math.nan):
+        with pytest.raises(InvalidRequestError):
+            s.padded(bad)

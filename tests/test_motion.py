@@ -22,7 +22,7 @@ from twin_motion.retimers import RuckigRetimer, ToppraRetimer, ruckig_point_to_p
 
 from twin.config import PlannerBlock, settings_from_dict
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
-from twin.planning import limits_from_settings, make_context, plan, plan_with
+from twin.planning import densify_path, limits_from_settings, make_context, plan, plan_with
 from twin.registry import Kind, default_registry
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
 
@@ -269,6 +269,19 @@ def test_ruckig_retimer_limits_waypoints_and_smoothness(limits: Limits) -> None:
     assert traj.duration <= 1.1 * direct
     at_waypoints = [int(np.abs(traj.q - w).max(axis=1).argmin()) for w in P[1:-1]]
     assert np.linalg.norm(traj.qd[at_waypoints], axis=1).min() > 0.5
+
+
+def test_densify_path_keeps_every_waypoint_and_bounds_the_spacing() -> None:
+    """The one joint-path densifier (TOPP-RA retimer, OMPL re-timing): straight segments split evenly."""
+    P = np.zeros((4, 6))
+    P[1, 0] = 0.25
+    P[2, :3] = (0.25, 0.3, 0.4)
+    P[3] = P[2]  # a repeated waypoint stays (one zero-length step)
+    D = densify_path(P, 0.1)
+    assert np.linalg.norm(np.diff(D, axis=0), axis=1).max() <= 0.1 + 1e-12
+    assert D.shape[0] == 1 + 3 + 5 + 1  # ceil(0.25 / 0.1), ceil(0.5 / 0.1), 1 pieces
+    np.testing.assert_allclose(D[[0, 3, 8, 9]], P, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(densify_path(P[:1], 0.1), P[:1])
 
 
 def test_toppra_retimer_limits_and_endpoints(limits: Limits) -> None:

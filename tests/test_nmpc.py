@@ -24,8 +24,9 @@ from twin.planning import RecedingHorizonPlanner, Segment, _checked, densify, ma
 from twin.registry import Kind, default_registry  # noqa: E402
 from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory  # noqa: E402
 from twin_nmpc.model import TCP_FRAME, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres  # noqa: E402
-from twin_nmpc.planner import NMPCPlanner, object_spheres  # noqa: E402
+from twin_nmpc.planner import NMPCPlanner  # noqa: E402
 from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes  # noqa: E402
+from twin_nmpc.spheres import object_spheres  # noqa: E402
 
 SEED000 = {"dt": 0.08, "execute_steps": 1}
 SEED001 = {"dt": 0.1, "execute_steps": 3}
@@ -110,7 +111,7 @@ def test_symbolic_kinematics_and_sphere_model_match_numpy(ctx):
 
     kin = ctx.kinematics
     qs = ca.SX.sym("q", 6)
-    F = fk_frames_sx(qs, kin.tcp_offset_m)
+    F = fk_frames_sx(qs, kin.tcp_offset_m, kin.dh)
     f = ca.Function("f", [qs], [F[4], F[5], F[6], F[TCP_FRAME]])
     rng = np.random.default_rng(3)
     for q in rng.uniform(-3, 3, (5, 6)):
@@ -252,7 +253,7 @@ def test_plan_api_accepts_the_tolerance_and_rechecks_the_whole_arm(settings, sce
     ts = scenes[2]
     res = plan(settings, PlannerBlock(name="nmpc", params=SEED000), ts.request, scene=build_scene(settings, ts))
     assert res.success, res.reason
-    assert res.info["goal_tolerance_m"] == 0.03 and res.info["position_error_m"] <= 0.03
+    assert res.goal_tolerance_m == 0.03 and res.info["position_error_m"] <= 0.03
 
 
 def test_planning_check_holds_a_declared_tolerance_to_its_value(settings, ctx, scenes):

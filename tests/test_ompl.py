@@ -28,7 +28,7 @@ from twin_ompl.scenarios import QueryCell, top_down
 
 from twin.config import PlannerBlock
 from twin.errors import ConfigError, DependencyMissing
-from twin.planning import first_collision, make_planner, plan_with
+from twin.planning import PathPlanner, first_collision, make_planner, plan_with
 from twin.registry import Kind, default_registry
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 
@@ -227,6 +227,8 @@ def test_pose_goal_is_a_goal_set_and_retimer_comes_from_config(robocup: Cell) ->
     T = top_down(-0.45, 0.35, 0.08, 0.3)
     block = PlannerBlock(name="ompl.rrtconnect", params={"joint_range": "full"}, retimer="ruckig")
     planner = make_planner(block, cell.ctx)
+    # the contract is declared (a PathPlanner takes a retimer), and the config's retimer is the one it holds
+    assert isinstance(planner.inner, PathPlanner) and type(planner.inner.retimer).__name__ == "RuckigRetimer"
     req = MotionRequest(start, PoseGoal(Pose.from_matrix(T)), cell.limits, time_limit_s=1.0)
     res = plan_with(planner, req, cell.scene, cell.ctx)
     assert res.success, res.reason

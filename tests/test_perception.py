@@ -20,7 +20,7 @@ from twin.config import load_config
 from twin.perception.aruco import calibrate, transform_error
 from twin.perception.capture import capture_frame
 from twin.perception.evaluate import run_calibration, run_perception, true_obstacle_box
-from twin.perception.warehouse import perceive_warehouse
+from twin.tasks.warehouse.perception import perceive_warehouse
 from twin.world import World
 
 pytest.importorskip("open3d")

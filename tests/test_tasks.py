@@ -232,7 +232,7 @@ def test_a_run_reads_ground_truth_only_in_the_judge(config, monkeypatch):
 def test_release_spots_keep_what_goes_into_a_bin_inside_its_walls_and_apart():
     """The green bin takes a lying bottle, a can, a spam box and a marker (with the fingers around each):
     every release spot keeps the footprint inside the inner walls and clear of what was released before."""
-    from twin.tasks.robocup import _release_spot, _turned, bin_geometries
+    from twin.tasks.robocup.task import _release_spot, _turned, bin_geometries
 
     b = bin_geometries(ROBOCUP)["bin_green"]
     # (object, object and opened fingers) half extents along the tcp's x (closing) and y, m

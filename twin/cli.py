@@ -167,6 +167,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="estimate the camera-to-base transform from the base ArUco marker; error against the truth")
     _add_config_args(p)
     p.add_argument("--json", dest="json_path", default=None, help="write the calibration (errors and poses) here")
+
+    p = sub.add_parser("check-planner", help="check a planner against the planner contract (twin.testing.check_planner)")
+    p.add_argument("name", help="registered planner name, e.g. ompl.rrtconnect (see `twin planners`)")
+    p.add_argument("--config", default=None, help="config (a file or a shipped name) whose scene and limits are used (default: robocup)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the queries and requests, a non-negative integer (default 0)")
+    p.add_argument("--time-limit", type=float, default=1.0, help="the requests' planning time limit, s (default 1)")
+    p.add_argument("--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here")
     return parser
 
 
@@ -394,6 +401,45 @@ def _cmd_perceive(args: argparse.Namespace) -> int:
 
 _COMMANDS["perceive"] = _cmd_perceive
 _COMMANDS["calibrate"] = _cmd_calibrate
+
+
+def _cmd_check_planner(args: argparse.Namespace) -> int:
+    """Exit 0 when the planner keeps every rule of the contract, 1 when it breaks one."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from twin.testing import check_planner, time_slack_s
+
+    if not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        from twin.errors import InvalidRequestError
+
+        raise InvalidRequestError(f"--time-limit must be positive, got {args.time_limit}")
+    settings = None
+    if args.config is not None:
+        from twin.config import load_config
+
+        settings = load_config(args.config)
+    console = Console(stderr=True)
+    with console.status(f"checking {args.name}") as status:
+        report = check_planner(args.name, settings=settings, seed=args.seed, time_limit_s=args.time_limit,
+                               config_name=args.config, on_progress=lambda text: status.update(f"{args.name}: {text}"))
+    if args.json_path:
+        _write_json(args.json_path, report.to_json())
+    table = Table(title=f"{report.planner} ({report.kind}) against the planner contract: {report.config}, seed {report.seed}, "
+                        f"time limit {report.time_limit_s:g} s (+{time_slack_s(report.time_limit_s):.2f} s slack)")
+    for col in ("rule", "check", "verdict", "plugin", "checked", "detail"):
+        table.add_column(col)
+    mark = {True: "ok", False: "FAIL"}
+    for r in report.results:
+        table.add_row(str(r.number), r.rule, "pass" if r.passed else "FAIL", mark[r.raw], mark[r.checked], r.detail)
+    Console(width=200).print(table)
+    n_fail = len(report.failures)
+    print(f"{report.planner}: {'keeps every rule' if report.ok else f'breaks {n_fail} of {len(report.results)} checks'} "
+          f"({len(report.requests)} requests, {report.wall_time_s:.1f} s)")
+    return EXIT_OK if report.ok else EXIT_NO_SOLUTION
+
+
+_COMMANDS["check-planner"] = _cmd_check_planner
 
 
 def main(argv: Sequence[str] | None = None) -> int:

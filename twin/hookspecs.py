@@ -48,3 +48,13 @@ class TwinSpec:
 
         A detector turns an RGB-D frame into detections. Called once per plugin.
         """
+
+    @hookspec
+    def twin_register_tasks(self, registry: "Registry") -> None:
+        """Add tasks with `registry.add_task(name, "module:Class")`.
+
+        A task is what `twin run` runs when a config's `task.kind` names it: built as `cls(params, context)`
+        (`params` from the config's `task.params`, validated by the class's `Params` model if it has one),
+        then `run(cell) -> list[ObjectOutcome]`, where `cell` (`twin.plugin.Cell`) is the robot, gripper,
+        cameras and planners as a real cell would offer them. Called once per plugin.
+        """

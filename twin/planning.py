@@ -13,6 +13,7 @@ a plant: the kinematic model (`plan`) or the simulated arm (`twin.executor`).
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
@@ -52,6 +53,7 @@ __all__ = [
     "plan",
     "plan_with",
     "densify",
+    "densify_path",
     "first_collision",
 ]
 
@@ -217,6 +219,18 @@ def densify(traj: Trajectory, kin: "UR5e", *, max_step_rad: float, max_step_m: f
         ts[0], ts[-1] = traj.t[0], traj.t[-1]
         q, _, _ = traj.sample(ts)
     return q
+
+
+def densify_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
+    """The polyline through the joint path `path` (m, 6) with points added on its straight segments, so no
+    two neighbours are more than `max_step_rad` apart (Euclidean norm over the six joints, rad). Every
+    original waypoint is kept; a segment of length L gets ceil(L / max_step_rad) - 1 points, evenly spaced."""
+    path = np.asarray(path, dtype=float)
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        k = max(1, math.ceil(float(np.linalg.norm(b - a)) / max_step_rad - 1e-9))
+        out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
+    return np.concatenate(out)
 
 
 def first_collision(traj: Trajectory, scene: "PlanningScene", kin: "UR5e", *, max_step_rad: float = 0.01, max_step_m: float = 0.01) -> int | None:

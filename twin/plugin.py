@@ -9,7 +9,9 @@ Contracts are declared, not probed:
   model validating its parameters); a path planner that takes a retimer subclasses `PathPlanner`;
 - a planner that stops near its goal rather than on it says how near in `MotionResult.goal_tolerance_m`;
 - a detector that must be handed ground truth declares `needs_ground_truth = True` (only `oracle` does);
-- an optional classmethod `unavailable_reason() -> str | None` says why a registered name cannot run here.
+- an optional classmethod `unavailable_reason() -> str | None` says why a registered name cannot run here;
+- a task is `cls(params, context)` with `run(cell) -> list[ObjectOutcome]`; it senses through the `Cell`
+  (camera frames, joint encoders, finger position) and leaves the verdicts to the judge.
 """
 
 from __future__ import annotations
@@ -53,9 +55,13 @@ _LAZY: dict[str, str] = {
     "EXACT_ORIENTATION_TOLERANCE_RAD": "twin.types",
     # transforms
     "rpy_matrix": "twin.types",
-    "quat_to_matrix": "twin.types",
-    "matrix_to_quat": "twin.types",
-    "pose_from_xyz_rpy": "twin.urdf_model",
+    "rpy_to_matrix": "twin.transforms",
+    "matrix_to_rpy": "twin.transforms",
+    "quat_to_matrix": "twin.transforms",
+    "quats_to_matrices": "twin.transforms",
+    "matrix_to_quat": "twin.transforms",
+    "pose_from_xyz_rpy": "twin.transforms",
+    "urdf_rgba": "twin.urdf_model",
     # planner contracts and the checks every planner's output gets
     "Segment": "twin.planning",
     "PathPlanner": "twin.planning",
@@ -65,6 +71,7 @@ _LAZY: dict[str, str] = {
     "SceneView": "twin.planning",
     "GOAL_KINDS": "twin.planning",
     "densify": "twin.planning",
+    "densify_path": "twin.planning",
     "first_collision": "twin.planning",
     "colliding_pair": "twin.planning",
     "goal_miss": "twin.planning",
@@ -93,6 +100,16 @@ _LAZY: dict[str, str] = {
     "color_distance": "twin.perception.colors",
     "palette": "twin.perception.colors",
     "OBJECT_TEMPLATES": "twin.scene_layout",
+    # tasks: the cell a task drives, and the judge of its outcome (physics ground truth)
+    "Cell": "twin.tasks.cell",
+    "StageFailed": "twin.tasks.cell",
+    "GripStatus": "twin.tasks.cell",
+    "GraspCheck": "twin.tasks.cell",
+    "top_down": "twin.tasks.cell",
+    "ObjectOutcome": "twin.types",
+    "Verdict": "twin.tasks.judge",
+    "judge_in_zone": "twin.tasks.judge",
+    "judge_in_bin": "twin.tasks.judge",
 }
 
 __all__ = [
@@ -127,6 +144,7 @@ if TYPE_CHECKING:
         Segment,
         colliding_pair,
         densify,
+        densify_path,
         first_collision,
         goal_miss,
         limits_from_settings,
@@ -135,6 +153,8 @@ if TYPE_CHECKING:
     )
     from twin.registry import Kind, PluginContext, Registry
     from twin.scene_layout import OBJECT_TEMPLATES
+    from twin.tasks.cell import Cell, GraspCheck, GripStatus, StageFailed, top_down
+    from twin.tasks.judge import Verdict, judge_in_bin, judge_in_zone
     from twin.types import (
         EXACT_JOINT_TOLERANCE_RAD,
         EXACT_ORIENTATION_TOLERANCE_RAD,
@@ -145,6 +165,7 @@ if TYPE_CHECKING:
         Limits,
         MotionRequest,
         MotionResult,
+        ObjectOutcome,
         Pose,
         PoseGoal,
         Status,
@@ -154,7 +175,8 @@ if TYPE_CHECKING:
         quat_to_matrix,
         rpy_matrix,
     )
-    from twin.urdf_model import pose_from_xyz_rpy
+    from twin.transforms import matrix_to_rpy, pose_from_xyz_rpy, quats_to_matrices, rpy_to_matrix
+    from twin.urdf_model import urdf_rgba
 
 
 def __getattr__(name: str) -> Any:

@@ -1,4 +1,4 @@
-"""The plugin registry: every planner, retimer and detector by dotted name, loaded lazily.
+"""The plugin registry: every planner, retimer, detector and task by dotted name, loaded lazily.
 
 `plugin_manager()` builds a fresh pluggy manager (built-ins and third-party plugins both come from the
 entry-point group `twin`); `Registry.from_plugin_manager(pm)` asks every plugin to register its names.
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["HOOKS", "Availability", "Entry", "Kind", "PluginContext", "Registry", "default_registry", "plugin_manager"]
 
-HOOKS = ("twin_register_planners", "twin_register_retimers", "twin_register_detectors")
+HOOKS = ("twin_register_planners", "twin_register_retimers", "twin_register_detectors", "twin_register_tasks")
 
 
 class Kind(enum.Enum):
@@ -42,6 +42,7 @@ class Kind(enum.Enum):
     RECEDING_HORIZON = "receding-horizon planner"
     RETIMER = "retimer"
     DETECTOR = "detector"
+    TASK = "task"
 
 
 _PLANNER_KINDS = (Kind.PLANNER, Kind.RECEDING_HORIZON)
@@ -146,7 +147,8 @@ def validate_params(entry: Entry, cls: type, params: dict[str, Any] | BaseModel 
 
 
 class Registry:
-    """Names -> lazily loaded plugin classes. Plugins call `add_planner`, `add_retimer`, `add_detector`."""
+    """Names -> lazily loaded plugin classes. Plugins call `add_planner`, `add_retimer`, `add_detector`,
+    `add_task`."""
 
     def __init__(self) -> None:
         self._entries: dict[str, Entry] = {}
@@ -172,6 +174,11 @@ class Registry:
 
     def add_detector(self, name: str, target: str | type, *, description: str = "", extra: str | None = None) -> None:
         self.add(Kind.DETECTOR, name, target, description=description, extra=extra)
+
+    def add_task(self, name: str, target: str | type, *, description: str = "", extra: str | None = None) -> None:
+        """Register a task (what `twin run` runs, chosen by `task.kind`): `cls(params, context)`, then
+        `run(cell) -> list[ObjectOutcome]`."""
+        self.add(Kind.TASK, name, target, description=description, extra=extra)
 
     # ---- lookup ---------------------------------------------------------------------------------
     def entries(self, kinds: Iterable[Kind] | None = None) -> list[Entry]:
@@ -207,6 +214,9 @@ class Registry:
 
     def detector(self, name: str, params: dict[str, Any] | None, context: PluginContext) -> Any:
         return self.create(name, params, context, (Kind.DETECTOR,))
+
+    def task(self, name: str, params: dict[str, Any] | None, context: PluginContext) -> Any:
+        return self.create(name, params, context, (Kind.TASK,))
 
     # ---- building from plugins ------------------------------------------------------------------
     @classmethod

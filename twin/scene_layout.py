@@ -1,8 +1,11 @@
-"""Nominal scene geometry, without PyBullet: object templates, colours and the ArUco marker pose.
+"""Nominal scene geometry, without PyBullet: object templates, colours, the ArUco marker pose, and where
+the objects of a seed are placed.
 
 Perception, planning and tests need to know what the world builds (object dimensions, where the base
 marker is) without importing the simulator; `twin.world` builds the scene from these same numbers, so
-the two cannot drift apart.
+the two cannot drift apart. The layout (`sample_layout`) is pure too: given the config, the seed and the
+boxes the objects must keep clear of (the world measures those in the simulator), it returns the same
+placements every time.
 
 Frames: the world frame is the robot base frame (z up, table top at z = 0). Every object's frame has
 its origin at the object's geometric centre; cylinders have their axis along the object's z axis.
@@ -17,6 +20,7 @@ the world's x, y, z, i.e. the image's top edge faces +y and its right edge faces
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import PurePosixPath
 from typing import Literal
@@ -25,8 +29,8 @@ import numpy as np
 
 from twin.types import rpy_matrix
 
-from twin.config import FixtureSettings, Settings
-from twin.errors import ConfigError
+from twin.config import FixtureSettings, ObjectSettings, Settings
+from twin.errors import ConfigError, WorldError
 
 __all__ = [
     "ObjectTemplate",
@@ -45,6 +49,9 @@ __all__ = [
     "marker_pose_in_base",
     "marker_corners_in_base",
     "marker_quad_size_m",
+    "Placement",
+    "keepout_rects",
+    "sample_layout",
 ]
 
 
@@ -166,3 +173,100 @@ def marker_corners_in_base(settings: Settings) -> np.ndarray:
 def marker_quad_size_m(marker_size_m: float) -> float:
     """Side of the textured quad: the marker plus its white quiet zone on both sides (m)."""
     return marker_size_m * (1.0 + 2.0 * MARKER_MARGIN_FRACTION)
+
+
+# ---- object layout -------------------------------------------------------------------------------
+LAYOUT_ATTEMPTS = 50  # whole-scene restarts before giving up
+TRIES_PER_OBJECT = 300  # position draws per object within one attempt
+KEEPOUT_MIN_TOP_M = 0.002  # bodies whose top is above this are obstacles for spawning (the table is not)
+
+Aabb = tuple[Sequence[float], Sequence[float]]  # (min xyz, max xyz), base frame, m
+Rect = tuple[float, float, float, float]  # (x0, y0, x1, y1), base frame, m
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where one object of the config starts: its name (`<class>[_<colour>]_<i>`), template, colour,
+    centre position (m, base frame; resting on the table at z = 0), yaw about z (rad), lying or upright."""
+
+    name: str
+    template: ObjectTemplate
+    color: str | None
+    position: tuple[float, float, float]
+    yaw: float
+    lying: bool
+
+
+def _circle_hits_rect(cx: float, cy: float, r: float, rect: Rect) -> bool:
+    x0, y0, x1, y1 = rect
+    dx = max(x0 - cx, 0.0, cx - x1)
+    dy = max(y0 - cy, 0.0, cy - y1)
+    return dx * dx + dy * dy < r * r
+
+
+def keepout_rects(boxes: Sequence[Aabb], gap: float) -> list[Rect]:
+    """xy rectangles objects must not touch: each box whose top is above the table (the robot base, bins,
+    the marker plate, obstacles; not the table itself), grown by `gap` on every side."""
+    rects = []
+    for lo, hi in boxes:
+        if hi[2] > KEEPOUT_MIN_TOP_M:
+            rects.append((lo[0] - gap, lo[1] - gap, hi[0] + gap, hi[1] + gap))
+    return rects
+
+
+def sample_layout(objects: ObjectSettings, seed: int, obstacles: Sequence[Aabb] = ()) -> list[Placement]:
+    """Seeded, non-overlapping placements of `objects.items` in the spawn region, in config order.
+
+    `obstacles`: axis-aligned boxes (min, max) of the bodies already in the scene; objects keep
+    `min_gap_m` from each one that stands above the table and from each other. The same arguments give
+    the same placements, bit for bit. Raises ConfigError for an unknown colour and WorldError when the
+    region is too crowded to place every object.
+    """
+    cfg = objects
+    rng = np.random.default_rng(seed)
+    todo: list[tuple[str, ObjectTemplate, str | None, bool, float]] = []
+    used: dict[str, int] = {}
+    for spec in cfg.items:
+        tmpl = OBJECT_TEMPLATES[spec.cls]
+        if spec.color is not None:
+            color_rgba(spec.color)  # ConfigError for an unknown colour, before anything is placed
+        for _ in range(spec.count):
+            base = f"{spec.cls}_{spec.color}" if spec.color else spec.cls
+            name = f"{base}_{used.get(base, 0)}"
+            used[base] = used.get(base, 0) + 1
+            lying = bool(rng.random() < cfg.lying_probability) and spec.cls != "obstacle"
+            yaw = float(rng.uniform(-math.pi, math.pi)) if cfg.random_yaw else 0.0
+            todo.append((name, tmpl, spec.color, lying, yaw))
+    if not todo:
+        return []
+    (x0, x1), (y0, y1) = cfg.region_x, cfg.region_y
+    gap = cfg.min_gap_m
+    keepouts = keepout_rects(obstacles, gap)
+    radii = [t[1].footprint_radius(t[3]) for t in todo]
+    order = sorted(range(len(todo)), key=lambda i: -radii[i])  # big ones first
+    for _attempt in range(LAYOUT_ATTEMPTS):
+        placed: dict[int, tuple[float, float]] = {}
+        for i in order:
+            r = radii[i]
+            for _try in range(TRIES_PER_OBJECT):
+                x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+                if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
+                    continue
+                if all(math.hypot(x - px, y - py) >= r + radii[j] + gap for j, (px, py) in placed.items()):
+                    placed[i] = (x, y)
+                    break
+            else:
+                break
+        if len(placed) == len(todo):
+            out = []
+            for i, (name, tmpl, color, lying, yaw) in enumerate(todo):
+                x, y = placed[i]
+                out.append(Placement(name, tmpl, color, (x, y, tmpl.height(lying) / 2.0), yaw, lying))
+            return out
+    worst = max(range(len(todo)), key=lambda i: radii[i])
+    raise WorldError(
+        f"cannot place {len(todo)} objects without overlap in region x={list(cfg.region_x)} "
+        f"y={list(cfg.region_y)} with min_gap_m={gap} after {LAYOUT_ATTEMPTS} attempts "
+        f"(largest footprint radius {radii[worst]:.3f} m: {todo[worst][0]}); enlarge the region, "
+        "lower the counts, the gap or lying_probability, or move fixtures out of the region"
+    )

@@ -13,6 +13,9 @@ from typing import Any
 import numpy as np
 
 from twin.errors import InvalidRequestError
+from twin.transforms import matrix_to_quat, quat_to_matrix, rpy_to_matrix
+
+rpy_matrix = rpy_to_matrix  # the old name of twin.transforms.rpy_to_matrix, kept for importers
 
 __all__ = [
     "Pose",
@@ -51,51 +54,6 @@ def as_q(q: Any, what: str = "q") -> np.ndarray:
     return arr
 
 
-def rpy_matrix(rpy: Any) -> np.ndarray:
-    """(3, 3) rotation of fixed-axis roll, pitch, yaw (URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    roll, pitch, yaw = (float(a) for a in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def matrix_to_quat(R: np.ndarray) -> np.ndarray:
-    """x-y-z-w quaternion of a rotation matrix (Shepperd's method)."""
-    t = np.trace(R)
-    if t > 0:
-        s = math.sqrt(t + 1.0) * 2
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    v = np.array(q)
-    return v / np.linalg.norm(v)
-
-
-def quat_to_matrix(q: Any) -> np.ndarray:
-    """(3, 3) rotation of a quaternion x-y-z-w (PyBullet's order)."""
-    q = np.asarray(q, dtype=float)
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 @dataclass(frozen=True)
 class Pose:
     """A rigid pose: position (3,) m and quaternion (4,) x-y-z-w, in the base frame unless named."""
@@ -111,7 +69,7 @@ class Pose:
     @classmethod
     def from_xyz_rpy(cls, xyz: Any, rpy: Any) -> "Pose":
         """Position and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-        R = rpy_matrix(rpy)
+        R = rpy_to_matrix(rpy)
         return cls(np.array(xyz, dtype=float), matrix_to_quat(R))
 
     def matrix(self) -> np.ndarray:

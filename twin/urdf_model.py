@@ -8,6 +8,10 @@ joint value; `rpy` is fixed-axis roll-pitch-yaw, R = Rz(yaw) @ Ry(pitch) @ Rx(ro
 continuous joints rotate about `axis`, prismatic joints translate along it, both in the child frame.
 Each collision element's `origin` places the shape in its link frame. Cylinders and capsules lie along
 their local z axis (`length` excludes a capsule's hemispherical caps, as in PyBullet).
+
+Visual geometry is not modelled; only the visual colours are read (`urdf_rgba`, `urdf_link_rgba`), so a
+detector can know an object's colour from the same file PyBullet renders. Rotation helpers live in
+`twin.transforms` (re-exported here under their old names).
 """
 
 from __future__ import annotations
@@ -20,9 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.types import rpy_matrix
-
 from twin.errors import ConfigError, InvalidRequestError
+from twin.transforms import pose_from_xyz_rpy, rpy_to_matrix  # re-exported: importers use these names from here
 
 __all__ = [
     "Shape",
@@ -33,23 +36,13 @@ __all__ = [
     "read_fixture_shapes",
     "rpy_to_matrix",
     "pose_from_xyz_rpy",
+    "RGBA",
+    "urdf_rgba",
+    "urdf_link_rgba",
 ]
 
 _MOVABLE = ("revolute", "continuous", "prismatic")
 _KNOWN_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
-
-
-def rpy_to_matrix(rpy: Sequence[float]) -> np.ndarray:
-    """(3, 3) rotation of URDF roll-pitch-yaw: Rz(yaw) @ Ry(pitch) @ Rx(roll)."""
-    return rpy_matrix(rpy)
-
-
-def pose_from_xyz_rpy(xyz: Sequence[float] = (0.0, 0.0, 0.0), rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """(4, 4) homogeneous transform from a translation and URDF roll-pitch-yaw."""
-    T = np.eye(4)
-    T[:3, :3] = rpy_to_matrix(rpy)
-    T[:3, 3] = [float(v) for v in xyz]
-    return T
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,7 +148,8 @@ def _shape(col: ET.Element, link: str, index: int, where: str) -> Shape | None:
     raise ConfigError(f"{where}: link {link!r} has unsupported collision geometry <{g.tag}>")
 
 
-def _parse(source: str | Path, text: str | None = None) -> tuple[str, dict[str, Link], dict[str, Joint]]:
+def _read_root(source: str | Path, text: str | None = None) -> ET.Element:
+    """The <robot> element of a URDF file (or of `text`); ConfigError when missing or malformed."""
     where = str(source)
     if text is None and not Path(source).is_file():  # a directory or a device would not parse (or block)
         raise ConfigError(f"URDF file not found: {where} (not a regular file)")
@@ -169,6 +163,12 @@ def _parse(source: str | Path, text: str | None = None) -> tuple[str, dict[str, 
         raise ConfigError(f"{where}: not valid XML ({e})") from None
     if root.tag != "robot":
         raise ConfigError(f"{where}: the root element must be <robot>, got <{root.tag}>")
+    return root
+
+
+def _parse(source: str | Path, text: str | None = None) -> tuple[str, dict[str, Link], dict[str, Joint]]:
+    where = str(source)
+    root = _read_root(source, text)
     links: dict[str, Link] = {}
     for le in root.findall("link"):
         name = le.get("name")
@@ -405,3 +405,70 @@ def read_fixture_shapes(path: str | Path, pose: np.ndarray | None = None) -> lis
                 raise ConfigError(f"{path}: link {name!r} uses a mesh; the planning scene needs primitives")
             out.append(FixtureShape(s.kind, s.size, T0 @ links[i] @ s.origin, name, s.index))
     return out
+
+
+# ---- visual colours ---------------------------------------------------------------------------------
+RGBA = tuple[float, float, float, float]
+
+
+def _rgba(color: ET.Element, where: str) -> RGBA:
+    text = color.get("rgba") or ""
+    try:
+        vals = [float(v) for v in text.split()]
+    except ValueError:
+        vals = []
+    if len(vals) == 3:  # tolerated (the URDF spec asks for 4): opaque
+        vals.append(1.0)
+    if len(vals) != 4:
+        raise ConfigError(f"{where}: <color rgba> needs 4 numbers, got {text!r}")
+    return (vals[0], vals[1], vals[2], vals[3])
+
+
+def _link_colors(root: ET.Element, where: str) -> dict[str, RGBA]:
+    # named materials: those defined at robot level, then named ones defined inline in a visual (URDF
+    # lets a later visual refer to them by name; a robot-level definition wins, as in urdfdom)
+    named: dict[str, RGBA] = {}
+    for mat in root.findall("material"):
+        color = mat.find("color")
+        if mat.get("name") and color is not None:
+            named[mat.get("name") or ""] = _rgba(color, f"{where} material {mat.get('name')!r}")
+    for mat in root.iterfind("link/visual/material"):
+        color = mat.find("color")
+        if mat.get("name") and color is not None:
+            named.setdefault(mat.get("name") or "", _rgba(color, f"{where} material {mat.get('name')!r}"))
+    out: dict[str, RGBA] = {}
+    for le in root.findall("link"):
+        for vis in le.findall("visual"):
+            vmat = vis.find("material")
+            if vmat is None:
+                continue
+            vcolor = vmat.find("color")
+            if vcolor is not None:
+                rgba: RGBA | None = _rgba(vcolor, f"{where} link {le.get('name')!r}")
+            else:
+                rgba = named.get(vmat.get("name") or "")
+            if rgba is not None:
+                out[le.get("name") or ""] = rgba
+                break
+    return out
+
+
+def urdf_link_rgba(path: str | Path) -> dict[str, RGBA]:
+    """{link: (r, g, b, a)} in 0..1: the colour of each link's first visual whose material has one (an
+    inline <color>, or a named material defined at robot level or in an earlier visual), in file order;
+    links without a coloured visual are left out (textures are ignored). Raises ConfigError for a missing
+    or malformed file or colour."""
+    return _link_colors(_read_root(path), str(path))
+
+
+def urdf_rgba(path: str | Path, *, link: str | None = None) -> RGBA | None:
+    """(r, g, b, a) in 0..1 of `link` (default: the first link, in file order, that has a coloured visual),
+    e.g. an object model's colour; None when there is none. Raises ConfigError as `urdf_link_rgba`, and
+    for a `link` the file does not define."""
+    root = _read_root(path)
+    colors = _link_colors(root, str(path))
+    if link is None:
+        return next(iter(colors.values()), None)
+    if link not in {le.get("name") for le in root.findall("link")}:
+        raise ConfigError(f"{path}: no link named {link!r}")
+    return colors.get(link)

@@ -2,9 +2,11 @@
 
 A `World` owns one PyBullet physics client (DIRECT unless a GUI is asked for) and builds the scene of a
 config: the UR5e with its gripper at the origin (the world frame IS the robot base frame), the fixtures
-(table, bins, the ArUco base plate, obstacles) and the objects, scattered by a seeded generator inside
-the spawn region without overlap. It drives the arm by joint position control at the physics rate and
-the gripper by force-limited closing, and it exposes ground truth for metrics and tests only.
+(table, bins, the ArUco base plate, obstacles) and the objects, placed where
+`twin.scene_layout.sample_layout` puts them for the seed (in the spawn region, without overlap). It
+drives the arm by joint position control at the physics rate and the gripper by force-limited closing,
+and it exposes ground truth for metrics and tests only. URDFs are found by `Settings.resolve`; the
+marker's texture is generated once by `twin.assets` into the cache directory.
 
 Determinism: every PyBullet call passes this world's client id, overlapping pairs are processed in a
 deterministic order, and the scene is built by the same call sequence for the same config and seed, so
@@ -21,18 +23,17 @@ import logging
 import math
 import os
 import sys
-import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pybullet as pb
 
-from twin.config import PROJECT_ROOT, Settings
+from twin.assets import marker_quad_obj
+from twin.config import Settings
 from twin.kinematics import JOINT_NAMES
 from twin.types import matrix_to_quat
 
@@ -40,16 +41,15 @@ if TYPE_CHECKING:
     from twin.camera import Intrinsics, RGBDFrame
 from twin.errors import ConfigError, InvalidRequestError, WorldError
 from twin.scene_layout import (
-    MARKER_MARGIN_FRACTION,
-    OBJECT_TEMPLATES,
     PLATE_SIZE_M,
-    ObjectTemplate,
+    Placement,
     color_rgba,
     find_marker_plate,
     is_marker_plate,
     marker_pose_in_base,
     marker_quad_size_m,
     rpy_matrix,
+    sample_layout,
 )
 
 __all__ = [
@@ -69,11 +69,6 @@ FINGER_JOINT_NAMES = ("left_finger_joint", "right_finger_joint")
 FINGER_TRAVEL_M = 0.0425  # each finger, along tool0 x; the opening is the sum of both
 
 _FINGER_LINKS = ("left_finger", "right_finger")
-_LAYOUT_ATTEMPTS = 50  # whole-scene restarts before giving up
-_TRIES_PER_OBJECT = 300  # position draws per object within one attempt
-_KEEPOUT_MIN_TOP_M = 0.002  # fixtures whose top is above this are obstacles for spawning (the table is not)
-_MARKER_PX = 600  # texture pixels across the black marker square
-_MARKER_ASSET_VERSION = "v1"  # bump when the generated marker files change shape
 
 
 @dataclass(frozen=True)
@@ -112,16 +107,6 @@ class ContactPoint:
     normal_force: float
 
 
-@dataclass(frozen=True)
-class _Spawn:
-    name: str
-    template: ObjectTemplate
-    color: str | None
-    position: tuple[float, float, float]
-    yaw: float
-    lying: bool
-
-
 def _as_vec(x: Any, n: int, what: str) -> np.ndarray:
     a = np.asarray(x, dtype=float)
     if a.shape != (n,):
@@ -129,13 +114,6 @@ def _as_vec(x: Any, n: int, what: str) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise InvalidRequestError(f"{what} must be finite, got {a.tolist()}")
     return a
-
-
-def _circle_hits_rect(cx: float, cy: float, r: float, rect: tuple[float, float, float, float]) -> bool:
-    x0, y0, x1, y1 = rect
-    dx = max(x0 - cx, 0.0, cx - x1)
-    dy = max(y0 - cy, 0.0, cy - y1)
-    return dx * dx + dy * dy < r * r
 
 
 def _flush_c_stdout() -> None:
@@ -172,18 +150,6 @@ def _quiet_stdout(active: bool = True) -> Iterator[None]:
         _flush_c_stdout()
         os.dup2(saved, 1)
         os.close(saved)
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Write a cache file so that concurrent workers never read a half-written one."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 class World:
@@ -265,8 +231,10 @@ class World:
             self._load_fixture(fx.name, fx.urdf, fx.position, fx.rpy)
             if is_marker_plate(fx):
                 self._add_marker_quad()
-        self._objects: dict[int, _Spawn] = {}
-        for sp in self._sample_layout():
+        self._objects: dict[int, Placement] = {}
+        objects = self.settings.world.objects
+        boxes = self._obstacle_boxes() if any(spec.count for spec in objects.items) else []
+        for sp in sample_layout(objects, self.seed, boxes):
             self._load_object(sp)
         self._apply_initial_commands()
         self._steps = 0
@@ -333,59 +301,13 @@ class World:
         self._fixtures[name] = bid
         self._bodies[name] = bid
 
-    def _marker_assets(self) -> Path:
-        """Generate (once, cached) the marker image and a unit quad OBJ whose MTL names it."""
-        import cv2  # only the world needs OpenCV at build time, and only for the marker texture
-
-        a = self.settings.aruco
-        dict_id = getattr(cv2.aruco, a.dictionary, None)
-        if not isinstance(dict_id, int) or not a.dictionary.startswith("DICT_"):
-            raise ConfigError(f"aruco.dictionary {a.dictionary!r} is not a cv2.aruco dictionary (e.g. DICT_4X4_50)")
-        cache = PROJECT_ROOT / "urdf" / "generated"  # git-ignored
-        try:
-            cache.mkdir(parents=True, exist_ok=True)
-            if not os.access(cache, os.W_OK):
-                raise PermissionError(str(cache))
-        except OSError:  # a read-only install: use a temp dir instead
-            cache = Path(tempfile.gettempdir()) / "twin-generated"
-            cache.mkdir(parents=True, exist_ok=True)
-        stem = f"aruco_{a.dictionary}_{a.id}_{_MARKER_ASSET_VERSION}"
-        png, mtl, obj = (cache / f"{stem}.{ext}" for ext in ("png", "mtl", "obj"))
-        if not (png.is_file() and mtl.is_file() and obj.is_file()):
-            dictionary = cv2.aruco.getPredefinedDictionary(dict_id)
-            try:
-                img = cv2.aruco.generateImageMarker(dictionary, a.id, _MARKER_PX, borderBits=1)
-            except cv2.error as e:
-                raise ConfigError(f"aruco.id {a.id} is not in {a.dictionary}: {' '.join(str(e).split())}") from None
-            m = round(_MARKER_PX * MARKER_MARGIN_FRACTION)
-            img = cv2.copyMakeBorder(img, m, m, m, m, cv2.BORDER_CONSTANT, value=255)
-            ok, buf = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
-            if not ok:
-                raise WorldError("could not encode the ArUco marker image")
-            _write_atomic(png, buf.tobytes())
-            _write_atomic(
-                mtl,
-                f"newmtl aruco\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nmap_Kd {png.name}\n".encode(),
-            )
-            # unit quad in z = 0, normal +z; image top-left at (-0.5, +0.5) (OBJ v runs bottom to top)
-            _write_atomic(
-                obj,
-                (
-                    f"mtllib {mtl.name}\no aruco_quad\n"
-                    "v -0.5 -0.5 0\nv 0.5 -0.5 0\nv 0.5 0.5 0\nv -0.5 0.5 0\n"
-                    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
-                    "usemtl aruco\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n"
-                ).encode(),
-            )
-        return obj
-
     def _add_marker_quad(self) -> None:
         """The marker: a visual-only textured quad on the plate's top face (pose: scene_layout)."""
         c = self._cid
         side = marker_quad_size_m(self.settings.aruco.size_m)
         if side > PLATE_SIZE_M:
             log.warning("ArUco quad (%.3f m with its white border) is wider than the plate (%.3f m)", side, PLATE_SIZE_M)
-        obj = self._marker_assets()
+        obj = marker_quad_obj(self.settings.aruco)  # generated once, in the cache directory
         vs = pb.createVisualShape(
             pb.GEOM_MESH, fileName=str(obj), meshScale=[side, side, 1.0], physicsClientId=c
         )
@@ -399,71 +321,16 @@ class World:
         )
         self._bodies["aruco_marker"] = self._marker_id
 
-    def _keepouts(self, gap: float) -> list[tuple[float, float, float, float]]:
-        """xy rectangles that objects must not touch: the robot base and every fixture above the table."""
+    def _obstacle_boxes(self) -> list[tuple[Sequence[float], Sequence[float]]]:
+        """Axis-aligned boxes (min, max) of the robot base and every link of every fixture, for the layout."""
         c = self._cid
-        rects = []
         boxes = [pb.getAABB(self.robot_id, -1, physicsClientId=c)]
         for bid in self._fixtures.values():
             for link in range(-1, pb.getNumJoints(bid, physicsClientId=c)):
                 boxes.append(pb.getAABB(bid, link, physicsClientId=c))
-        for lo, hi in boxes:
-            if hi[2] > _KEEPOUT_MIN_TOP_M:
-                rects.append((lo[0] - gap, lo[1] - gap, hi[0] + gap, hi[1] + gap))
-        return rects
+        return boxes
 
-    def _sample_layout(self) -> list[_Spawn]:
-        """Seeded, non-overlapping placements; raises WorldError when the region is too crowded."""
-        cfg = self.settings.world.objects
-        rng = np.random.default_rng(self.seed)
-        todo: list[tuple[str, ObjectTemplate, str | None, bool, float]] = []
-        used: dict[str, int] = {}
-        for spec in cfg.items:
-            tmpl = OBJECT_TEMPLATES[spec.cls]
-            if spec.color is not None:
-                color_rgba(spec.color)  # ConfigError for an unknown colour, before anything is placed
-            for _ in range(spec.count):
-                base = f"{spec.cls}_{spec.color}" if spec.color else spec.cls
-                name = f"{base}_{used.get(base, 0)}"
-                used[base] = used.get(base, 0) + 1
-                lying = bool(rng.random() < cfg.lying_probability) and spec.cls != "obstacle"
-                yaw = float(rng.uniform(-math.pi, math.pi)) if cfg.random_yaw else 0.0
-                todo.append((name, tmpl, spec.color, lying, yaw))
-        if not todo:
-            return []
-        (x0, x1), (y0, y1) = cfg.region_x, cfg.region_y
-        gap = cfg.min_gap_m
-        keepouts = self._keepouts(gap)
-        radii = [t[1].footprint_radius(t[3]) for t in todo]
-        order = sorted(range(len(todo)), key=lambda i: -radii[i])  # big ones first
-        for _attempt in range(_LAYOUT_ATTEMPTS):
-            placed: dict[int, tuple[float, float]] = {}
-            for i in order:
-                r = radii[i]
-                for _try in range(_TRIES_PER_OBJECT):
-                    x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
-                    if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
-                        continue
-                    if all(math.hypot(x - px, y - py) >= r + radii[j] + gap for j, (px, py) in placed.items()):
-                        placed[i] = (x, y)
-                        break
-                else:
-                    break
-            if len(placed) == len(todo):
-                out = []
-                for i, (name, tmpl, color, lying, yaw) in enumerate(todo):
-                    x, y = placed[i]
-                    out.append(_Spawn(name, tmpl, color, (x, y, tmpl.height(lying) / 2.0), yaw, lying))
-                return out
-        worst = max(range(len(todo)), key=lambda i: radii[i])
-        raise WorldError(
-            f"cannot place {len(todo)} objects without overlap in region x={list(cfg.region_x)} "
-            f"y={list(cfg.region_y)} with min_gap_m={gap} after {_LAYOUT_ATTEMPTS} attempts "
-            f"(largest footprint radius {radii[worst]:.3f} m: {todo[worst][0]}); enlarge the region, "
-            "lower the counts, the gap or lying_probability, or move fixtures out of the region"
-        )
-
-    def _load_object(self, sp: _Spawn) -> None:
+    def _load_object(self, sp: Placement) -> None:
         c = self._cid
         R = rpy_matrix((0.0, 0.0, sp.yaw))
         if sp.lying:

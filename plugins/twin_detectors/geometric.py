@@ -13,20 +13,25 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from twin.camera import RGBDFrame
-from twin.perception.colors import color_distance, palette
-from twin.perception.detection import Detection, SceneCloud, scene_cloud
-from twin.perception.segmentation import cluster_points, footprint
-from twin.scene_layout import OBJECT_TEMPLATES
+from twin.plugin import (
+    OBJECT_TEMPLATES,
+    Detection,
+    RGBDFrame,
+    SceneCloud,
+    cluster_points,
+    color_distance,
+    footprint,
+    palette,
+    scene_cloud,
+    urdf_rgba,
+)
 
 __all__ = ["GeometricDetector", "Prototype"]
 
@@ -46,19 +51,6 @@ class Prototype:
     length: float
     width: float
     rgb: np.ndarray
-
-
-def _urdf_rgb(path: str) -> np.ndarray | None:
-    """The first material colour of a URDF (our object models carry their own colour)."""
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError):
-        return None
-    for color in root.iter("color"):
-        vals = [float(v) for v in re.split(r"\s+", color.get("rgba", "").strip()) if v]
-        if len(vals) >= 3:
-            return np.array(vals[:3])
-    return None
 
 
 class GeometricDetector:
@@ -101,7 +93,8 @@ class GeometricDetector:
         grey = np.array([0.5, 0.5, 0.5])
         for cls in _CLASSES:
             t = OBJECT_TEMPLATES[cls]
-            rgb = _urdf_rgb(str(self.settings.resolve(t.urdf)))
+            rgba = urdf_rgba(self.settings.resolve(t.urdf))  # our object models carry their own colour
+            rgb = None if rgba is None else np.array(rgba[:3])
             for lying in (False, True):
                 ex, ey, ez = t.extents(lying)
                 out.append(Prototype(cls, None, lying, ez, max(ex, ey), min(ex, ey), grey if rgb is None else rgb))

@@ -14,10 +14,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from twin.camera import RGBDFrame
-from twin.errors import InvalidRequestError
-from twin.perception.detection import Detection, SceneCloud, scene_cloud
-from twin.types import quat_to_matrix
+from twin.plugin import Detection, InvalidRequestError, RGBDFrame, SceneCloud, quat_to_matrix, scene_cloud
 
 __all__ = ["OracleDetector"]
 

@@ -11,8 +11,7 @@ The defensive IK they share is `twin_motion.ik.DefensiveIK`.
 
 from __future__ import annotations
 
-from twin import hookimpl
-from twin.registry import Registry
+from twin.plugin import Registry, hookimpl
 
 __all__ = ["PLANNERS", "RETIMERS", "twin_register_planners", "twin_register_retimers"]
 

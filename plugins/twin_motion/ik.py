@@ -23,16 +23,13 @@ import numpy as np
 import ur_analytic_ik
 from pydantic import BaseModel, ConfigDict, Field
 
-from twin.kinematics import DH_A, DH_D, UR5e, dh_frames, jacobian_one, jacobians
-from twin.types import Pose
+from twin.plugin import Pose, UR5e
 
 __all__ = [
     "DefensiveIK",
     "DefensiveIKParams",
     "IKResult",
     "condition_numbers",
-    "jacobian_one",
-    "jacobians",
 ]
 
 log = logging.getLogger("twin")
@@ -87,9 +84,9 @@ def _cond(J: np.ndarray) -> np.ndarray:
         return sv[:, 0] / sv[:, -1]
 
 
-def condition_numbers(qs: np.ndarray, tool: np.ndarray) -> np.ndarray:
-    """(n,) cond(J) for (n, 6) configurations (inf at an exact singularity)."""
-    return _cond(jacobians(dh_frames(qs), tool))
+def condition_numbers(kin: UR5e, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
+    """(n,) cond(J) of `frame`'s Jacobian for (n, 6) configurations (inf at an exact singularity)."""
+    return _cond(kin.jacobians_from_frames(kin.dh_frames(qs), frame))
 
 
 class DefensiveIK:
@@ -101,10 +98,9 @@ class DefensiveIK:
     def __init__(self, kin: UR5e | None = None, params: DefensiveIKParams | None = None):
         self.kin = kin or UR5e()
         self.params = params or DefensiveIKParams()
-        z = np.zeros(6)
-        flange = self.kin.fk(z, "flange")
-        self._tool = {f: np.linalg.inv(flange) @ self.kin.fk(z, f) for f in ("tcp", "flange")}
+        self._tool = {f: self.kin.tool_transform(f) for f in ("tcp", "flange")}
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
+        self._dh = self.kin.dh
         self._lo = self.kin.joint_limits[:, 0] - 1e-12
         self._hi = self.kin.joint_limits[:, 1] + 1e-12
 
@@ -137,19 +133,20 @@ class DefensiveIK:
 
     def condition(self, q: np.ndarray, frame: str = "tcp") -> float:
         """cond(J) at `q` (6,) for the Jacobian of `frame`."""
-        sv = np.linalg.svd(jacobian_one(q, self._tool[frame]), compute_uv=False)
+        sv = np.linalg.svd(self.kin.jacobian(q, frame), compute_uv=False)
         return float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
 
     def _why_unreachable(self, T_fl: np.ndarray) -> str:
-        wc = T_fl[:3, 3] - DH_D[5] * T_fl[:3, 2]  # wrist centre (frame 5 origin)
+        d, a = self._dh.d, self._dh.a
+        wc = T_fl[:3, 3] - d[5] * T_fl[:3, 2]  # wrist centre (frame 5 origin)
         r_xy = math.hypot(wc[0], wc[1])
-        if r_xy < DH_D[3]:
+        if r_xy < d[3]:
             return (
                 f"the wrist centre is {r_xy:.3f} m from the base z axis, inside the shoulder singularity column "
-                f"(radius d4 = {DH_D[3]:.4f} m)"
+                f"(radius d4 = {d[3]:.4f} m)"
             )
-        dist = float(np.linalg.norm(wc - np.array([0.0, 0.0, DH_D[0]])))
-        reach = abs(DH_A[1]) + abs(DH_A[2])
+        dist = float(np.linalg.norm(wc - np.array([0.0, 0.0, d[0]])))
+        reach = abs(a[1]) + abs(a[2])
         return (
             f"no analytic solution (wrist centre {dist:.3f} m from the shoulder; the arm spans "
             f"{reach:.3f} m plus the wrist offsets): out of reach or orientation not attainable there"

@@ -18,15 +18,23 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from twin.kinematics import UR5e, wrap_to_pi
-from twin.planning import first_collision
-from twin.types import JointGoal, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
+from twin.plugin import (
+    JointGoal,
+    MotionRequest,
+    MotionResult,
+    PoseGoal,
+    Settings,
+    Status,
+    Trajectory,
+    UR5e,
+    first_collision,
+    wrap_to_pi,
+)
 from twin_motion.ik import DefensiveIK, DefensiveIKParams, IKResult
 from twin_motion.retimers import RetimingFailed, ruckig_point_to_point, ruckig_samples
 
 if TYPE_CHECKING:
-    from twin.collision import PlanningScene
-    from twin.registry import PluginContext
+    from twin.plugin import PlanningScene, PluginContext
 
 __all__ = [
     "MotionPlannerBase",
@@ -74,8 +82,6 @@ class MotionPlannerBase:
             self.kin: UR5e = context.kinematics
             settings = context.settings
         else:
-            from twin.config import Settings
-
             self.kin = UR5e()
             settings = Settings()
         self.home = np.array(settings.robot.home, dtype=float)

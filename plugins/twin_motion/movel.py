@@ -24,13 +24,12 @@ import numpy as np
 from pydantic import Field
 from scipy.interpolate import CubicSpline
 
-from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
-from twin.kinematics import dh_frames
+from twin.plugin import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
 from twin_motion.movej import MotionPlannerBase, sample_times, stationary
 from twin_motion.retimers import toppra_time_spline
 
 if TYPE_CHECKING:
-    from twin.collision import PlanningScene
+    from twin.plugin import PlanningScene
 
 __all__ = ["CartesianLine", "SeedSlerpMoveL", "ToppraMoveL", "quat_slerp", "quats_to_matrices"]
 
@@ -265,7 +264,7 @@ class ToppraMoveL(_MoveLBase):
         for _ in range(8):
             spline = CubicSpline(S, Q, bc_type="not-a-knot")
             s_chk = (S[:-1, None] + np.diff(S)[:, None] * frac[None, :]).ravel()
-            T = dh_frames(spline(s_chk))[:, 6] @ tool
+            T = self.kin.dh_frames(spline(s_chk))[:, 6] @ tool
             dp, da = line.deviation(T, s_chk)
             dp, da = dp.reshape(-1, frac.size).max(axis=1), da.reshape(-1, frac.size).max(axis=1)
             bad = np.flatnonzero((dp > tol_p) | (da > tol_a))
@@ -317,7 +316,7 @@ class ToppraMoveL(_MoveLBase):
             "spline_orientation_deviation_deg": math.degrees(dev_a),
         }
         if p.verify_samples and timed.s is not None:
-            T = dh_frames(traj.q)[:, 6] @ self.ik.tool(frame)
+            T = self.kin.dh_frames(traj.q)[:, 6] @ self.ik.tool(frame)
             dp, da = line.deviation(T, timed.s)
             info["line_deviation_m"], info["orientation_deviation_deg"] = float(dp.max()), math.degrees(float(da.max()))
             if dp.max() > p.max_line_deviation_m or da.max() > math.radians(p.max_orientation_deviation_deg):

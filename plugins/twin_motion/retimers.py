@@ -32,8 +32,7 @@ import ruckig
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.interpolate import CubicSpline
 
-from twin.errors import PlanningError
-from twin.types import Limits, Trajectory
+from twin.plugin import Limits, PlanningError, Trajectory, densify_path
 
 __all__ = [
     "RetimingFailed",
@@ -422,14 +421,6 @@ def toppra_time_spline(
     return TimedSamples(t, q, qd, qdd, s)
 
 
-def _densify(P: np.ndarray, max_step: float) -> np.ndarray:
-    out = [P[:1]]
-    for a, b in itertools.pairwise(P):
-        k = max(1, math.ceil(np.linalg.norm(b - a) / max_step - 1e-9))
-        out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
-    return np.concatenate(out)
-
-
 class ToppraRetimer:
     """Time-optimal retimer (TOPP-RA, constant-acceleration parametrizer) of a spline through the path."""
 
@@ -460,7 +451,7 @@ class ToppraRetimer:
             return _stationary(P[0])
         # Subdivide straight segments so the cubic spline hugs the polyline (corners are rounded within
         # about one spacing) and parameterise by joint-space arc length.
-        D = _densify(P, p.max_spacing_rad)
+        D = densify_path(P, p.max_spacing_rad)
         knots = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(D, axis=0), axis=1))))
         out = toppra_time_spline(
             knots,

@@ -6,8 +6,7 @@
 
 from __future__ import annotations
 
-from twin import hookimpl
-from twin.registry import Registry
+from twin.plugin import Registry, hookimpl
 
 __all__ = ["twin_register_planners"]
 

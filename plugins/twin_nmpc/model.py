@@ -35,12 +35,13 @@ import logging
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
 
-from twin.kinematics import DH_A, DH_ALPHA, DH_D
+if TYPE_CHECKING:
+    from twin.plugin import DHParameters
 
 __all__ = [
     "ProblemShape",
@@ -74,24 +75,25 @@ def _exact(v: float) -> float:
     return v
 
 
-def fk_tcp_sx(q: ca.SX, tcp_offset_m: float) -> tuple[ca.SX, ca.SX]:
-    """Symbolic UR5e forward kinematics (standard DH, SPEC parameters): TCP position (3,) and rotation (3, 3)."""
-    frames = fk_frames_sx(q, tcp_offset_m)
+def fk_tcp_sx(q: ca.SX, tcp_offset_m: float, dh: "DHParameters") -> tuple[ca.SX, ca.SX]:
+    """Symbolic forward kinematics (standard DH parameters `dh`, `UR5e.dh`): TCP position (3,) and rotation (3, 3)."""
+    frames = fk_frames_sx(q, tcp_offset_m, dh)
     return frames[TCP_FRAME][:3, 3], frames[TCP_FRAME][:3, :3]
 
 
-def fk_frames_sx(q: ca.SX, tcp_offset_m: float) -> dict[int, ca.SX]:
+def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: "DHParameters") -> dict[int, ca.SX]:
     """Symbolic DH frames 4, 5 and 6 (wrist_2 joint, wrist_3 joint, flange) and the TCP (key TCP_FRAME),
-    (4, 4) each in the base frame."""
+    (4, 4) each in the base frame, for the standard DH parameters `dh` (`UR5e.dh`)."""
     T = ca.SX.eye(4)
     out: dict[int, ca.SX] = {}
+    d, a, alpha = (np.asarray(v, dtype=float) for v in (dh.d, dh.a, dh.alpha))
     for i in range(6):
         ct, st = ca.cos(q[i]), ca.sin(q[i])
-        cal, sal = _exact(math.cos(DH_ALPHA[i])), _exact(math.sin(DH_ALPHA[i]))
+        cal, sal = _exact(math.cos(alpha[i])), _exact(math.sin(alpha[i]))
         A = ca.SX.zeros(4, 4)
-        A[0, 0], A[0, 1], A[0, 2], A[0, 3] = ct, -st * cal, st * sal, DH_A[i] * ct
-        A[1, 0], A[1, 1], A[1, 2], A[1, 3] = st, ct * cal, -ct * sal, DH_A[i] * st
-        A[2, 1], A[2, 2], A[2, 3] = sal, cal, DH_D[i]
+        A[0, 0], A[0, 1], A[0, 2], A[0, 3] = ct, -st * cal, st * sal, a[i] * ct
+        A[1, 0], A[1, 1], A[1, 2], A[1, 3] = st, ct * cal, -ct * sal, a[i] * st
+        A[2, 1], A[2, 2], A[2, 3] = sal, cal, d[i]
         A[3, 3] = 1.0
         T = ca.mtimes(T, A)
         if i + 1 >= 4:
@@ -175,7 +177,8 @@ class NMPCProblem:
     """The NLP for one `ProblemShape`, with a cold and a warm-started IPOPT instance built once
     (`cold_options`, `warm_options`: nlpsol options, e.g. {"ipopt.tol": 1e-2}).
 
-    `robot_spheres` (n, 5): (frame, x, y, z, r) with frame a DH frame index (4, 5, 6) or TCP_FRAME.
+    `robot_spheres` (n, 5): (frame, x, y, z, r) with frame a DH frame index (4, 5, 6) or TCP_FRAME; `dh` and
+    `tcp_offset_m` the arm's kinematics (`UR5e.dh`, `UR5e.tcp_offset_m`).
     Parameters of a solve (vector `p`): q0 (6), the last executed step q0 - q_{-1} (6), goal (3), tracked
     point in the TCP frame (3), table z (1),
     then per box centre (3) and half extents incl. margin (3), then per held-object sphere offset in the TCP
@@ -187,6 +190,7 @@ class NMPCProblem:
         shape: ProblemShape,
         *,
         robot_spheres: np.ndarray,
+        dh: "DHParameters",
         tcp_offset_m: float,
         weights: Weights,
         table_clearance_m: float,
@@ -215,7 +219,7 @@ class NMPCProblem:
         used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME})
 
         qs = ca.SX.sym("q", 6)
-        frames = fk_frames_sx(qs, tcp_offset_m)
+        frames = fk_frames_sx(qs, tcp_offset_m, dh)
         fk = ca.Function("fk", [qs], [frames[f] for f in used])
 
         def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, ca.SX]], ca.SX, ca.SX]:

@@ -17,12 +17,19 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
-from twin.collision import FixtureSpec, PlanningScene
-from twin.config import PROJECT_ROOT, Settings, load_config
-from twin.kinematics import UR5e
-from twin.planning import densify, limits_from_settings
-from twin.types import BoxBounds, MotionRequest, Pose, PoseGoal, Trajectory
-from twin.urdf_model import pose_from_xyz_rpy
+from twin.plugin import (
+    BoxBounds,
+    MotionRequest,
+    PlanningScene,
+    Pose,
+    PoseGoal,
+    Settings,
+    Trajectory,
+    UR5e,
+    densify,
+    limits_from_settings,
+    load_config,
+)
 
 __all__ = ["TransferScene", "transfer_scenes", "build_scene", "TrajectoryCheck", "check_trajectory", "CUBE_SIZE_M", "GOAL_TOLERANCE_M"]
 
@@ -52,26 +59,23 @@ def _down(yaw: float) -> np.ndarray:
     return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
 
 
-def _fixtures(settings: Settings, obstacle_center: np.ndarray) -> list[FixtureSpec]:
-    out = []
+def _cell(settings: Settings, obstacle_center: np.ndarray | None, *, only: tuple[str, ...] | None = None) -> Settings:
+    """The config with its obstacle wall moved to `obstacle_center` and made a known fixture (the scene that
+    checks a run holds the true wall; the planner sees only the perceived box), keeping only the fixtures
+    named in `only` (None: all)."""
+    fixtures = []
     for f in settings.world.fixtures:
-        pos = tuple(obstacle_center) if f.name == "obstacle" else f.position
-        out.append(FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(pos, f.rpy)))
-    return out
+        if f.name == "obstacle" and obstacle_center is not None:
+            f = f.model_copy(update={"position": tuple(obstacle_center), "known": True})
+        if only is None or f.name in only:
+            fixtures.append(f)
+    return settings.model_copy(update={"world": settings.world.model_copy(update={"fixtures": fixtures})})
 
 
 def build_scene(settings: Settings, ts: TransferScene, *, with_fixtures: bool = True, holding: bool = True) -> PlanningScene:
     """The FCL planning scene of `ts`: the cell with the obstacle moved to its place, the perceived box,
     the cube held in the gripper (closed on it). `with_fixtures=False` keeps the table only."""
-    fixtures = _fixtures(settings, ts.obstacle_center)
-    if not with_fixtures:
-        fixtures = [f for f in fixtures if f.name == "table"]
-    scene = PlanningScene(
-        settings.resolve(settings.robot.urdf),
-        fixtures=fixtures,
-        padding_m=settings.collision.padding_m,
-        reference_configs=[settings.robot.home],
-    )
+    scene = PlanningScene.from_settings(_cell(settings, ts.obstacle_center, only=None if with_fixtures else ("table",)))
     if with_fixtures:
         b = ts.perceived_box
         scene.add_box_bounds(_PERCEIVED, b.lo, b.hi)
@@ -92,7 +96,7 @@ def _box_only_scene(settings: Settings, ts: TransferScene, cache: dict[str, Plan
     """The arm holding the cube, with only the perceived box (one scene reused: the box is replaced)."""
     scene = cache.get("scene")
     if scene is None:
-        scene = PlanningScene(settings.resolve(settings.robot.urdf), reference_configs=[settings.robot.home])
+        scene = PlanningScene.from_settings(_cell(settings, None, only=()))
         scene.set_gripper_opening(CUBE_SIZE_M)
         cache["scene"] = scene
     if scene.attached is not None:
@@ -105,7 +109,7 @@ def _box_only_scene(settings: Settings, ts: TransferScene, cache: dict[str, Plan
 
 def transfer_scenes(n: int = 50, seed: int = 0, *, settings: Settings | None = None) -> list[TransferScene]:
     """`n` seeded transfer scenes over the obstacle wall (deterministic for a given seed)."""
-    settings = settings or load_config(PROJECT_ROOT / "configs" / "warehouse.yaml")
+    settings = settings or load_config("warehouse")
     kin = UR5e()
     limits = limits_from_settings(settings)
     home = np.array(settings.robot.home)

@@ -20,8 +20,7 @@ Python-side FCL check no blocked table-to-bin query was solved within 1 s (see `
 
 from __future__ import annotations
 
-from twin import hookimpl
-from twin.registry import Registry
+from twin.plugin import Registry, hookimpl
 
 __all__ = ["PLANNERS", "twin_register_planners"]
 

@@ -39,11 +39,14 @@ not bound (`unavailable_reason()` says so without building a planner, and creati
 DependencyMissing); the PRM family and BFMT* get only the nearest goal configuration (see
 `PlannerSpec.single_goal`: the PRM goal-adding helper thread deadlocks with Python callbacks, BFMT*
 crashes with a goal set).
+
+The pieces: `twin_ompl.params` (one parameter model per planner), `twin_ompl.validity` (FCL state and
+motion checks, the inflated scene), `twin_ompl.problem` (step 4: bounds, OMPL space, start and goals, the
+seeded planner), `twin_ompl.postprocess` (steps 5-7); this module holds the planner class and its loop.
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 import time
@@ -53,25 +56,31 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import ompl.base as ob
 import ompl.geometric as og
-import ompl.util as ou
 
-from twin.config import Settings
-from twin.errors import ConfigError, DependencyMissing, PlanningError, TwinError
-from twin.kinematics import UR5e
-from twin.planning import colliding_pair, make_context
-from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
-from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
-from twin_ompl.validity import (
-    CheckCounter,
-    SceneMotionValidator,
-    padded_scene,
-    state_validity_checker,
-    trajectory_check_points,
+from twin.plugin import (
+    ConfigError,
+    DependencyMissing,
+    JointGoal,
+    Limits,
+    MotionRequest,
+    MotionResult,
+    PathPlanner,
+    PlanningError,
+    PoseGoal,
+    Retimer,
+    Settings,
+    Status,
+    UR5e,
+    colliding_pair,
+    make_context,
 )
+from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
+from twin_ompl.postprocess import add_time, path_length, simplify, timed_and_checked
+from twin_ompl.problem import repair_bounds, sampling_bounds, simple_setup, space_information, states
+from twin_ompl.validity import CheckCounter, padded_scene
 
 if TYPE_CHECKING:
-    from twin.collision import PlanningScene
-    from twin.registry import PluginContext
+    from twin.plugin import PlanningScene, PluginContext
 
 __all__ = [
     "AORRTC",
@@ -97,59 +106,11 @@ __all__ = [
 
 log = logging.getLogger("twin")
 
-ou.setLogLevel(ou.LogLevel.LOG_WARN)
-
-_PI = math.pi
 # kept free of sampling (for shortcutting, retiming and the final check) when a planner would use all of
 # its time: a quarter of the limit, at most this many seconds
 _POST_RESERVE_S = 0.25
 _REPAIR_RESERVE_S = 0.05  # a repaired path needs only retiming and the final check
 _DIRECT_GOALS = 3  # nearest goals tried with a straight motion
-# a repair plans one grazing segment again inside the segment's own box widened by this much per joint: the
-# detour around a graze is local, and a small box keeps batch planners (FMT*, BFMT*), whose edges span
-# their whole sampling box, from checking long edges at the fine resolution
-_REPAIR_MARGIN_RAD = 0.3
-
-
-def sampling_bounds(kin: UR5e, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
-    """(6, 2) sampling bounds in rad (see the module docstring, step 3)."""
-    lim = np.asarray(kin.joint_limits, dtype=float)
-    if joint_range == "full":
-        return lim.copy()
-    lo = np.minimum(-_PI, start - _PI)
-    hi = np.maximum(_PI, start + _PI)
-    if joint_goal is not None:
-        lo, hi = np.minimum(lo, joint_goal), np.maximum(hi, joint_goal)
-    return np.stack([np.maximum(lo, lim[:, 0]), np.minimum(hi, lim[:, 1])], axis=1)
-
-
-def path_length(path: np.ndarray) -> float:
-    """Joint-space length of a waypoint path (m, 6): sum of the L2 norms of its segments, rad."""
-    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if path.shape[0] > 1 else 0.0
-
-
-def _densify(path: np.ndarray, spacing: float) -> np.ndarray:
-    """The polyline through `path` (m, 6) with extra points so no two are more than `spacing` apart (L2)."""
-    out = [path[:1]]
-    for a, b in itertools.pairwise(path):
-        k = max(1, math.ceil(float(np.linalg.norm(b - a)) / spacing - 1e-9))
-        out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
-    return np.concatenate(out)
-
-
-def _seed(seed: int) -> None:
-    """Re-seed OMPL's seed generator (seed 0 is OMPL's 'random'; avoid it). Its 'already started'
-    complaint is expected here: re-seeding still restarts the sequence of seeds for new generators."""
-    level = ou.getLogLevel()
-    ou.setLogLevel(ou.LogLevel.LOG_NONE)
-    try:
-        ou.RNG.setSeed(int(seed) % 2_147_483_647 + 1)
-    finally:
-        ou.setLogLevel(level)
-
-
-def _states(path: Any) -> np.ndarray:
-    return np.array([path.getState(i)[0:6] for i in range(path.getStateCount())], dtype=float)
 
 
 @dataclass
@@ -163,11 +124,13 @@ class _Attempt:
     goal_index: int | None = None
 
 
-class OmplPlanner:
+class OmplPlanner(PathPlanner):
     """A one-shot planner around one OMPL geometric planner (the subclasses below fix which one).
 
     `params` is the planner's pydantic model (`Params`), `context` the plugin context (settings,
     kinematics, registry). `plan(request, scene)` never raises for "no path": it returns a status.
+    A `PathPlanner`: a config block's `retimer:` arrives through `set_retimer` (`self.retimer`); without
+    one, the retimer named in `params.retimer` times the path.
     """
 
     spec: PlannerSpec = PLANNER_SPECS["RRTConnect"]
@@ -186,7 +149,7 @@ class OmplPlanner:
             self.kin = UR5e()
             self.settings = Settings()
         self._planner_setters = self._setters()
-        self._retimer: Any = None
+        self._default_retimer: Retimer | None = None
         self._warm_up()
 
     # ---- configuration ---------------------------------------------------------------------------
@@ -229,32 +192,32 @@ class OmplPlanner:
             out.append((setter, value))
         return out
 
-    def set_retimer(self, retimer: Any) -> None:
-        """Use this retimer (any object with `retime(path, limits) -> Trajectory`) instead of `params.retimer`."""
-        if not hasattr(retimer, "retime"):
-            raise PlanningError(f"{type(retimer).__name__} has no retime(path, limits)")
-        self._retimer = retimer
+    def set_retimer(self, retimer: Retimer) -> None:
+        """Use this retimer (the config block's `retimer:`) instead of `params.retimer`; warmed up at once."""
+        super().set_retimer(retimer)
         self._warm_up()
 
     def _warm_up(self) -> None:
         """Time one tiny path now, so a retimer's first-use imports (TOPP-RA ~1 s) are paid at construction,
         not inside the first request's time limit."""
-        retimer = self.retimer  # an unknown retimer name or bad retimer params fail here, at construction
+        retimer = self._timer()  # an unknown retimer name or bad retimer params fail here, at construction
         try:
             retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
         except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
             log.debug("%s: retimer warm-up failed: %r", self.name, e)
 
-    @property
-    def retimer(self) -> Any:
-        if self._retimer is None:
+    def _timer(self) -> Retimer:
+        """The retimer that times paths: the config's (`self.retimer`), else the one `params.retimer` names."""
+        if self.retimer is not None:
+            return self.retimer
+        if self._default_retimer is None:
             if self.context is not None:
                 registry, context = self.context.registry, self.context
             else:
                 context = make_context(self.settings, kinematics=self.kin)
                 registry = context.registry
-            self._retimer = registry.retimer(self.params.retimer, self.params.retimer_params, context)
-        return self._retimer
+            self._default_retimer = registry.retimer(self.params.retimer, self.params.retimer_params, context)
+        return self._default_retimer
 
     # ---- the protocol ----------------------------------------------------------------------------
     def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
@@ -286,7 +249,7 @@ class OmplPlanner:
         assert goals is not None
         # plan (and check finely) on the scene inflated by the clearance, unless start or goal lie closer
         clearance = p.clearance_m
-        plan_scene = padded_scene(scene, self.settings, clearance) if clearance > 0 else None
+        plan_scene = padded_scene(scene, clearance) if clearance > 0 else None
         if plan_scene is not None:
             far = ~plan_scene.in_collision_batch(goals)
             if plan_scene.in_collision(start) or not far.any():
@@ -309,7 +272,7 @@ class OmplPlanner:
         info.update(goal_index=att.goal_index)
         repairs = 0
         while True:
-            traj, outcome, segment = self._timed_and_checked(path, request, scene, timings)
+            traj, outcome, segment = timed_and_checked(path, self._timer(), request, scene, kin, p, timings)
             info.update(repairs=repairs, waypoints=int(path.shape[0]), path_length_rad=path_length(path))
             if traj is not None:
                 info.update(duration_s=traj.duration)
@@ -324,7 +287,7 @@ class OmplPlanner:
             a, b = path[segment], path[segment + 1]
             fine = p.verify_resolution_rad
             sub = self._attempt(
-                a, b[None], _repair_bounds(a, b, bounds), scene, request.seed + 7919 * repairs, fine, counter, deadline, limit,
+                a, b[None], repair_bounds(a, b, bounds), scene, request.seed + 7919 * repairs, fine, counter, deadline, limit,
                 timings, repair=True,
             )
             if sub.path is None:
@@ -397,58 +360,24 @@ class OmplPlanner:
         """One sampling run from `start` to the goal set at `resolution`; adds its timings to `timings`.
         A `repair` run (one short segment) keeps less time in reserve and stops at its first path."""
         p = self.params
-        space = ob.RealVectorStateSpace(6)
-        rb = ob.RealVectorBounds(6)
-        for j in range(6):
-            rb.setLow(j, float(bounds[j, 0]))
-            rb.setHigh(j, float(bounds[j, 1]))
-        space.setBounds(rb)
-        si = ob.SpaceInformation(space)
-        si.setStateValidityChecker(state_validity_checker(scene, counter))
-        mv = SceneMotionValidator(si, scene, resolution, counter)
-        si.setMotionValidator(mv)
-        si.setup()
-
-        def spent(key: str, since: float) -> None:
-            timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
+        si, mv = space_information(bounds, scene, resolution, counter)
 
         if p.try_direct:
             t = time.perf_counter()
             for i in range(min(_DIRECT_GOALS, goals.shape[0])):
                 if mv.motion_free(start, goals[i]):
-                    spent("direct", t)
+                    add_time(timings, "direct", t)
                     return _Attempt(np.stack([start, goals[i]]), Status.SUCCESS, direct=True, goal_index=i)
-            spent("direct", t)
+            add_time(timings, "direct", t)
 
         # decide before any OMPL planner exists: a planner destroyed without setup() can crash (AORRTC does)
         reserve = min(_REPAIR_RESERVE_S, 0.05 * limit) if repair else min(_POST_RESERVE_S, 0.25 * limit)
         budget = deadline - time.perf_counter() - reserve
         if budget <= 0.001:
             return _Attempt(status=Status.TIMEOUT, reason=f"no time left to sample within {limit:.3g} s")
-        ss = og.SimpleSetup(si)
-        st = si.allocState()
-        st[0:6] = start.tolist()
-        ss.setStartState(st)
         if self.spec.single_goal:
             goals = goals[:1]  # see PlannerSpec.single_goal
-        if goals.shape[0] == 1:
-            g = si.allocState()
-            g[0:6] = goals[0].tolist()
-            goal: Any = ob.GoalState(si)
-            goal.setState(g)
-        else:
-            goal = ob.GoalStates(si)
-            for q in goals:
-                g = si.allocState()
-                g[0:6] = q.tolist()
-                goal.addState(g)
-        ss.setGoal(goal)
-        _seed(seed)
-        planner = getattr(og, self.spec.ompl_class)(si)
-        for setter, value in self._planner_setters:
-            getattr(planner, setter)(value)
-        ss.setPlanner(planner)
-        ss.setup()
+        ss = simple_setup(si, start, goals, self.spec.ompl_class, self._planner_setters, seed)
         ptc = ob.timedPlannerTerminationCondition(budget)
         if repair or getattr(p, "stop_at_first_solution", False):
             ptc = ob.plannerOrTerminationCondition(ptc, ob.exactSolnPlannerTerminationCondition(ss.getProblemDefinition()))
@@ -459,7 +388,7 @@ class OmplPlanner:
             status = ss.solve(ptc)
         finally:
             counter.deadline = math.inf
-        spent("solve", t)
+        add_time(timings, "solve", t)
         if counter.error is not None:
             return _Attempt(reason=f"the validity check raised {counter.error!r}")
         if not ss.haveExactSolutionPath():
@@ -474,75 +403,13 @@ class OmplPlanner:
         path = ss.getSolutionPath()
         if p.simplify:
             t = time.perf_counter()
-            self._simplify(si, path, deadline)  # bounded passes; no refusals here (OMPL would warn of "touching")
-            spent("simplify", t)
-        waypoints = _states(path)
+            simplify(si, path, p, deadline)  # bounded passes; no refusals here (OMPL would warn of "touching")
+            add_time(timings, "simplify", t)
+        waypoints = states(path)
         waypoints[0] = start  # OMPL copies states exactly; make the ends bit-identical anyway
         gi = int(np.argmin(np.abs(goals - waypoints[-1]).max(axis=1)))
         waypoints[-1] = goals[gi]
         return _Attempt(waypoints, Status.SUCCESS, goal_index=gi)
-
-    def _simplify(self, si: Any, path: Any, deadline: float) -> None:
-        """OMPL shortcutting in bounded passes (no wall-clock cut inside a pass, so seeded runs repeat)."""
-        steps = self.params.simplify_max_steps
-        ps = og.PathSimplifier(si)
-        for _ in range(self.params.simplify_passes):
-            if time.perf_counter() >= deadline:
-                break
-            # rope shortcutting does most of the work on a raw tree path; the others tidy what is left
-            changed = ps.ropeShortcutPath(path)
-            if time.perf_counter() < deadline and path.getStateCount() > 2:
-                changed |= ps.reduceVertices(path, steps, max(1, steps // 2), 0.33)
-            if time.perf_counter() < deadline and path.getStateCount() > 2:
-                changed |= ps.collapseCloseVertices(path, steps, max(1, steps // 2))
-            if not changed or path.getStateCount() <= 2:
-                break
-
-    def _timed_and_checked(
-        self, path: np.ndarray, request: MotionRequest, scene: "PlanningScene", timings: dict[str, float]
-    ) -> tuple[Trajectory | None, str, int | None]:
-        """(trajectory, "ok", None) when the timed `path` passes the final check; else (None, why, segment)
-        with `segment` the index of a straight path segment that itself collides (None: the path is free
-        but its timing spline cuts a corner even through a denser path, or retiming failed)."""
-        p = self.params
-
-        def spent(key: str, since: float) -> None:
-            timings[key] = timings.get(key, 0.0) + time.perf_counter() - since
-
-        last = ""
-        for spacing in (None, 0.02, 0.005):
-            P = path if spacing is None else _densify(path, spacing)
-            t = time.perf_counter()
-            try:
-                traj = self.retimer.retime(P, request.limits)
-            except TwinError as e:
-                spent("retime", t)
-                return None, f"retiming failed: {e}", None
-            spent("retime", t)
-            if p.verify_resolution_rad <= 0:
-                return traj, "ok", None
-            t = time.perf_counter()
-            qs = trajectory_check_points(traj, self.kin, p.verify_resolution_rad, p.verify_resolution_m)
-            hit = scene.first_collision(qs)
-            if hit is None:
-                spent("verify", t)
-                return traj, "ok", None
-            # the path itself (missed between the states checked while planning) or the spline's corner?
-            check = scene.check_path(path, resolution_rad=p.verify_resolution_rad)
-            spent("verify", t)
-            if not check.free:
-                assert check.segment is not None
-                return None, f"path segment {check.segment} collides at {p.verify_resolution_rad:g} rad", check.segment
-            last = f"the timed trajectory collides ({colliding_pair(scene, qs[hit])}) while its path is free"
-        return None, last, None
-
-
-def _repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-    """(6, 2) sampling bounds for replanning the segment a -> b: its box widened by _REPAIR_MARGIN_RAD,
-    inside `bounds`."""
-    lo = np.maximum(np.minimum(a, b) - _REPAIR_MARGIN_RAD, bounds[:, 0])
-    hi = np.minimum(np.maximum(a, b) + _REPAIR_MARGIN_RAD, bounds[:, 1])
-    return np.stack([lo, hi], axis=1)
 
 
 def _dist_version() -> str:

@@ -15,10 +15,16 @@ from typing import Any, Literal
 
 import numpy as np
 
-from twin.collision import PlanningScene
-from twin.config import PROJECT_ROOT, Settings, load_config
-from twin.planning import limits_from_settings, make_context
-from twin.types import JointGoal, Pose, PoseGoal
+from twin.plugin import (
+    JointGoal,
+    PlanningScene,
+    Pose,
+    PoseGoal,
+    Settings,
+    limits_from_settings,
+    load_config,
+    make_context,
+)
 
 __all__ = ["CUBE_M", "QueryCell", "Straight", "top_down"]
 
@@ -41,7 +47,7 @@ class QueryCell:
 
     def __init__(self, name: str):
         self.name = name
-        self.settings: Settings = load_config(PROJECT_ROOT / "configs" / f"{name}.yaml")
+        self.settings: Settings = load_config(name)
         self.scene = PlanningScene.from_settings(self.settings)
         self.scene.add_unknown_fixtures(self.settings)
         if name == "warehouse":

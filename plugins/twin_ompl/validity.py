@@ -14,7 +14,6 @@ invalid from its start: they lose partial extensions, never validity.
 
 from __future__ import annotations
 
-import logging
 import math
 import weakref
 from time import perf_counter
@@ -23,12 +22,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import ompl.base as ob
 
-from twin.types import Trajectory
+from twin.plugin import PlanningScene
 
 if TYPE_CHECKING:
-    from twin.collision import PlanningScene
-    from twin.config import Settings
-    from twin.kinematics import UR5e
+    from twin.plugin import Trajectory, UR5e
 
 __all__ = [
     "CheckCounter",
@@ -38,8 +35,6 @@ __all__ = [
     "trajectory_check_points",
     "padded_scene",
 ]
-
-log = logging.getLogger("twin")
 
 
 class CheckCounter:
@@ -152,7 +147,7 @@ def trajectory_check_points(traj: Trajectory, kin: "UR5e", step_rad: float, step
 
 
 # ---- clearance: the same scene with the environment inflated ------------------------------------------------
-_PADDED: "weakref.WeakKeyDictionary[Any, tuple[Any, Any]]" = weakref.WeakKeyDictionary()
+_PADDED: "weakref.WeakKeyDictionary[PlanningScene, tuple[Any, PlanningScene]]" = weakref.WeakKeyDictionary()
 
 
 def _signature(scene: "PlanningScene") -> tuple[Any, ...]:
@@ -162,48 +157,21 @@ def _signature(scene: "PlanningScene") -> tuple[Any, ...]:
     return (tuple(scene.names()), boxes, held_sig, float(scene.gripper_opening), float(scene.padding_m))
 
 
-def padded_scene(scene: "PlanningScene", settings: "Settings", clearance_m: float) -> "PlanningScene | None":
-    """A copy of `scene` whose environment (fixtures, boxes) is inflated by `clearance_m` more, or None
-    when it cannot be rebuilt faithfully from `settings` and the scene's public state.
+def padded_scene(scene: PlanningScene, clearance_m: float) -> PlanningScene | None:
+    """A copy of `scene` whose environment (fixtures, boxes) is inflated by `clearance_m` more
+    (`PlanningScene.padded`), or None for an object that is not a planning scene (a test double).
 
     Why: discrete checks (any resolution) can pass a path that grazes an obstacle by a fraction of a
     millimetre between two checked states; a finer check then finds it, and execution in the world would
     touch it. Planning and the final check on the inflated scene keep that margin instead. The copy is
-    built from the settings' known fixtures plus the scene's run-time boxes, held box and finger opening
-    (~20 ms), cached per scene and rebuilt when any of those change; a scene with other fixtures or
-    exclusions than the settings describe (a hand-built one) gets None, and is planned on as given.
+    cached per scene and made again when the scene's boxes, held object, finger opening or padding change.
     """
-    from twin.collision import FixtureSpec, PlanningScene
-    from twin.urdf_model import pose_from_xyz_rpy
-
-    try:
-        sig = _signature(scene) + (float(clearance_m),)
-        cached = _PADDED.get(scene)
-    except (AttributeError, TypeError):  # not a PlanningScene (a test double): no copy
+    if not isinstance(scene, PlanningScene):
         return None
+    sig = _signature(scene) + (float(clearance_m),)
+    cached = _PADDED.get(scene)
     if cached is not None and cached[0] == sig:
         return cached[1]
-    fixtures = [
-        FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
-        for f in settings.world.fixtures
-        if f.known
-    ]
-    copy: PlanningScene | None = PlanningScene(
-        settings.resolve(settings.robot.urdf),
-        fixtures=fixtures,
-        padding_m=scene.padding_m + clearance_m,
-        reference_configs=[settings.robot.home],
-    )
-    assert copy is not None
-    for name, (size, T) in scene.boxes().items():
-        copy.add_box(name, size, T)
-    held = scene.attached_box()
-    if held is not None:
-        copy.attach_box(held[0], held[1], held[2])
-    if abs(copy.gripper_opening - scene.gripper_opening) > 1e-12:
-        copy.set_gripper_opening(scene.gripper_opening)
-    if copy.names() != scene.names() or copy.excluded_pairs != scene.excluded_pairs:
-        log.debug("planning scene differs from the settings' cell; planning without extra clearance")
-        copy = None
+    copy = scene.padded(clearance_m)
     _PADDED[scene] = (sig, copy)
     return copy

@@ -11,7 +11,7 @@ path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
       - {name: ompl.rrtconnect, retimer: toppra, label: rrtconnect+toppra}
     scenarios:
       - name: warehouse-blocked                       # motion queries in a scene config
-        scene: warehouse.yaml                         # relative to this file
+        scene: warehouse.yaml                         # relative to this file, else a shipped config
         random: {count: 3, goal: joint, straight: blocked}   # only queries a straight line cannot solve
       - name: robocup-fixed
         scene: robocup.yaml
@@ -52,7 +52,7 @@ from pydantic import (
     model_validator,
 )
 
-from twin.config import PlannerBlock, apply_override, read_yaml
+from twin.config import PlannerBlock, apply_override, find_config, read_yaml
 from twin.errors import ConfigError
 
 __all__ = [
@@ -486,11 +486,10 @@ def _resolve_configs(spec: CompareSpec, base: Path, source: str) -> CompareSpec:
     scenarios = []
     for i, sc in enumerate(spec.scenarios):
         key = "task" if isinstance(sc, TaskScenario) else "scene"
-        raw = getattr(sc, key)
-        p = Path(raw)
-        p = p if p.is_absolute() else (base / p)
-        if not p.is_file():
-            raise ConfigError(f"{source}: scenarios.{i}.{key}: config file not found: {raw} (looked at {p.resolve()})")
+        try:  # a path relative to the comparison file, or the name of a shipped config
+            p = find_config(getattr(sc, key), relative_to=base)
+        except ConfigError as e:
+            raise ConfigError(f"{source}: scenarios.{i}.{key}: {e}") from None
         scenarios.append(sc.model_copy(update={key: str(p.resolve())}))
     return spec.model_copy(update={"scenarios": scenarios})
 
@@ -498,7 +497,8 @@ def _resolve_configs(spec: CompareSpec, base: Path, source: str) -> CompareSpec:
 def compare_spec_from_dict(
     data: dict[str, Any], *, source: str = "<dict>", base_dir: str | Path | None = None
 ) -> CompareSpec:
-    """Validate a mapping into a CompareSpec; scene paths are resolved against `base_dir` (default: cwd).
+    """Validate a mapping into a CompareSpec; scene paths are resolved against `base_dir` (default: cwd),
+    and a scene that is no file there names a shipped config ('robocup', 'warehouse.yaml').
 
     Raises ConfigError naming the dotted path of a bad or unknown key.
     """
@@ -512,9 +512,10 @@ def compare_spec_from_dict(
 
 
 def load_compare_config(path: str | Path, overrides: Iterable[str] = ()) -> CompareSpec:
-    """Load a comparison YAML (following `extends`), apply `a.b=value` overrides, validate, and resolve
-    the scenarios' config paths relative to the file. Raises ConfigError."""
-    p = Path(path)
+    """Load a comparison YAML (a path, or the name of a shipped one: 'compare-smoke'), following `extends`,
+    apply `a.b=value` overrides, validate, and resolve the scenarios' config paths relative to the file
+    (or to the shipped configs). Raises ConfigError."""
+    p = find_config(path)
     data = read_yaml(p)
     for o in overrides:
         apply_override(data, o)

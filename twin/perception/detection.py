@@ -3,7 +3,7 @@
 A detector turns an RGB-D frame (plus the camera pose in the base frame) into `Detection`s: a class,
 a colour, a confidence and a pixel mask - the role YOLO plays in seed 002, where the mask is the depth
 crop. Detectors are plugins (`registry.add_detector`) implementing the `Detector` protocol; the pose
-estimation that follows (`twin.perception.robocup`) only needs the mask.
+estimation that follows (`twin.tasks.robocup.perception`) only needs the mask.
 """
 
 from __future__ import annotations

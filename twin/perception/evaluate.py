@@ -31,7 +31,7 @@ from twin.perception.aruco import Calibration, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, wrist_camera_offset
 from twin.perception.detection import detection_label
 from twin.types import quat_to_matrix
-from twin.perception.robocup import CYLINDERS
+from twin.tasks.robocup.perception import CYLINDERS
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, rpy_matrix
 from twin.types import BoxBounds
 
@@ -255,8 +255,9 @@ def run_perception(
     `detector` overrides `perception.detector.name` (its params then default).
     """
     from twin.perception.aruco import MarkerNotFound
-    from twin.perception.pipeline import camera_extrinsics, make_detector, perceive_robocup
-    from twin.perception.warehouse import perceive_warehouse
+    from twin.perception.pipeline import camera_extrinsics, make_detector
+    from twin.tasks.robocup.perception import perceive_robocup
+    from twin.tasks.warehouse.perception import perceive_warehouse
     from twin.world import World
 
     seed = settings.seed if seed is None else int(seed)

@@ -7,32 +7,17 @@ Nothing here reads simulator ground truth, except that a detector which declares
 from __future__ import annotations
 
 import logging
-import time
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from twin.camera import RGBDFrame
 from twin.config import Settings
 from twin.perception.capture import Capture, wrist_camera_offset
-from twin.perception.detection import Detection, Detector, needs_ground_truth, scene_cloud
-from twin.perception.robocup import ObjectEstimate, estimate_object
+from twin.perception.detection import Detector
 
-__all__ = ["RobocupResult", "make_detector", "perceive_robocup", "camera_extrinsics"]
+__all__ = ["camera_extrinsics", "make_detector"]
 
 log = logging.getLogger("twin")
-
-
-@dataclass(frozen=True)
-class RobocupResult:
-    """Estimates (base frame) for every detection that kept enough points, the detections themselves,
-    and seconds per stage: cloud (back-projection), plane (table), detect (the whole detector, with its
-    own stages such as dbscan when it reports them), pca and icp (summed over objects)."""
-
-    objects: tuple[ObjectEstimate, ...]
-    detections: tuple[Detection, ...]
-    timings_s: dict[str, float] = field(default_factory=dict)
 
 
 def make_detector(settings: Settings, *, name: str | None = None, params: dict[str, Any] | None = None) -> Detector:
@@ -44,38 +29,6 @@ def make_detector(settings: Settings, *, name: str | None = None, params: dict[s
     reg = default_registry()
     ctx = PluginContext(settings=settings, kinematics=UR5e(), registry=reg)
     return reg.detector(name or block.name, block.params if params is None and name is None else params, ctx)
-
-
-def perceive_robocup(
-    frame: RGBDFrame,
-    T_base_camera: np.ndarray,
-    settings: Settings,
-    detector: Detector,
-    *,
-    ground_truth: Any = None,
-    seed: int = 0,
-) -> RobocupResult:
-    """Detect, then estimate pose and grasp per detection (seed 002 pipeline)."""
-    params = settings.perception.robocup
-    timings: dict[str, float] = {}
-    cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
-    timings.update(cloud.timings_s)
-    t0 = time.perf_counter()
-    gt = ground_truth if needs_ground_truth(detector) else None
-    detections = detector.detect(frame, T_base_camera, cloud=cloud, ground_truth=gt)
-    timings["detect"] = time.perf_counter() - t0
-    timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"
-    estimates = []
-    timings["pca"] = timings["icp"] = 0.0
-    for det in detections:
-        est = estimate_object(det, cloud, params)
-        if est is None:
-            continue
-        estimates.append(est)
-        for k in ("pca", "icp"):
-            timings[k] += est.timings_s.get(k, 0.0)
-    log.debug("robocup: %d detections, %d estimates", len(detections), len(estimates))
-    return RobocupResult(tuple(estimates), tuple(detections), timings)
 
 
 def camera_extrinsics(settings: Settings, capture: Capture, T_base_camera_aruco: np.ndarray | None, q_aruco: np.ndarray | None = None) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Task runs (`twin run`): the reference systems end to end, perception to placed object.
 
-`run_task(settings, seed=..., planner=...)` builds the world, runs the configured task
-(`settings.task.kind`: robocup or warehouse) and judges every object by physics ground truth at the end.
+`run_task(settings, seed=..., planner=...)` builds the world, runs the configured task and judges every
+object by physics ground truth at the end. Tasks are plugins (hook `twin_register_tasks`), found by the
+name in `settings.task.kind`; the built-in ones are `robocup` and `warehouse` (`twin.tasks.builtin`).
 
 The tasks decide with what a real cell senses (camera frames, joint encoders, the gripper's finger
 position); the simulator's ground truth is read only by `twin.tasks.judge` (verdicts, metrics, the
@@ -13,13 +14,26 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
-from twin.config import Settings
 from twin.types import RunSummary
 
-__all__ = ["run_task"]
+if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
+    from twin.config import Settings
+    from twin.registry import PluginContext
+
+__all__ = ["make_task", "run_task"]
 
 log = logging.getLogger("twin")
+
+
+def make_task(settings: Settings, context: "PluginContext | None" = None) -> Any:
+    """The task plugin named by `settings.task.kind`, built with its validated `task.params`; an unknown
+    name raises UnknownNameError listing the registered tasks."""
+    from twin.planning import make_context
+
+    context = context or make_context(settings)
+    return context.registry.task(settings.task.kind, settings.task.params, context)
 
 
 def run_task(
@@ -42,6 +56,7 @@ def run_task(
     recorder = Recorder(record) if record else None
     t0 = time.perf_counter()
     planners = stage_planners(settings, planner)
+    task = make_task(settings)
     from twin.world import World  # pybullet prints a banner on import: only once the input is known good
 
     with World(settings, seed=seed, gui=gui) as world:
@@ -50,14 +65,7 @@ def run_task(
             recorder.attach(world)
         if gui:
             world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
-        if settings.task.kind == "warehouse":
-            from twin.tasks.warehouse import run_warehouse
-
-            outcomes = run_warehouse(cell)
-        else:
-            from twin.tasks.robocup import run_robocup
-
-            outcomes = run_robocup(cell)
+        outcomes = task.run(cell)
         sim_time = world.sim_time
     if recorder is not None:
         recorder.save()

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from twin.camera import RGBDFrame
     from twin.config import Settings
     from twin.perception.detection import Detector
-    from twin.perception.pipeline import RobocupResult
+    from twin.tasks.robocup.perception import RobocupResult
     from twin.tasks.robocup import BinGeometry
     from twin.world import ObjectState, World
 
@@ -304,9 +304,9 @@ def oracle_ground_truth(world: World, detector: object) -> list[ObjectState] | N
 
 
 def perceive_robocup_scene(world: World, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector) -> RobocupResult:
-    """The RoboCup perception of one frame (`twin.perception.pipeline.perceive_robocup`), with the ORACLE
+    """The RoboCup perception of one frame (`twin.tasks.robocup.perception.perceive_robocup`), with the ORACLE
     hand-off: only a detector labelled as needing ground truth is given the simulator's objects."""
-    from twin.perception.pipeline import perceive_robocup
+    from twin.tasks.robocup.perception import perceive_robocup
 
     return perceive_robocup(
         frame, T_base_camera, settings, detector, ground_truth=oracle_ground_truth(world, detector), seed=world.seed

@@ -31,27 +31,30 @@ import math
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from twin.config import RobocupPerceptionSettings
-from twin.perception.detection import Detection, SceneCloud
+from twin.camera import RGBDFrame
+from twin.config import RobocupPerceptionSettings, Settings
+from twin.perception.detection import Detection, Detector, SceneCloud, needs_ground_truth, scene_cloud
 from twin.perception.geometry import pca, rot_z, trimmed_icp
 from twin.perception.segmentation import footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES, rpy_matrix
 
 __all__ = [
+    "ObjectEstimate",
     "Orientation",
     "PcaFeatures",
-    "ObjectEstimate",
-    "object_template_points",
-    "pca_features",
+    "RobocupResult",
     "classify_orientation",
-    "pca_yaw",
     "estimate_object",
     "estimate_objects",
+    "object_template_points",
+    "pca_features",
+    "pca_yaw",
+    "perceive_robocup",
     "wrap_half_turn",
 ]
 
@@ -294,3 +297,46 @@ def estimate_objects(detections: list[Detection], cloud: SceneCloud, params: Rob
         if est is not None:
             out.append(est)
     return out
+
+
+@dataclass(frozen=True)
+class RobocupResult:
+    """Estimates (base frame) for every detection that kept enough points, the detections themselves,
+    and seconds per stage: cloud (back-projection), plane (table), detect (the whole detector, with its
+    own stages such as dbscan when it reports them), pca and icp (summed over objects)."""
+
+    objects: tuple[ObjectEstimate, ...]
+    detections: tuple[Detection, ...]
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def perceive_robocup(
+    frame: RGBDFrame,
+    T_base_camera: np.ndarray,
+    settings: Settings,
+    detector: Detector,
+    *,
+    ground_truth: Any = None,
+    seed: int = 0,
+) -> RobocupResult:
+    """Detect, then estimate pose and grasp per detection (seed 002 pipeline)."""
+    params = settings.perception.robocup
+    timings: dict[str, float] = {}
+    cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
+    timings.update(cloud.timings_s)
+    t0 = time.perf_counter()
+    gt = ground_truth if needs_ground_truth(detector) else None
+    detections = detector.detect(frame, T_base_camera, cloud=cloud, ground_truth=gt)
+    timings["detect"] = time.perf_counter() - t0
+    timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"
+    estimates = []
+    timings["pca"] = timings["icp"] = 0.0
+    for det in detections:
+        est = estimate_object(det, cloud, params)
+        if est is None:
+            continue
+        estimates.append(est)
+        for k in ("pca", "icp"):
+            timings[k] += est.timings_s.get(k, 0.0)
+    log.debug("robocup: %d detections, %d estimates", len(detections), len(estimates))
+    return RobocupResult(tuple(estimates), tuple(detections), timings)

@@ -12,16 +12,21 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame
-from twin.perception.warehouse import LabeledCube, perceive_warehouse
+from twin.tasks.warehouse.perception import LabeledCube, perceive_warehouse
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
 from twin.tasks.judge import WarehouseReferee
 from twin.types import ObjectOutcome
 
-__all__ = ["run_warehouse"]
+if TYPE_CHECKING:
+    from twin.registry import PluginContext
+
+__all__ = ["WarehouseTask", "run_warehouse"]
 
 log = logging.getLogger("twin")
 
@@ -142,3 +147,14 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
     return referee.outcomes(attempts, global_error=global_error)
+
+
+class WarehouseTask:
+    """The warehouse sorting task as a task plugin (name `warehouse`). Its settings are the config's
+    `task.warehouse` and `perception.warehouse` sections (models in `twin.tasks.warehouse.settings`)."""
+
+    def __init__(self, params: None, context: "PluginContext") -> None:
+        self.context = context
+
+    def run(self, cell: Cell) -> list[ObjectOutcome]:
+        return run_warehouse(cell)

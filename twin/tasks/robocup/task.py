@@ -17,6 +17,8 @@ import logging
 import math
 from dataclasses import dataclass, field
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from twin.config import Settings
@@ -24,14 +26,17 @@ from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame
 from twin.perception.pipeline import camera_extrinsics, make_detector
-from twin.perception.robocup import ObjectEstimate
+from twin.tasks.robocup.perception import ObjectEstimate
 from twin.scene_layout import OBJECT_TEMPLATES, pose_matrix
 from twin.tasks.cell import Cell, StageFailed, top_down
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
 from twin.types import ObjectOutcome
 from twin.urdf_model import RobotModel, read_fixture_shapes
 
-__all__ = ["BinGeometry", "bin_for", "bin_geometries", "feasible_cube_yaw", "grip_width", "read_bin_geometry", "run_robocup"]
+if TYPE_CHECKING:
+    from twin.registry import PluginContext
+
+__all__ = ["RobocupTask", "BinGeometry", "bin_for", "bin_geometries", "feasible_cube_yaw", "grip_width", "read_bin_geometry", "run_robocup"]
 
 log = logging.getLogger("twin")
 
@@ -438,3 +443,14 @@ def _target_for(est: ObjectEstimate, targets: list[_Target]) -> _Target:
         targets.append(t)
     t.position = est.position.copy()
     return t
+
+
+class RobocupTask:
+    """The RoboCup ARM sorting task as a task plugin (name `robocup`). Its settings are the config's
+    `task.robocup` and `perception.robocup` sections (models in `twin.tasks.robocup.settings`)."""
+
+    def __init__(self, params: None, context: "PluginContext") -> None:
+        self.context = context
+
+    def run(self, cell: Cell) -> list[ObjectOutcome]:
+        return run_robocup(cell)

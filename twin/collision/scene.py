@@ -1,31 +1,22 @@
-"""FCL planning scene: the robot (from its URDF collision primitives), the static cell (fixture URDFs),
-perceived obstacle boxes and an object held in the gripper.
+"""The planning scene: the robot, the static cell, perceived obstacle boxes and an object held in the
+gripper, and the collision, distance and clearance queries planners make against them.
 
 Why this shape: planners call the collision check millions of times, so everything is built once and a
 query only moves the robot's shapes. Link poses come from a compiled, vectorised URDF chain (numpy); the
 shapes are moved with `setRotation/setTranslation` on persistent FCL objects; then
 * robot vs environment: one manager-vs-manager call of FCL's DynamicAABBTree broadphase (moving robot
   shapes + held object vs fixtures + boxes);
-* self-collision: the allowed shape pairs are prefiltered with bounding spheres in one numpy step and
-  the few survivors (~3 per configuration) go to FCL's narrow phase directly. For distances the pairs
-  are visited in order of their sphere lower bound and the walk stops once the bound exceeds the best
-  distance found; that best distance then bounds the environment broadphase.
-
-Self-collision exclusions (`excluded_pairs`), computed from the URDF:
-1. links of one rigid body (joined by fixed joints only, e.g. wrist_3_link + tool0 + gripper_base);
-2. rigid bodies joined directly by one joint (base/shoulder, shoulder/upper_arm, ..., wrist_2/wrist_3
-   body, gripper_base body/fingers): their housings touch by construction;
-3. pairs in contact (signed distance <= 1 mm) at a reference configuration: all zeros and the home
-   posture, each with the gripper fully open and closed (this adds left_finger/right_finger, which
-   touch when closed);
-4. any pairs the caller adds (`extra_excluded_pairs`, e.g. from an SRDF-like "never collide" list).
-The held object is never tested against the rigid body it is attached to (wrist_3 .. tcp) nor the
-fingers. Links rigidly fixed to the world (base_link) are never tested against the environment: their
-pose cannot change, and base_link stands on the table.
+* self-collision: the allowed shape pairs (`twin.collision.rules`) are prefiltered with bounding spheres
+  in one numpy step and the few survivors (~3 per configuration) go to FCL's narrow phase directly. For
+  distances the pairs are visited in order of their sphere lower bound and the walk stops once the bound
+  exceeds the best distance found; that best distance then bounds the environment broadphase.
+Links rigidly fixed to the world (base_link) are never tested against the environment: their pose
+cannot change, and base_link stands on the table.
 
 Padding: `padding_m` inflates every environment shape (fixtures and boxes) on each side; the robot, the
 held object and self-collision are unpadded. Distances to the environment are therefore reduced by the
 padding (exactly on faces, conservatively near box edges). Distances are signed: < 0 is a penetration.
+`padded(extra_m)` copies a scene with more padding without reading any URDF again.
 """
 
 from __future__ import annotations
@@ -41,6 +32,20 @@ from typing import TYPE_CHECKING, Any
 import fcl
 import numpy as np
 
+from twin.collision.geometry import COLLISION_REQUEST as _CREQ
+from twin.collision.geometry import DISTANCE_REQUEST as _DREQ
+from twin.collision.geometry import FAR as _FAR
+from twin.collision.geometry import BufferView as _Vec
+from twin.collision.geometry import CollideFlag as _CollideFlag
+from twin.collision.geometry import DistanceAccumulator as _DistAcc
+from twin.collision.geometry import bounding_radius as _bounding_radius
+from twin.collision.geometry import collide_callback as _collide_cb
+from twin.collision.geometry import distance_callback as _distance_cb
+from twin.collision.geometry import fcl_geometry as _geometry
+from twin.collision.geometry import fcl_transform as _tf
+from twin.collision.geometry import primitive_shapes
+from twin.collision.rules import HELD as _HELD
+from twin.collision.rules import CollisionRules, gripper_stroke_m
 from twin.errors import ConfigError, InvalidRequestError
 from twin.types import BoxBounds
 from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
@@ -52,8 +57,7 @@ __all__ = ["PlanningScene", "DistanceResult", "PathCheck", "FixtureSpec"]
 
 log = logging.getLogger("twin")
 
-_CONTACT_TOL_M = 1e-3  # rule 3 above: "in contact" at a reference configuration
-_FAR = 1e9
+_ONES3 = np.ones(3)
 
 
 @dataclass(frozen=True)
@@ -94,84 +98,6 @@ class FixtureSpec:
     pose: np.ndarray
 
 
-class _Vec:
-    """Hands python-fcl a persistent buffer view: its setters call `arr.astype(float64)` and read the
-    memory, so returning a ready memoryview skips a numpy copy per call (halves the transfer cost)."""
-
-    __slots__ = ("mv",)
-
-    def __init__(self, mv: memoryview):
-        self.mv = mv
-
-    def astype(self, *_: Any, **__: Any) -> memoryview:
-        return self.mv
-
-
-def _geometry(kind: str, size: Sequence[float], pad: float = 0.0) -> Any:
-    if kind == "box":
-        return fcl.Box(*(float(s) + 2 * pad for s in size))
-    if kind == "cylinder":
-        return fcl.Cylinder(float(size[0]) + pad, float(size[1]) + 2 * pad)
-    if kind == "sphere":
-        return fcl.Sphere(float(size[0]) + pad)
-    if kind == "capsule":
-        return fcl.Capsule(float(size[0]) + pad, float(size[1]))
-    raise ConfigError(f"collision shape {kind!r} is not supported by the planning scene (use primitives)")
-
-
-def _bounding_radius(kind: str, size: Sequence[float]) -> float:
-    """Radius of the sphere about the shape's origin that encloses it (all primitives are centred)."""
-    if kind == "box":
-        return 0.5 * math.sqrt(sum(float(v) ** 2 for v in size))
-    if kind == "cylinder":
-        return math.hypot(float(size[0]), 0.5 * float(size[1]))
-    if kind == "capsule":
-        return float(size[0]) + 0.5 * float(size[1])
-    return float(size[0])
-
-
-def _tf(T: np.ndarray) -> Any:
-    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
-
-
-class _CollideFlag:
-    __slots__ = ("hit",)
-
-    def __init__(self) -> None:
-        self.hit = False
-
-
-def _collide_cb(o1: Any, o2: Any, flag: _CollideFlag) -> bool:
-    if fcl.collide(o1, o2, _CREQ):
-        flag.hit = True
-        return True
-    return False
-
-
-class _DistAcc:
-    """Running minimum handed to the broadphase; starting it at a known bound prunes every farther pair."""
-
-    __slots__ = ("request", "result")
-
-    def __init__(self, bound: float = _FAR) -> None:
-        self.request = _DREQ
-        self.result = fcl.DistanceResult(bound)
-
-
-def _distance_cb(o1: Any, o2: Any, acc: _DistAcc) -> tuple[bool, float]:
-    fcl.distance(o1, o2, acc.request, acc.result)
-    # keep exploring overlapping AABBs after a penetration so the deepest one is usually found
-    return False, max(acc.result.min_distance, 1e-12)
-
-
-_CREQ = fcl.CollisionRequest()
-_DREQ = fcl.DistanceRequest(enable_signed_distance=True)
-
-
-_ONES3 = np.ones(3)
-_HELD = "\0held"  # node name of the held object in the self-collision pair list
-
-
 class PlanningScene:
     """Collision and distance queries for the arm in its cell.
 
@@ -191,22 +117,37 @@ class PlanningScene:
         finger_opening_m: float | None = None,
         tcp_link: str = "tcp",
     ):
-        if not (math.isfinite(padding_m) and 0.0 <= padding_m < 1.0):
-            raise InvalidRequestError(f"padding_m must be in [0, 1) m, got {padding_m}")
-        self.padding_m = float(padding_m)
-        self.model = m = RobotModel.from_urdf(robot_urdf)
+        self.padding_m = _check_padding(padding_m)
+        model = RobotModel.from_urdf(robot_urdf)
+        self._init_robot(model, tcp_link=tcp_link, finger_opening_m=finger_opening_m)
+        self._set_rules(
+            CollisionRules.from_model(
+                model, tcp_link=tcp_link, reference_configs=reference_configs, extra_excluded_pairs=extra_excluded_pairs
+            )
+        )
+
+        # ---- environment ---------------------------------------------------------------------------
+        self._init_env()
+        for fx in fixtures:
+            self._add_fixture(fx)
+        self._env.setup()
+        self._rebuild_robot()
+
+    def _init_robot(self, model: RobotModel, *, tcp_link: str, finger_opening_m: float | None) -> None:
+        """Robot part of the scene from a parsed model: compiled chain and persistent FCL shapes (the
+        allowed-collision rules are set by the caller with `_set_rules`)."""
+        self.model = m = model
+        src = m.source
         if len(m.arm_joints) != 6:
-            raise ConfigError(f"{robot_urdf}: expected 6 arm joints, found {list(m.arm_joints)}")
+            raise ConfigError(f"{src}: expected 6 arm joints, found {list(m.arm_joints)}")
         if tcp_link not in m.link_index:
-            raise ConfigError(f"{robot_urdf}: no link named {tcp_link!r} for the tcp")
+            raise ConfigError(f"{src}: no link named {tcp_link!r} for the tcp")
         arm = set(m.arm_joints)
         for j in m.joint_order:
             if j.mimic is not None and j.mimic[0] in arm:
-                raise ConfigError(f"{robot_urdf}: joint {j.name!r} mimics an arm joint; not supported")
+                raise ConfigError(f"{src}: joint {j.name!r} mimics an arm joint; not supported")
         self.tcp_link = tcp_link
-        # each finger moves half the opening (RobotModel convention): the stroke is twice the smallest range
-        g = m.gripper_joints
-        self.max_opening_m = 2.0 * min(m.joints[n].upper for n in g) if g else 0.0
+        self.max_opening_m = gripper_stroke_m(m)
         self._opening = self.max_opening_m if finger_opening_m is None else float(finger_opening_m)
         self._check_opening(self._opening)
 
@@ -227,10 +168,7 @@ class PlanningScene:
                 self._gen[k, :3, 3] = a
 
         # ---- robot shapes (built once; fcl reports the python geometry back in distance results) --
-        self._shapes = m.shapes()
-        for s in self._shapes:
-            if s.kind == "mesh":
-                raise ConfigError(f"{robot_urdf}: link {s.link!r} uses a mesh; the planning scene needs primitives")
+        self._shapes = primitive_shapes(m)
         self._owner: dict[int, tuple[str, bool]] = {}  # id(geometry) -> (name, is_robot)
         self._geom_object: dict[int, Any] = {}  # id(geometry) -> its CollisionObject
         self._warm: tuple[Any, Any, tuple[str, str]] | None = None  # last closest robot/env objects
@@ -243,26 +181,47 @@ class PlanningScene:
             self._geom_object[id(geom)] = self._shape_objects[-1]
         self._shape_radius = [_bounding_radius(s.kind, s.size) for s in self._shapes]
         self._static_links = {ln for ln in m.link_names if self._frame_of[ln] == 0}
-        self._held_excluded = self._rigid_body_links(self.tcp_link) | self._gripper_links()
         self._attached: tuple[str, Any, np.ndarray, Any, float] | None = None  # name, obj, T_tcp_obj, geom, radius
         self._update_constants()
-        refs = [np.zeros(6)] + [np.asarray(r, dtype=float) for r in reference_configs]
-        excl = self._compute_exclusions(refs)
-        for a, b in extra_excluded_pairs:
-            if a not in m.link_index or b not in m.link_index:
-                raise ConfigError(f"excluded pair ({a!r}, {b!r}) names a link that {robot_urdf} does not have")
-            excl.add((a, b) if m.link_index[a] < m.link_index[b] else (b, a))
-        self.excluded_pairs: frozenset[tuple[str, str]] = frozenset(excl)
 
-        # ---- environment ---------------------------------------------------------------------------
+    def _init_env(self) -> None:
         self._env = fcl.DynamicAABBTreeCollisionManager()
         self._env_objects: dict[str, list[tuple[Any, Any]]] = {}
+        self._env_shapes: dict[str, list[tuple[str, tuple[float, ...], np.ndarray]]] = {}  # unpadded, for padded()
         self._boxes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._fixture_names: set[str] = set()
-        for fx in fixtures:
-            self._add_fixture(fx)
-        self._env.setup()
-        self._rebuild_robot()
+
+    def padded(self, extra_m: float) -> "PlanningScene":
+        """A copy of this scene whose environment (fixtures and boxes) is inflated by `extra_m` more on
+        each side (`padding_m` becomes `padding_m + extra_m`); robot, exclusions, held object and gripper
+        opening are the same. The original is not changed; `padded(0.0)` is an equal copy.
+
+        Much cheaper than building a scene again: the parsed robot model, the self-collision exclusions and
+        the fixtures' shapes are reused, only the FCL objects are new (a query moves them, so two scenes
+        cannot share them). A negative `extra_m` shrinks the padding, down to 0.
+        """
+        extra = float(extra_m)
+        if not math.isfinite(extra):
+            raise InvalidRequestError(f"extra_m must be finite, got {extra_m}")
+        new = type(self).__new__(type(self))
+        new.padding_m = _check_padding(self.padding_m + extra)
+        new._init_robot(self.model, tcp_link=self.tcp_link, finger_opening_m=self._opening)
+        new._set_rules(self._rules)
+        new._init_env()
+        for name in self._env_objects:
+            if name in self._fixture_names:
+                new._fixture_names.add(name)
+            new._add_env(name, self._env_shapes[name])
+            if name in self._boxes:
+                sz, T = self._boxes[name]
+                new._boxes[name] = (sz.copy(), T.copy())
+        new._env.setup()
+        if self._attached is not None:
+            name, _, T, _, _ = self._attached
+            ax, ay, az = (float(v) for v in self._attached_size)
+            new._set_attached(name, (ax, ay, az), T.copy())
+        new._rebuild_robot()
+        return new
 
     @classmethod
     def from_settings(cls, settings: "Settings") -> "PlanningScene":
@@ -291,25 +250,6 @@ class PlanningScene:
         if not (math.isfinite(w) and -1e-12 <= w <= self.max_opening_m + 1e-12):
             raise InvalidRequestError(f"gripper opening must be in [0, {self.max_opening_m}] m, got {w}")
 
-    def _rigid_body_links(self, link: str) -> set[str]:
-        m = self.model
-        root = m.rigid_parent(link)
-        return {ln for ln in m.link_names if m.rigid_parent(ln) == root}
-
-    def _gripper_links(self) -> set[str]:
-        """Links moved by a gripper joint (the fingers and anything below them)."""
-        m = self.model
-        out: set[str] = set()
-        for gj in m.gripper_joints:
-            start = m.joints[gj].child
-            for ln in m.link_names:
-                cur: str | None = ln
-                while cur is not None and cur != start:
-                    cur = m.parent_link(cur)
-                if cur == start:
-                    out.add(ln)
-        return out
-
     def _update_constants(self) -> None:
         """Constants of the compiled chain at the current finger opening: local joint transforms are
         A + u*B + v*C with u = sin q, v = 1 - cos q (revolute, Rodrigues) or u = q, v = 0 (prismatic)."""
@@ -334,42 +274,10 @@ class PlanningScene:
         if hasattr(self, "_objects"):
             self._refresh_constants()
 
-    def _compute_exclusions(self, refs: list[np.ndarray]) -> set[tuple[str, str]]:
-        m = self.model
-        geo_links = [ln for ln in m.link_names if m.links[ln].shapes]
-        body = {ln: m.rigid_parent(ln) for ln in m.link_names}
-        excl: set[tuple[str, str]] = set()
-        for a, b in itertools.combinations(geo_links, 2):
-            ba, bb = body[a], body[b]
-            pa, pb = m.parent_link(ba), m.parent_link(bb)
-            if ba == bb or (pa is not None and body[pa] == bb) or (pb is not None and body[pb] == ba):
-                excl.add((a, b))
-        saved = self._opening
-        frames = [self._frame_of[s.link] for s in self._shapes]
-        for w in (0.0, self.max_opening_m):
-            self._opening = w
-            self._update_constants()
-            for q in refs:
-                T = self._frames(q[None])[0][frames] @ self._shape_const
-                objs = [fcl.CollisionObject(_geometry(s.kind, s.size), _tf(T[i])) for i, s in enumerate(self._shapes)]
-                for i, k in itertools.combinations(range(len(self._shapes)), 2):
-                    a, b = self._shapes[i].link, self._shapes[k].link
-                    if a == b or (a, b) in excl or (b, a) in excl:
-                        continue
-                    if fcl.distance(objs[i], objs[k], _DREQ, fcl.DistanceResult()) <= _CONTACT_TOL_M:
-                        excl.add((a, b))
-                        log.debug("self-collision exclusion (contact at a reference posture): %s - %s", a, b)
-        self._opening = saved
-        self._update_constants()
-        pos = m.link_index
-        return {(a, b) if pos[a] < pos[b] else (b, a) for a, b in excl}
-
-    def _allowed(self, a: str, b: str) -> bool:
-        if a == b:
-            return False
-        if _HELD in (a, b):
-            return (b if a == _HELD else a) not in self._held_excluded
-        return (a, b) not in self.excluded_pairs and (b, a) not in self.excluded_pairs
+    def _set_rules(self, rules: CollisionRules) -> None:
+        self._rules = rules
+        self.excluded_pairs: frozenset[tuple[str, str]] = rules.excluded_pairs
+        self._held_excluded = rules.held_excluded
 
     def _rebuild_robot(self) -> None:
         """(Re)build the robot object list, self pairs, transfer buffer and the moving-shape broadphase
@@ -389,7 +297,8 @@ class PlanningScene:
         self._moving = [i for i, f in enumerate(frames) if f != 0]
         self._moving_objects = [objects[i] for i in self._moving]
         # self pairs at shape level, with their bounding-sphere radius sums
-        pairs = [(i, k) for i, k in itertools.combinations(range(len(objects)), 2) if self._allowed(nodes[i], nodes[k])]
+        allows = self._rules.allows
+        pairs = [(i, k) for i, k in itertools.combinations(range(len(objects)), 2) if allows(nodes[i], nodes[k])]
         self._pa = np.array([i for i, _ in pairs], dtype=int)
         self._pb = np.array([k for _, k in pairs], dtype=int)
         rsum = np.array([radius[i] + radius[k] for i, k in pairs]) + 1e-9
@@ -466,6 +375,7 @@ class PlanningScene:
             objs.append((fcl.CollisionObject(geom, _tf(pose)), geom))
             self._geom_object[id(geom)] = objs[-1][0]
         self._env_objects[name] = objs
+        self._env_shapes[name] = [(kind, tuple(size), np.array(pose, dtype=float)) for kind, size, pose in shapes]
         if objs:
             self._env.registerObjects([o for o, _ in objs])
             self._env.update()
@@ -761,6 +671,7 @@ class PlanningScene:
         """Remove an environment object (box or fixture) by name."""
         objs = self._env_objects.pop(name, None)
         self._boxes.pop(name, None)
+        self._env_shapes.pop(name, None)
         if objs is None:
             raise InvalidRequestError(f"no object named {name!r} in the scene; present: {self.names()}")
         for o, geom in objs:
@@ -802,14 +713,15 @@ class PlanningScene:
             raise InvalidRequestError(f"already holding {self._attached[0]!r}; detach() first")
         if not isinstance(name, str) or not name:
             raise InvalidRequestError("attached object name must be a non-empty string")
-        sz = _check_size(size)
-        T = _check_pose(T_tcp_object)
+        self._set_attached(name, _check_size(size), _check_pose(T_tcp_object))
+        self._rebuild_robot()
+
+    def _set_attached(self, name: str, sz: tuple[float, float, float], T: np.ndarray) -> None:
         geom = _geometry("box", sz)
         self._attached_size = np.array(sz, dtype=float)
         self._owner[id(geom)] = (name, True)
         self._attached = (name, fcl.CollisionObject(geom), T, geom, _bounding_radius("box", sz))
         self._geom_object[id(geom)] = self._attached[1]
-        self._rebuild_robot()
 
     def detach(self) -> str | None:
         """Drop the held object from the model; returns its name (None when nothing was held)."""
@@ -825,14 +737,19 @@ class PlanningScene:
     # ---- introspection ------------------------------------------------------------------------
     def allowed_self_pairs(self) -> list[tuple[str, str]]:
         """Robot link pairs checked against each other (the held object is not listed)."""
-        m = self.model
-        geo = [ln for ln in m.link_names if m.links[ln].shapes]
-        return [(a, b) for a, b in itertools.combinations(geo, 2) if self._allowed(a, b)]
+        return self._rules.allowed_self_pairs(self.model)
 
     def held_object_checked_against(self) -> list[str]:
         """Robot links the held object is checked against (all but the tcp's rigid body and fingers)."""
         m = self.model
         return [ln for ln in m.link_names if m.links[ln].shapes and ln not in self._held_excluded]
+
+
+def _check_padding(padding_m: float) -> float:
+    p = float(padding_m)
+    if not (math.isfinite(p) and 0.0 <= p < 1.0):
+        raise InvalidRequestError(f"padding_m must be in [0, 1) m, got {padding_m}")
+    return p
 
 
 def _check_size(size: Sequence[float]) -> tuple[float, float, float]:

@@ -1,0 +1,112 @@
+"""Parameters of `nmpc` (a pydantic model: a planner block's `params:` are validated by it) and the default
+proxy spheres of the gripper and wrist.
+
+Defaults are the SPEC's (seed 000); seed 001 is `dt: 0.1, execute_steps: 3`. What each sphere covers and
+why the wrist has two is said beside the defaults.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["DEFAULT_TOOL_SPHERES", "DEFAULT_WRIST_SPHERES", "NMPCParams"]
+
+# (x, y, z, radius) in the TCP frame (z along the tool, pointing out of the gripper; the flange is at
+# z = -0.135): fingertips/held object, fingers, the two halves of the 0.14 x 0.06 x 0.07 m gripper body,
+# flange + wrist_3. With the default 1 cm box margin every sphere covers its part of the URDF collision
+# geometry (a half gripper body needs 0.058 m), so the FCL check of the whole arm passes too.
+DEFAULT_TOOL_SPHERES: tuple[tuple[float, float, float, float], ...] = (
+    (0.0, 0.0, 0.0, 0.05),
+    (0.0, 0.0, -0.06, 0.05),
+    (0.035, 0.0, -0.088, 0.05),
+    (-0.035, 0.0, -0.088, 0.05),
+    (0.0, 0.0, -0.15, 0.05),
+)
+# (DH frame, x, y, z, radius): one sphere on each of the wrist_1 (frame 4) and wrist_2 (frame 5) link
+# housings; with the box margin they cover the r 0.045 m x 0.13 / 0.11 m cylinders (0.079 / 0.071 m
+# needed). Not in the seed (it models the end effector only), but without them the wrist, tilted on the
+# way, clipped the perceived box while the gripper spheres stayed clear; `wrist_spheres: []` is the seed's
+# model. They sit 0.2 m or more above the TCP of a tool facing down, so their size costs little room.
+DEFAULT_WRIST_SPHERES: tuple[tuple[int, float, float, float, float], ...] = (
+    (4, 0.0, -0.02, 0.0, 0.07),
+    (5, 0.0, 0.005, 0.0, 0.062),
+)
+
+
+class NMPCParams(BaseModel):
+    """Parameters of `nmpc` (defaults: SPEC, seed 000; seed 001 is dt=0.1, execute_steps=3)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    horizon: int = Field(30, ge=2, le=200, description="steps per solve")
+    dt: float = Field(0.08, gt=0, le=1.0, description="s per step (seed 001: 0.1)")
+    execute_steps: int = Field(1, ge=1, description="steps executed per solve (seed 001: 3)")
+    max_step_rad: float = Field(0.15, gt=0, le=1.0, description="per-step joint increment bound")
+    limit_acceleration: bool = Field(
+        True,
+        description="bound the change of the step by the request's max_joint_acc * dt^2 (not in the seed, which"
+        " jumps to full speed in one step; the simulated grasp shook the cube loose that way)",
+    )
+    goal_tolerance_m: float = Field(0.03, gt=0, description="stop when the TCP is this close to the goal (or the goal's tighter tolerance)")
+    max_solves: int = Field(40, ge=1, description="give up after this many solves")
+    tool_spheres: list[tuple[float, float, float, float]] = Field(
+        default_factory=lambda: [tuple(s) for s in DEFAULT_TOOL_SPHERES],
+        description="proxy spheres (x, y, z, r) in the TCP frame",
+        min_length=1,
+    )
+    wrist_spheres: list[tuple[int, float, float, float, float]] = Field(
+        default_factory=lambda: [tuple(s) for s in DEFAULT_WRIST_SPHERES],
+        description="proxy spheres (DH frame 4..6, x, y, z, r) on the wrist",
+    )
+    object_sphere_min_radius_m: float = Field(0.03, gt=0)
+    object_sphere_max_radius_m: float = Field(0.05, gt=0)
+    max_object_spheres: int = Field(4, ge=1, le=16)
+    box_margin_m: float = Field(0.01, ge=0, le=0.1, description="boxes are grown by this on every side")
+    constraint_substeps: int = Field(2, ge=1, le=8, description="box constraint points per step (1 = knots only)")
+    table_z_m: float = Field(0.0, description="table top height")
+    table_clearance_m: float = Field(0.0, ge=0, description="sphere bottoms above the table (soft)")
+    facing_down: bool = Field(True, description="terminal facing-down term (soft)")
+    facing_down_tol_rad: float = Field(0.05, ge=0, le=math.pi / 2)
+    position_weight: float = Field(1.0, gt=0)
+    terminal_weight_factor: float = Field(10.0, gt=0)
+    step_weight: float = Field(0.02, ge=0, description="per rad^2 of joint step (lighter than position)")
+    table_slack_weight: float = Field(1e4, gt=0)
+    facing_down_weight: float = Field(1e3, gt=0)
+    initial_guess: Literal["over_box", "straight"] = Field(
+        "over_box",
+        description="cold-solve guess when the straight line to the goal crosses a box: lift/transfer/lower over it,"
+        " or the straight line anyway (only to show the local-minimum trap)",
+    )
+    lift_clearance_m: float = Field(0.05, ge=0, description="extra height of the over-the-box initial guess")
+    guess_step_fraction: float = Field(0.9, gt=0, le=1.0, description="initial guess steps, fraction of max")
+    ipopt_tol: float = Field(
+        1e-3, gt=0, description="IPOPT tol of warm-started solves (the shifted plan is usually 1-5 iterations away)"
+    )
+    ipopt_max_iter: int = Field(100, ge=1, description="IPOPT iteration limit of warm-started solves")
+    solve_time_limit_s: float = Field(1.0, gt=0, description="CPU-time limit of a warm-started solve")
+    cold_ipopt_tol: float = Field(
+        1e-3, gt=0, description="IPOPT tol of a cold solve (looser left the first warm solve with more to do)"
+    )
+    cold_mu_init: float = Field(1e-3, gt=0, description="IPOPT mu_init of a cold solve (the guess is good)")
+    cold_max_iter: int = Field(300, ge=1)
+    cold_solve_time_limit_s: float = Field(5.0, gt=0, description="CPU-time limit of a cold solve")
+    ipopt_options: dict[str, float | int | str] = Field(
+        default_factory=dict, description="extra IPOPT options for every solve, e.g. {linear_solver: mumps}"
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "NMPCParams":
+        if self.execute_steps > self.horizon:
+            raise ValueError(f"execute_steps ({self.execute_steps}) must not exceed horizon ({self.horizon})")
+        if self.object_sphere_min_radius_m > self.object_sphere_max_radius_m:
+            raise ValueError("object_sphere_min_radius_m must not exceed object_sphere_max_radius_m")
+        for s in self.tool_spheres:
+            if s[3] <= 0:
+                raise ValueError(f"tool sphere radii must be positive, got {s}")
+        for w in self.wrist_spheres:
+            if w[0] not in (4, 5, 6) or w[4] <= 0:
+                raise ValueError(f"wrist spheres need a DH frame 4, 5 or 6 and a positive radius, got {w}")
+        return self

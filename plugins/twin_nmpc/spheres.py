@@ -1,0 +1,149 @@
+"""The proxy spheres `nmpc` keeps out of the obstacle boxes, and the numpy check of a plan's hard constraints.
+
+The NLP (`twin_nmpc.model`) models the gripper, the wrist and a held box as spheres (frame, x, y, z, r):
+`robot_spheres` from the parameters, `object_spheres` covering the held box, `with_object` both together.
+Every plan is checked again here, independently of IPOPT's own view, before a step of it is executed
+(`violation`): joint steps and their change, joint limits, the spheres' pairwise box rows at the NLP's check
+points (`model.pair_clearance`), and the joint-linear path between knots densely against the boxes.
+
+A box is (name, lo (3,), hi (3,)) in the base frame, m, without the margin.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from twin_nmpc.model import TCP_FRAME, pair_clearance, sphere_box_clearance, sphere_centres
+
+if TYPE_CHECKING:
+    from twin.plugin import UR5e
+
+__all__ = [
+    "Box",
+    "CHECK_TOL_M",
+    "clearance",
+    "drop_covered",
+    "object_spheres",
+    "robot_spheres",
+    "sphere_positions",
+    "subdivide",
+    "violation",
+    "with_object",
+]
+
+log = logging.getLogger("twin")
+
+Box = tuple[str, np.ndarray, np.ndarray]
+
+CHECK_TOL_M = 5e-4  # the numpy re-check of the hard constraints accepts this much below the margin
+
+
+def object_spheres(size: np.ndarray, T_tcp_obj: np.ndarray, *, r_min: float, r_max: float, max_n: int) -> np.ndarray:
+    """(n, 4) spheres (x, y, z, r) in the TCP frame covering a held box of full extents `size`.
+
+    The box is cut into n equal pieces along its longest axis, each covered by its circumscribed
+    sphere; n is the smallest count whose radius is <= r_max (capped at max_n, radius then larger).
+    """
+    half = 0.5 * np.asarray(size, dtype=float)
+    ax = int(np.argmax(half))
+    rest = float(np.sum(np.delete(half, ax) ** 2))
+    n = 1
+    while n < max_n and math.sqrt((half[ax] / n) ** 2 + rest) > r_max:
+        n += 1
+    r = max(math.sqrt((half[ax] / n) ** 2 + rest), r_min)
+    if r > r_max + 1e-12:
+        log.warning("nmpc: held box %s needs spheres of %.3f m (> %.3f m) with %d spheres", size.tolist(), r, r_max, n)
+    offs = np.zeros((n, 3))
+    offs[:, ax] = (np.arange(n) + 0.5) / n * 2 * half[ax] - half[ax]
+    centres = (T_tcp_obj[:3, :3] @ offs.T).T + T_tcp_obj[:3, 3]
+    return np.hstack([centres, np.full((n, 1), r)])
+
+
+def robot_spheres(tool: np.ndarray | Sequence, wrist: np.ndarray | Sequence = ()) -> np.ndarray:
+    """(n, 5) spheres (frame, x, y, z, r): `tool` (x, y, z, r) in the TCP frame, then `wrist` as given."""
+    t = np.asarray(tool, dtype=float).reshape(-1, 4)
+    w = np.asarray(wrist, dtype=float).reshape(-1, 5)
+    return np.vstack([np.hstack([np.full((t.shape[0], 1), TCP_FRAME), t]), w])
+
+
+def drop_covered(obj: np.ndarray, robot_sph: np.ndarray) -> np.ndarray:
+    """The held-object spheres (n, 4) that no tool sphere of `robot_sph` (k, 5) contains.
+
+    A held-object sphere inside a tool sphere adds constraints but no protection (a 50 mm cube held at the
+    TCP sits inside the TCP sphere): dropping it makes solves cheaper."""
+    tool = robot_sph[robot_sph[:, 0] == TCP_FRAME, 1:5]
+    gap = np.linalg.norm(obj[:, None, :3] - tool[None, :, :3], axis=2) + obj[:, None, 3] - tool[None, :, 3]
+    return obj[~np.any(gap <= 1e-9, axis=1)]
+
+
+def with_object(robot_sph: np.ndarray, obj: np.ndarray) -> np.ndarray:
+    """(n, 5) all proxy spheres: the robot's (k, 5), then the held object's (m, 4) in the TCP frame."""
+    if not obj.size:
+        return robot_sph.copy()
+    return np.vstack([robot_sph, np.hstack([np.full((obj.shape[0], 1), TCP_FRAME), obj])])
+
+
+def sphere_positions(kin: "UR5e", qs: np.ndarray, sph: np.ndarray) -> np.ndarray:
+    """Centres (m, n, 3) of the spheres `sph` (n, 5) at configurations `qs` (m, 6) (or one (6,)), base frame."""
+    return sphere_centres(kin.dh_frames(np.atleast_2d(qs)), kin.tcp_offset_m, sph)
+
+
+def subdivide(knots: np.ndarray, n: int) -> np.ndarray:
+    """The joint-linear path through knots (m+1, 6) at n points per step, knots[0] excluded: (m*n, 6)."""
+    f = np.arange(1, n + 1) / n
+    return (knots[:-1, None, :] + f[None, :, None] * (knots[1:] - knots[:-1])[:, None, :]).reshape(-1, 6)
+
+
+def clearance(kin: "UR5e", qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, margin: float) -> np.ndarray:
+    """(m, n_boxes * n_spheres) signed clearances of the spheres at qs from the boxes grown by `margin`."""
+    if not boxes:
+        return np.zeros((qs.shape[0], 0))
+    centres = sphere_positions(kin, qs, sph)
+    cols = [sphere_box_clearance(centres, sph[None, :, 4], lo - margin, hi + margin) for _, lo, hi in boxes]
+    return np.concatenate(cols, axis=1)
+
+
+def violation(
+    kin: "UR5e",
+    knots: np.ndarray,
+    sph: np.ndarray,
+    boxes: list[Box],
+    step: np.ndarray,
+    dstep: np.ndarray | None,
+    *,
+    dq_prev: np.ndarray,
+    box_margin_m: float,
+    substeps: int,
+) -> str | None:
+    """Why the knot path (m+1, 6) (knots[0] = the current state, reached by the step `dq_prev`) breaks a hard
+    constraint, or None: a joint step beyond `step` (6,), a change of step beyond `dstep` (6,) (None: not
+    bounded), a knot outside the joint limits, a sphere closer than CHECK_TOL_M inside a box grown by
+    `box_margin_m` at `substeps` check points per step, or inside a box itself between knots."""
+    dq = np.diff(knots, axis=0)
+    if np.any(np.abs(dq) > step + 1e-7):
+        return f"a joint step of {np.abs(dq).max():.3f} rad exceeds {step.max():.3f} rad"
+    if dstep is not None:
+        ddq = np.abs(np.diff(np.vstack([dq_prev[None], dq]), axis=0))
+        if np.any(ddq > dstep + 1e-7):
+            return f"a joint step changes by {ddq.max():.4f} rad, more than {dstep.max():.4f} rad (acceleration)"
+    lim = kin.joint_limits
+    if np.any(knots < lim[:, 0] - 1e-9) or np.any(knots > lim[:, 1] + 1e-9):
+        return "a knot leaves the joint limits"
+    if boxes:
+        m = box_margin_m
+        seq = np.vstack([knots[:1], subdivide(knots, substeps)])
+        centres = sphere_positions(kin, seq, sph)
+        for name, lo, hi in boxes:
+            c = pair_clearance(centres, sph[:, 4], lo - m, hi + m)
+            if c.min() < -CHECK_TOL_M:
+                return f"proxy spheres may come {-c.min():.4f} m into box {name!r} (incl. margin) between check points"
+        # belt and braces: the joint-linear path, densely, against the boxes themselves
+        dense = clearance(kin, subdivide(knots, 8), sph, boxes, margin=0.0)
+        if dense.min() < 0.0:
+            return f"a proxy sphere enters an obstacle box by {-dense.min():.4f} m between knots"
+    return None

@@ -1,0 +1,18 @@
+"""FCL collision checking for the arm in its cell (pybullet-free).
+
+* `twin.collision.geometry`: URDF collision primitives as FCL shapes (padding, bounding spheres,
+  transforms, broadphase callbacks); meshes are rejected.
+* `twin.collision.rules`: the allowed-collision rules (which robot link pairs are never tested, the
+  reference-configuration contact rule, what a held object is tested against).
+* `twin.collision.scene`: `PlanningScene` with its queries (collision, signed distance, clearance, path
+  checks) and edits (boxes, fixtures, gripper opening, attach/detach, `padded` copies).
+
+Padding: `padding_m` inflates every environment shape (fixtures and boxes) on each side; the robot, the
+held object and self-collision are unpadded. Distances are signed: < 0 is a penetration.
+"""
+
+from twin.collision.rules import CollisionRules
+from twin.collision.scene import DistanceResult, FixtureSpec, PathCheck, PlanningScene
+from twin.urdf_model import read_fixture_shapes
+
+__all__ = ["PlanningScene", "DistanceResult", "PathCheck", "FixtureSpec", "CollisionRules", "read_fixture_shapes"]

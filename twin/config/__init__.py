@@ -1,0 +1,89 @@
+"""Validated configuration: YAML files loaded into typed pydantic models.
+
+`twin.config.schema` holds the models of the cell and `Settings` (the two reference tasks' own models
+live with their tasks, `twin.tasks.<name>.settings`), `twin.config.loader` reads files (`extends`, `--set`
+overrides, config names, one-line errors). Import from here: every name below stays importable from
+`twin.config` whichever module defines it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from twin.config.loader import (
+    apply_override,
+    find_config,
+    load_config,
+    one_line,
+    read_yaml,
+    settings_from_dict,
+    short_repr,
+)
+from twin.config.schema import (
+    ArucoSettings,
+    CameraSettings,
+    CollisionSettings,
+    DepthNoiseSettings,
+    DetectorBlock,
+    FixtureSettings,
+    GripperSettings,
+    ObjectSettings,
+    ObjectSpec,
+    PerceptionSettings,
+    PlannerBlock,
+    RobotSettings,
+    Settings,
+    TaskSettings,
+    WorldSettings,
+)
+from twin.tasks.robocup.settings import GraspEntry, IcpSettings, RobocupPerceptionSettings, RobocupTaskSettings
+from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
+
+__all__ = [
+    "ArucoSettings",
+    "CameraSettings",
+    "CollisionSettings",
+    "DepthNoiseSettings",
+    "DetectorBlock",
+    "FixtureSettings",
+    "GraspEntry",
+    "GripperSettings",
+    "IcpSettings",
+    "ObjectSettings",
+    "ObjectSpec",
+    "PerceptionSettings",
+    "PlannerBlock",
+    "RobocupPerceptionSettings",
+    "RobocupTaskSettings",
+    "RobotSettings",
+    "Settings",
+    "TaskSettings",
+    "WarehousePerceptionSettings",
+    "WarehouseTaskSettings",
+    "WorldSettings",
+    "apply_override",
+    "find_config",
+    "load_config",
+    "one_line",
+    "read_yaml",
+    "settings_from_dict",
+    "short_repr",
+]
+
+
+def __getattr__(name: str) -> Any:
+    # Deprecated: the checkout's root directory. It means nothing in an installed package (configs and
+    # URDFs are package data now: `load_config("robocup")`, `twin.resources.packaged_path("urdf/...")`);
+    # kept while bench/ and tests/ still use it.
+    if name == "PROJECT_ROOT":
+        import warnings
+
+        warnings.warn(
+            "twin.config.PROJECT_ROOT is deprecated: load shipped configs by name (load_config('robocup')) "
+            "and shipped files with twin.resources.packaged_path('urdf/ur5e.urdf')",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return Path(__file__).resolve().parent.parent.parent
+    raise AttributeError(f"module 'twin.config' has no attribute {name!r}")

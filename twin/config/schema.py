@@ -1,0 +1,310 @@
+"""The config's typed models: the cell (robot, gripper, world, camera, marker, collision), planner and
+detector blocks, and `Settings`, everything a run needs.
+
+Every model is frozen and rejects unknown keys (`ConfigModel`). The task and perception models of the two
+reference tasks live with their tasks (`twin.tasks.robocup.settings`, `twin.tasks.warehouse.settings`);
+`TaskSettings` names the task plugin to run and `PerceptionSettings` the perception pipeline.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import ConfigDict, Field, PrivateAttr, field_validator, model_validator
+
+from twin.config.base import Q6, ConfigModel, Vec3
+from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSettings
+from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
+
+__all__ = [
+    "ArucoSettings",
+    "CameraSettings",
+    "CollisionSettings",
+    "DepthNoiseSettings",
+    "DetectorBlock",
+    "FixtureSettings",
+    "GripperSettings",
+    "ObjectSettings",
+    "ObjectSpec",
+    "PerceptionSettings",
+    "PlannerBlock",
+    "RobotSettings",
+    "Settings",
+    "TaskSettings",
+    "WorldSettings",
+]
+
+
+class RobotSettings(ConfigModel):
+    """The arm: its URDF, home posture and joint limits (SPEC: pi rad/s, +-2pi, elbow +-pi)."""
+
+    urdf: str = "urdf/ur5e.urdf"
+    home: Q6 = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
+    max_joint_vel: float = Field(math.pi, gt=0)
+    max_joint_acc: float = Field(8.0, gt=0)
+    max_joint_jerk: float = Field(100.0, gt=0)
+    position_gain: float = Field(0.3, gt=0, le=1)
+    max_joint_force: Q6 = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
+
+
+class GripperSettings(ConfigModel):
+    """Parallel gripper: 0..85 mm stroke, 20..235 N grip force (Robotiq 2F-85)."""
+
+    max_opening_m: float = Field(0.085, gt=0, le=0.085)
+    force_n: float = Field(100.0, ge=20, le=235)
+    speed_m_s: float = Field(0.1, gt=0, le=0.15)
+    finger_friction: float = Field(1.5, gt=0)
+    # "Object detected", as the 2F-85 reports it: the fingers stopped closing above this opening. Closed on
+    # nothing, the force-limited pads meet at 0 mm (the joint limits) and contact softness leaves well under
+    # 1 mm; the thinnest object (the marker) is 21 mm. 5 mm sits clear of both.
+    object_min_opening_m: float = Field(0.005, gt=0, le=0.02)
+    # How much wider than the width the task expects between the fingers (from the perceived class and
+    # orientation) the stopped opening may be: a box squeezed a few degrees off its face (spam 5 deg off:
+    # +9 mm) and template vs real size. Wider than that, something else (or more) is between the fingers.
+    width_over_tolerance_m: float = Field(0.012, gt=0, le=0.05)
+    # How much narrower: the pads sink into what they squeeze. On a rigid object a real 2F-85 sinks < 1 mm;
+    # PyBullet's soft contacts let the 100 N pads sink 0.2-2 mm into the cans, cubes and spam, and up to
+    # 13 mm into the 15 g marker (which tilts and is pinched), which is still a grasp that holds.
+    width_under_tolerance_m: float = Field(0.015, gt=0, le=0.05)
+    # Slip / drop: the opening fell this far below the one sensed at the grasp (and below the narrowest the
+    # object can be held at). An object that leaves lets the fingers close to 0 within a fraction of a
+    # second; one that stays moves them by about a millimetre under the lift's and transfer's accelerations.
+    slip_tolerance_m: float = Field(0.008, gt=0, le=0.02)
+
+
+class FixtureSettings(ConfigModel):
+    """A static body of the cell, loaded from a URDF at a pose in the world (= robot base) frame."""
+
+    name: str
+    urdf: str
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+    known: bool = True  # in the planners' scene from the start; false: the robot must perceive it
+
+
+class ObjectSpec(ConfigModel):
+    """`count` objects of one class (and colour, for cubes) to scatter in the spawn region."""
+
+    cls: Literal["bottle", "can", "spam", "cube", "marker", "warehouse_cube", "obstacle"] = Field(alias="class")
+    color: str | None = None
+    count: int = Field(1, ge=0, le=50)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+class ObjectSettings(ConfigModel):
+    """Where and how objects are placed: seeded, never overlapping, upright or lying."""
+
+    region_x: tuple[float, float] = (-0.65, -0.30)
+    region_y: tuple[float, float] = (-0.30, 0.30)
+    min_gap_m: float = Field(0.03, ge=0)
+    lying_probability: float = Field(0.0, ge=0, le=1)
+    random_yaw: bool = True
+    items: list[ObjectSpec] = Field(default_factory=list)
+
+    @field_validator("region_x", "region_y")
+    @classmethod
+    def _ordered(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if v[0] >= v[1]:
+            raise ValueError(f"range must be [min, max] with min < max, got {list(v)}")
+        return v
+
+
+class WorldSettings(ConfigModel):
+    """The PyBullet world: rate, gravity, fixtures and objects.
+
+    The world frame is the robot base frame (UR DH base: with the shoulder pan at 0 the arm reaches
+    towards -x), so the table and the work area lie at negative x, in front of the arm's home posture.
+    """
+
+    physics_hz: float = Field(240.0, gt=0)
+    gravity: float = -9.81
+    gui: bool = False
+    fixtures: list[FixtureSettings] = Field(
+        default_factory=lambda: [
+            FixtureSettings(name="table", urdf="urdf/table.urdf", position=(-0.30, 0.0, 0.0)),
+        ]
+    )
+    objects: ObjectSettings = Field(default_factory=ObjectSettings)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> WorldSettings:
+        names = [f.name for f in self.fixtures]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"fixture names must be unique, repeated: {sorted(dup)}")
+        return self
+
+
+class ArucoSettings(ConfigModel):
+    """The marker on the robot base plate (dictionary name from cv2.aruco, e.g. DICT_4X4_50)."""
+
+    dictionary: str = "DICT_4X4_50"
+    id: int = Field(0, ge=0)
+    size_m: float = Field(0.10, gt=0)
+    # camera-to-base estimation: "pnp" is the seed's solvePnP(IPPE_SQUARE) on the corners; "pnp+plane"
+    # takes the marker's plane from the depth image (the table), which removes the tilt/range error of a
+    # small marker seen far and obliquely (~3 cm at the warehouse camera); `refine_grid` adds the marker's
+    # interior grid corners to PnP when its cells are at least 5 px
+    method: Literal["pnp+plane", "pnp"] = "pnp+plane"
+    refine_grid: bool = True
+
+
+class DepthNoiseSettings(ConfigModel):
+    """D435i-like depth noise: RMS = z^2 * subpixel / (focal_px * baseline_m), plus dropouts.
+
+    Defaults give ~1 mm at 0.5 m, ~4 mm at 1 m, ~15 mm at 2 m (Intel's model for the D435i). Dropouts
+    are invalid pixels (depth 0): a random fraction everywhere and a larger one at depth edges, where a
+    stereo camera loses the match. `rgb_noise_std` is Gaussian pixel noise on the colour image (0..255).
+    """
+
+    enabled: bool = True
+    subpixel: float = Field(0.08, ge=0)
+    baseline_m: float = Field(0.05, gt=0)
+    focal_px: float = Field(424.0, gt=0)
+    dropout_fraction: float = Field(0.002, ge=0, le=1)
+    edge_dropout_fraction: float = Field(0.3, ge=0, le=1)
+    edge_threshold_m: float = Field(0.03, gt=0)
+    min_range_m: float = Field(0.17, ge=0)
+    max_range_m: float = Field(10.0, gt=0)
+    depth_unit_m: float = Field(0.001, ge=0)
+    rgb_noise_std: float = Field(2.0, ge=0)
+
+
+class CameraSettings(ConfigModel):
+    """RGB-D camera: D435i-like intrinsics at 640x480.
+
+    A fixed mount looks from `position` at `target` (base frame); a wrist mount sits at `wrist_offset_m`
+    in the tool0 frame and looks along tool0's z axis.
+    """
+
+    mount: Literal["fixed", "wrist"] = "fixed"
+    width: int = Field(640, ge=16, le=1920)
+    height: int = Field(480, ge=16, le=1080)
+    fx: float = Field(612.0, gt=0)
+    fy: float = Field(611.0, gt=0)
+    near_m: float = Field(0.05, gt=0)
+    far_m: float = Field(4.0, gt=0)
+    position: Vec3 = (-1.25, 0.0, 0.55)
+    target: Vec3 = (-0.30, 0.0, 0.0)
+    wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
+    noise: DepthNoiseSettings = Field(default_factory=DepthNoiseSettings)
+    # wrist mount: joint angles where the camera looks straight down from ~0.72 m above the table centre
+    # (image x along base +y), and the settling pause before a frame is taken there (seed 002: 3 s)
+    capture_pose: Q6 = (-0.2518, -1.2366, 0.4574, -0.7916, -1.5708, -0.2518)
+    settle_s: float = Field(3.0, ge=0)
+    # wrist mount: joint angles where the camera sees the base marker for `twin calibrate` (None: capture_pose)
+    calibration_pose: Q6 | None = None
+
+    @model_validator(mode="after")
+    def _near_far(self) -> CameraSettings:
+        if self.near_m >= self.far_m:
+            raise ValueError(f"near_m ({self.near_m}) must be less than far_m ({self.far_m})")
+        return self
+
+
+class CollisionSettings(ConfigModel):
+    """FCL planning scene options."""
+
+    padding_m: float = Field(0.0, ge=0, le=0.1)
+    check_resolution_rad: float = Field(0.01, gt=0, le=0.1)
+    check_resolution_m: float = Field(0.01, gt=0, le=0.05)
+
+
+class PlannerBlock(ConfigModel):
+    """A plugin chosen by name with its own parameters, validated by that plugin's model."""
+
+    name: str
+    params: dict[str, Any] = Field(default_factory=dict)
+    retimer: str | None = None
+    retimer_params: dict[str, Any] = Field(default_factory=dict)
+
+
+class DetectorBlock(ConfigModel):
+    """A detector plugin chosen by name, with its own parameters (validated by the plugin's model)."""
+
+    name: str = "geometric"
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class PerceptionSettings(ConfigModel):
+    """What `twin perceive` runs: the warehouse pipeline (seeds 000/001) or the RoboCup one (seed 002).
+
+    `extrinsics`: how the camera-to-base transform is obtained; "auto" uses the ArUco marker for a fixed
+    camera and forward kinematics of the measured joints plus `camera.wrist_offset_m` for a wrist camera.
+    """
+
+    pipeline: Literal["robocup", "warehouse"] = "robocup"
+    extrinsics: Literal["auto", "aruco", "kinematics"] = "auto"
+    detector: DetectorBlock = Field(default_factory=DetectorBlock)
+    warehouse: WarehousePerceptionSettings = Field(default_factory=WarehousePerceptionSettings)
+    robocup: RobocupPerceptionSettings = Field(default_factory=RobocupPerceptionSettings)
+
+
+class TaskSettings(ConfigModel):
+    """Which task `twin run` runs (a registered task plugin's name; `twin planners` lists them), and its
+    parameters: the built-in tasks' own sections `robocup` / `warehouse`, a third-party task's `params`
+    (validated by the task class's `Params` model when the task is made)."""
+
+    kind: str = Field("robocup", pattern=r"^[a-z0-9_]+(\.[a-z0-9_]+)*$")
+    params: dict[str, Any] = Field(default_factory=dict)
+    robocup: RobocupTaskSettings = Field(default_factory=RobocupTaskSettings)
+    warehouse: WarehouseTaskSettings = Field(default_factory=WarehouseTaskSettings)
+    settle_s: float = Field(0.5, ge=0, le=5)  # pause after gripper actions (seed 002: 0.5-0.8 s)
+    max_sim_time_s: float = Field(900.0, gt=0)  # a run stops (objects left are failed) after this
+    # the transfer ends above the place point and the place move finishes it: it needs the position within
+    # this distance (the seed-000 NMPC stops within 3 cm), the orientation is free
+    transfer_tolerance_m: float = Field(0.03, gt=0, le=0.1)
+
+
+class Settings(ConfigModel):
+    """Everything a run needs, validated on load."""
+
+    name: str = "twin"
+    seed: int = 0
+    robot: RobotSettings = Field(default_factory=RobotSettings)
+    gripper: GripperSettings = Field(default_factory=GripperSettings)
+    world: WorldSettings = Field(default_factory=WorldSettings)
+    aruco: ArucoSettings = Field(default_factory=ArucoSettings)
+    camera: CameraSettings = Field(default_factory=CameraSettings)
+    collision: CollisionSettings = Field(default_factory=CollisionSettings)
+    planners: dict[str, PlannerBlock] = Field(default_factory=dict)
+    task: TaskSettings = Field(default_factory=TaskSettings)
+    perception: PerceptionSettings = Field(default_factory=PerceptionSettings)
+
+    # The directories of the config file and of the files it extends (nearest first); set by the loader.
+    # Not a field: it is where the config came from, not what it says (dumps and run ids leave it out).
+    _config_dirs: tuple[Path, ...] = PrivateAttr(default=())
+
+    @property
+    def config_dirs(self) -> tuple[Path, ...]:
+        """Directories that relative paths in this config are looked up in first: the config file's own,
+        then those of the files it `extends`; empty for settings not loaded from a file."""
+        return self._config_dirs
+
+    def with_config_dirs(self, dirs: tuple[Path, ...] | list[Path]) -> Settings:
+        """A copy whose relative paths are looked up in `dirs` first (see `resolve`)."""
+        out = self.model_copy()
+        out._config_dirs = tuple(Path(d) for d in dirs)
+        return out
+
+    def resolve(self, path: str) -> Path:
+        """The file a path in this config names (a URDF): an absolute path as it is; a relative one in the
+        config file's directory (then those of the files it extends) when it exists there, else in the
+        data twin ships (`urdf/ur5e.urdf`), so it works from any working directory and any install.
+
+        A path found nowhere resolves to where it was looked for first, for the error message.
+        """
+        from twin.resources import data_files, packaged_path
+
+        p = Path(path)
+        if p.is_absolute():
+            return p
+        for d in self._config_dirs:
+            if (d / p).exists():
+                return d / p
+        shipped = packaged_path(path)
+        if shipped is not None:
+            return shipped
+        return self._config_dirs[0] / p if self._config_dirs else Path(str(data_files())) / p
