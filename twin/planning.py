@@ -38,6 +38,7 @@ __all__ = [
     "PathPlanner",
     "SceneView",
     "accepts_retimer",
+    "jerk_limited",
     "KinematicPlant",
     "Plant",
     "colliding_pair",
@@ -135,6 +136,20 @@ class PathPlanner:
 
     def set_retimer(self, retimer: "Retimer") -> None:
         self.retimer = retimer
+
+    @property
+    def jerk_limited(self) -> bool:
+        """As jerk-limited as the retimer that times the path (its `jerk_limited`, default True); a subclass
+        with a default retimer of its own answers for that one."""
+        return jerk_limited(self.retimer) if self.retimer is not None else True
+
+
+def jerk_limited(planner: Any) -> bool:
+    """Does this planner (instance) keep the request's jerk limit? Declared by its attribute `jerk_limited`
+    (default True: a planner is held to every limit of the request unless it says otherwise). TOPP-RA
+    parameterises with velocity and acceleration limits only, so a path timed by it declares False; a
+    `PathPlanner` answers for its retimer."""
+    return bool(getattr(planner, "jerk_limited", True))
 
 
 def accepts_retimer(planner_class: type) -> bool:

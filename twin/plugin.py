@@ -171,11 +171,9 @@ if TYPE_CHECKING:
         Status,
         Trajectory,
         as_q,
-        matrix_to_quat,
-        quat_to_matrix,
         rpy_matrix,
     )
-    from twin.transforms import matrix_to_rpy, pose_from_xyz_rpy, quats_to_matrices, rpy_to_matrix
+    from twin.transforms import matrix_to_quat, matrix_to_rpy, pose_from_xyz_rpy, quat_to_matrix, quats_to_matrices, rpy_to_matrix
     from twin.urdf_model import urdf_rgba
 
 
