@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from twin.config import load_config
-from twin.scene_layout import OBJECT_TEMPLATES, pose_matrix
+from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.judge import (
     RobocupReferee,
     Verdict,
@@ -25,6 +25,7 @@ from twin.tasks.judge import (
     object_bounds,
 )
 from twin.tasks.robocup import BinGeometry, bin_geometries, read_bin_geometry
+from twin.transforms import pose_from_xyz_rpy
 from twin.types import Pose
 from twin.world import ObjectState, World
 
@@ -35,7 +36,7 @@ AT_REST = (np.zeros(3), np.zeros(3))
 
 
 def quat(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
-    T = pose_matrix((0.0, 0.0, 0.0), (roll, pitch, yaw))
+    T = pose_from_xyz_rpy((0.0, 0.0, 0.0), (roll, pitch, yaw))
     return Pose.from_matrix(T).quat_xyzw
 
 
@@ -65,7 +66,7 @@ def test_bounds_are_exact_for_boxes_and_cylinders():
 def test_the_bin_verdict_follows_the_bins_yaw():
     """A cube turned with a bin turned 45 deg fits in its corner; judged with unturned walls it would not."""
     yaw = math.pi / 4
-    b = read_bin_geometry("bin", str(ROOT / "urdf/bin_blue.urdf"), pose_matrix((0.0, 0.0, 0.0), (0.0, 0.0, yaw)))
+    b = read_bin_geometry("bin", str(ROOT / "urdf/bin_blue.urdf"), pose_from_xyz_rpy((0.0, 0.0, 0.0), (0.0, 0.0, yaw)))
     local = np.array([0.10, 0.10, 0.01 + 0.0375])  # the cube's corner 2.5 mm inside both inner walls
     c = state("cube", b.world(local), quat(yaw=yaw))
     assert bin_verdict(c, AT_REST, b) == Verdict(True)

@@ -160,7 +160,8 @@ def test_yaw_error_uses_the_object_symmetry():
     from twin.world import ObjectState
 
     def obj(cls: str, yaw: float, lying: bool = False) -> ObjectState:
-        from twin.scene_layout import OBJECT_TEMPLATES, rpy_matrix
+        from twin.scene_layout import OBJECT_TEMPLATES
+        from twin.transforms import rpy_to_matrix as rpy_matrix
         from twin.types import Pose
 
         R = rpy_matrix((0, 0, yaw)) @ (rpy_matrix(OBJECT_TEMPLATES[cls].lying_rpy) if lying else np.eye(3))

@@ -355,9 +355,9 @@ _COMMANDS["compare"] = _cmd_compare
 def _pose_line(T: Any) -> str:
     import numpy as np
 
-    R = np.asarray(T)[:3, :3]
-    rpy = (math.degrees(math.atan2(R[2, 1], R[2, 2])), math.degrees(-math.asin(max(-1.0, min(1.0, R[2, 0])))),
-           math.degrees(math.atan2(R[1, 0], R[0, 0])))
+    from twin.transforms import matrix_to_rpy
+
+    rpy = np.degrees(matrix_to_rpy(np.asarray(T)[:3, :3]))
     xyz = np.asarray(T)[:3, 3]
     return f"xyz [{xyz[0]:+.4f}, {xyz[1]:+.4f}, {xyz[2]:+.4f}] m, rpy [{rpy[0]:+.2f}, {rpy[1]:+.2f}, {rpy[2]:+.2f}] deg"
 

@@ -27,10 +27,9 @@ from typing import Literal
 
 import numpy as np
 
-from twin.types import rpy_matrix
-
 from twin.config import FixtureSettings, ObjectSettings, Settings
 from twin.errors import ConfigError, WorldError
+from twin.transforms import pose_from_xyz_rpy
 
 __all__ = [
     "ObjectTemplate",
@@ -42,8 +41,6 @@ __all__ = [
     "MARKER_LIFT_M",
     "MARKER_MARGIN_FRACTION",
     "color_rgba",
-    "rpy_matrix",
-    "pose_matrix",
     "is_marker_plate",
     "find_marker_plate",
     "marker_pose_in_base",
@@ -129,13 +126,6 @@ def color_rgba(name: str) -> tuple[float, float, float, float]:
         raise ConfigError(f"unknown colour {name!r}; known colours: {', '.join(sorted(COLORS))}") from None
 
 
-def pose_matrix(position: tuple[float, float, float] | np.ndarray, rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:
-    """(4, 4) homogeneous transform from a position (m) and URDF rpy (rad)."""
-    T = np.eye(4)
-    T[:3, :3] = rpy_matrix(rpy)
-    T[:3, 3] = np.asarray(position, dtype=float)
-    return T
-
 
 def is_marker_plate(fixture: FixtureSettings) -> bool:
     """True for the fixture that carries the ArUco marker (its URDF is the plate's)."""
@@ -160,7 +150,7 @@ def marker_pose_in_base(settings: Settings) -> np.ndarray:
         raise ConfigError(f"the config has no ArUco plate fixture (a fixture with urdf: {ARUCO_PLATE_URDF})")
     lift = np.eye(4)
     lift[2, 3] = PLATE_THICKNESS_M + MARKER_LIFT_M
-    return pose_matrix(plate.position, plate.rpy) @ lift
+    return pose_from_xyz_rpy(plate.position, plate.rpy) @ lift
 
 
 def marker_corners_in_base(settings: Settings) -> np.ndarray:

@@ -48,9 +48,9 @@ from twin.scene_layout import (
     is_marker_plate,
     marker_pose_in_base,
     marker_quad_size_m,
-    rpy_matrix,
     sample_layout,
 )
+from twin.transforms import rpy_to_matrix
 
 __all__ = [
     "World",
@@ -332,9 +332,9 @@ class World:
 
     def _load_object(self, sp: Placement) -> None:
         c = self._cid
-        R = rpy_matrix((0.0, 0.0, sp.yaw))
+        R = rpy_to_matrix((0.0, 0.0, sp.yaw))
         if sp.lying:
-            R = R @ rpy_matrix(sp.template.lying_rpy)
+            R = R @ rpy_to_matrix(sp.template.lying_rpy)
         try:
             bid = pb.loadURDF(
                 self._urdf(sp.template.urdf), list(sp.position), matrix_to_quat(R).tolist(),

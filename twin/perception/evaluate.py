@@ -30,10 +30,10 @@ from twin.config import Settings
 from twin.perception.aruco import Calibration, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, wrist_camera_offset
 from twin.perception.detection import detection_label
-from twin.types import quat_to_matrix
+from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.tasks.robocup.perception import CYLINDERS
-from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, rpy_matrix
-from twin.types import BoxBounds
+from twin.transforms import rpy_to_matrix as rpy_matrix
+from twin.types import BoxBounds, quat_to_matrix
 
 if TYPE_CHECKING:
     from twin.world import ObjectState, World

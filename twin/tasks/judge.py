@@ -29,8 +29,8 @@ if TYPE_CHECKING:
     from twin.camera import RGBDFrame
     from twin.config import Settings
     from twin.perception.detection import Detector
-    from twin.tasks.robocup.perception import RobocupResult
     from twin.tasks.robocup import BinGeometry
+    from twin.tasks.robocup.perception import RobocupResult
     from twin.world import ObjectState, World
 
 __all__ = [

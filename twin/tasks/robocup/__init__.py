@@ -7,7 +7,16 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from twin.tasks.robocup.task import BinGeometry, RobocupTask, bin_for, bin_geometries, feasible_cube_yaw, grip_width, read_bin_geometry, run_robocup
+    from twin.tasks.robocup.task import (
+        BinGeometry,
+        RobocupTask,
+        bin_for,
+        bin_geometries,
+        feasible_cube_yaw,
+        grip_width,
+        read_bin_geometry,
+        run_robocup,
+    )
 
 __all__ = [
     "BinGeometry",

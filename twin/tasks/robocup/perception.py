@@ -41,7 +41,8 @@ from twin.config import RobocupPerceptionSettings, Settings
 from twin.perception.detection import Detection, Detector, SceneCloud, needs_ground_truth, scene_cloud
 from twin.perception.geometry import pca, rot_z, trimmed_icp
 from twin.perception.segmentation import footprint, open3d
-from twin.scene_layout import OBJECT_TEMPLATES, rpy_matrix
+from twin.scene_layout import OBJECT_TEMPLATES
+from twin.transforms import rpy_to_matrix as rpy_matrix
 
 __all__ = [
     "ObjectEstimate",

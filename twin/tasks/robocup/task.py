@@ -16,7 +16,6 @@ import functools
 import logging
 import math
 from dataclasses import dataclass, field
-
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,10 +25,11 @@ from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame
 from twin.perception.pipeline import camera_extrinsics, make_detector
-from twin.tasks.robocup.perception import ObjectEstimate
-from twin.scene_layout import OBJECT_TEMPLATES, pose_matrix
+from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, top_down
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
+from twin.tasks.robocup.perception import ObjectEstimate
+from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
 from twin.urdf_model import RobotModel, read_fixture_shapes
 
@@ -121,7 +121,7 @@ def bin_geometries(settings: Settings) -> dict[str, BinGeometry]:
     task = settings.task.robocup
     named = set(task.bins.values()) | {task.default_bin}
     return {
-        f.name: read_bin_geometry(f.name, str(settings.resolve(f.urdf)), pose_matrix(f.position, f.rpy))
+        f.name: read_bin_geometry(f.name, str(settings.resolve(f.urdf)), pose_from_xyz_rpy(f.position, f.rpy))
         for f in settings.world.fixtures
         if f.name in named
     }

@@ -11,16 +11,15 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame
-from twin.tasks.warehouse.perception import LabeledCube, perceive_warehouse
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
 from twin.tasks.judge import WarehouseReferee
+from twin.tasks.warehouse.perception import LabeledCube, perceive_warehouse
 from twin.types import ObjectOutcome
 
 if TYPE_CHECKING:
