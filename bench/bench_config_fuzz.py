@@ -22,11 +22,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from hypothesis import HealthCheck, given, settings
+
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 
-from hypothesis import HealthCheck, given, settings
-from test_config_fuzz import Outcome, config_files, run_config
+from test_config_fuzz import Outcome, config_files, run_config  # noqa: E402 - importable once tests/ is on the path
 
 HANG_S = 30
 
@@ -61,8 +62,9 @@ def main() -> int:
     workdir = tempfile.TemporaryDirectory(prefix="twin-fuzz-")
     tmp = Path(workdir.name)
 
-    @settings(max_examples=args.cases, derandomize=True, deadline=None, database=None,
-              suppress_health_check=list(HealthCheck))
+    @settings(
+        max_examples=args.cases, derandomize=True, deadline=None, database=None, suppress_health_check=list(HealthCheck)
+    )
     @given(config_files())
     def one(content: bytes) -> None:
         path = tmp / "fuzz.yaml"
@@ -89,9 +91,15 @@ def main() -> int:
     kinds = collections.Counter(o.kind for o, _, _ in outcomes)
     stages = collections.Counter(o.stage for o, _, _ in outcomes if o.kind == "rejected")
     times = sorted(dt for _, _, dt in outcomes)
-    print(f"{len(outcomes)} cases in {wall:.1f} s (median {times[len(times) // 2] * 1e3:.0f} ms, max {times[-1]:.2f} s per case)")
+    print(
+        f"{len(outcomes)} cases in {wall:.1f} s (median {times[len(times) // 2] * 1e3:.0f} ms, "
+        f"max {times[-1]:.2f} s per case)"
+    )
     print(f"accepted: {kinds['accepted']}")
-    print(f"rejected with a one-line TwinError: {kinds['rejected']} ({', '.join(f'{s} {n}' for s, n in stages.most_common())})")
+    print(
+        "rejected with a one-line TwinError: "
+        f"{kinds['rejected']} ({', '.join(f'{s} {n}' for s, n in stages.most_common())})"
+    )
     print(f"failed (traceback / multi-line / hang > {HANG_S} s): {kinds['failed']}")
     errors = collections.Counter(_gist(o) for o, _, _ in outcomes if o.kind == "rejected")
     print("most common rejections:")
@@ -101,7 +109,10 @@ def main() -> int:
     for o, content, _ in outcomes:
         if o.kind == "failed" and shown < args.show:
             shown += 1
-            print(f"\n--- failure {shown}: stage {o.stage} ---\n{o.message[-3000:]}\nconfig (first 600 bytes): {content[:600]!r}")
+            print(
+                f"\n--- failure {shown}: stage {o.stage} ---\n{o.message[-3000:]}"
+                f"\nconfig (first 600 bytes): {content[:600]!r}"
+            )
     return 0
 
 

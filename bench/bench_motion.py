@@ -113,7 +113,7 @@ def main() -> None:
 
     def note(name: str, res: Any) -> None:
         if res.success:
-            worst[name] = [max(a, b) for a, b in zip(worst[name], limit_use(res.trajectory, lim))]
+            worst[name] = [max(a, b) for a, b in zip(worst[name], limit_use(res.trajectory, lim), strict=True)]
 
     # ---- MoveJ: random joint pairs ----
     ratios_j = []
@@ -139,7 +139,7 @@ def main() -> None:
             times_fcl[n].append(timed(planners[n], req, fcl_scene)[1])
 
     # ---- MoveL: random lines in the work area (top-down, yaw changes, descents and lateral moves) ----
-    ratios_l, dev_m, dev_deg, fails = [], 0.0, 0.0, {n: 0 for n in ("toppra.movel", "seed.slerp_movel")}
+    ratios_l, dev_m, dev_deg, fails = [], 0.0, 0.0, dict.fromkeys(("toppra.movel", "seed.slerp_movel"), 0)
     ik = planners["toppra.movel"].ik
     reasons: list[str] = []
     done = 0
@@ -184,16 +184,19 @@ def main() -> None:
             ratios_l.append(rt.trajectory.duration / rs.trajectory.duration)
 
     print(
-        f"MoveJ, {args.pairs} random pairs: median duration ruckig.movej / seed.quintic_movej = {np.median(ratios_j):.3f} "
+        f"MoveJ, {args.pairs} random pairs: "
+        f"median duration ruckig.movej / seed.quintic_movej = {np.median(ratios_j):.3f} "
         f"(min {np.min(ratios_j):.3f}, max {np.max(ratios_j):.3f})"
     )
     print(
-        f"MoveL, {args.lines} random lines: median duration toppra.movel / seed.slerp_movel = {np.median(ratios_l):.3f} "
+        f"MoveL, {args.lines} random lines: "
+        f"median duration toppra.movel / seed.slerp_movel = {np.median(ratios_l):.3f} "
         f"on {len(ratios_l)} lines both planned (failures: {fails})"
     )
     print("\n".join(reasons))
     print(
-        f"MoveL worst deviation of toppra.movel at 1 kHz: {dev_m * 1e3:.4f} mm from the line, {dev_deg:.4f} deg from SLERP"
+        f"MoveL worst deviation of toppra.movel at 1 kHz: {dev_m * 1e3:.4f} mm from the line, "
+        f"{dev_deg:.4f} deg from SLERP"
     )
     print()
     print(f"{'':22s} {'microseconds per plan (median)':^58s}")

@@ -68,8 +68,16 @@ def run(name: str, params: dict[str, Any], n: int, seed: int) -> None:
         if res.trajectory is not None:
             durations.append(res.trajectory.duration)
             steps = np.diff(res.trajectory.q, axis=0)  # knots are dt apart
-            peak_acc.append(float(np.abs(np.diff(np.vstack([np.zeros(6), steps]), axis=0)).max()) / planner.params.dt**2)
-            chk = check_trajectory(res.trajectory, ts, planner.proxy_spheres, build_scene(settings, ts, with_fixtures=False), ctx.kinematics)
+            peak_acc.append(
+                float(np.abs(np.diff(np.vstack([np.zeros(6), steps]), axis=0)).max()) / planner.params.dt**2
+            )
+            chk = check_trajectory(
+                res.trajectory,
+                ts,
+                planner.proxy_spheres,
+                build_scene(settings, ts, with_fixtures=False),
+                ctx.kinematics,
+            )
             min_box.append(chk.min_sphere_box_m)
             min_table.append(chk.min_table_m)
             bad_checks += not chk.ok
@@ -85,14 +93,24 @@ def run(name: str, params: dict[str, Any], n: int, seed: int) -> None:
             f"motion duration (s)   median {np.median(durations):.2f}  p95 {pct(durations, 95):.2f};"
             f"  peak knot acceleration {max(peak_acc):.2f} rad/s^2"
         )
-    print(f"solve time (ms)       cold  median {1e3 * np.median(cold):7.1f}  p95 {1e3 * pct(cold, 95):7.1f}  (n={len(cold)})")
+    print(
+        f"solve time (ms)       cold  median {1e3 * np.median(cold):7.1f}  p95 {1e3 * pct(cold, 95):7.1f}"
+        f"  (n={len(cold)})"
+    )
     if warm:
-        print(f"                      warm  median {1e3 * np.median(warm):7.1f}  p95 {1e3 * pct(warm, 95):7.1f}  (n={len(warm)})")
+        print(
+            f"                      warm  median {1e3 * np.median(warm):7.1f}  p95 {1e3 * pct(warm, 95):7.1f}"
+            f"  (n={len(warm)})"
+        )
     print(f"                      all   median {1e3 * np.median(every):7.1f}  p95 {1e3 * pct(every, 95):7.1f}")
-    print(f"planning wall time    per goal median {np.median(wall):.2f} s  (incl. FCL re-check); NLP build {build:.2f} s once")
+    print(
+        f"planning wall time    per goal median {np.median(wall):.2f} s  (incl. FCL re-check); "
+        f"NLP build {build:.2f} s once"
+    )
     if min_box:
         print(
-            f"FCL check             min sphere-box {1e3 * min(min_box):.1f} mm, min robot/cube-table {1e3 * min(min_table):.1f} mm,"
+            f"FCL check             min sphere-box {1e3 * min(min_box):.1f} mm, "
+            f"min robot/cube-table {1e3 * min(min_table):.1f} mm,"
             f" trajectories violating: {bad_checks}"
         )
     print()

@@ -42,8 +42,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from twin_ompl.scenarios import QueryCell as Cell
-from twin_ompl.scenarios import top_down
 
 from twin.config import PlannerBlock
 from twin.errors import DependencyMissing
@@ -51,6 +49,8 @@ from twin.planning import first_collision, make_planner, plan_with
 from twin.registry import Kind
 from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
 from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
+from twin_ompl.scenarios import QueryCell as Cell
+from twin_ompl.scenarios import top_down
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
@@ -73,9 +73,15 @@ def bench_limits(warehouse: Cell, repeats: int = 5) -> None:
     cases = [
         ("joint goal in the obstacle", MotionRequest(start, JointGoal(q_inside), lim, time_limit_s=1.0)),
         ("pose goal in the obstacle", MotionRequest(start, PoseGoal(Pose.from_matrix(inside)), lim, time_limit_s=1.0)),
-        ("pose goal out of reach", MotionRequest(start, PoseGoal(Pose.from_matrix(top_down(-1.6, 0.0, 0.2, 0.0))), lim)),
+        (
+            "pose goal out of reach",
+            MotionRequest(start, PoseGoal(Pose.from_matrix(top_down(-1.6, 0.0, 0.2, 0.0))), lim),
+        ),
         ("start in collision", MotionRequest(q_inside, JointGoal(start), lim)),
-        ("joint goal outside the limits", MotionRequest(start, JointGoal(np.array([0.0, -1.0, 3.5, 0.0, 0.0, 0.0])), lim)),
+        (
+            "joint goal outside the limits",
+            MotionRequest(start, JointGoal(np.array([0.0, -1.0, 3.5, 0.0, 0.0, 0.0])), lim),
+        ),
     ]
     print(f"infeasible queries, ompl.rrtconnect (budget {FAIL_FAST_BUDGET_S * 1e3:.0f} ms), best / worst of {repeats}:")
     for label, req in cases:
@@ -101,7 +107,10 @@ def bench_limits(warehouse: Cell, repeats: int = 5) -> None:
         res = plan_with(walled, MotionRequest(a, JointGoal(b), cell.limits, time_limit_s=limit), cell.scene, cell.ctx)
         over = res.planning_time_s - limit
         flag = "ok" if over <= TIMEOUT_OVERSHOOT_S else "LATE"
-        print(f"  limit {limit:4.2f} s: {res.status.value:8s} after {res.planning_time_s:6.3f} s (overshoot {over * 1e3:+6.1f} ms)  {flag}")
+        print(
+            f"  limit {limit:4.2f} s: "
+            f"{res.status.value:8s} after {res.planning_time_s:6.3f} s (overshoot {over * 1e3:+6.1f} ms)  {flag}"
+        )
 
 
 # ---- our planners ------------------------------------------------------------------------------------------
@@ -169,13 +178,18 @@ def print_row(label: str, s: dict[str, Any] | str) -> None:
 def mplib_python() -> Path | str:
     """The mplib venv's python, created on first use; or a string saying why it is unavailable."""
     py = MPLIB_VENV / "bin" / "python"
-    if py.exists() and subprocess.run([str(py), "-c", "import mplib"], capture_output=True, check=False).returncode == 0:
+    if (
+        py.exists()
+        and subprocess.run([str(py), "-c", "import mplib"], capture_output=True, check=False).returncode == 0
+    ):
         return py
     print(f"mplib: creating {MPLIB_VENV.relative_to(ROOT)} (python -m venv + pip install mplib) ...", flush=True)
     try:
         subprocess.run([sys.executable, "-m", "venv", str(MPLIB_VENV)], check=True, capture_output=True, text=True)
         (MPLIB_VENV / ".gitignore").write_text("# created by bench/bench_ompl.py\n*\n")
-        pip = subprocess.run([str(py), "-m", "pip", "install", "-q", "mplib"], capture_output=True, text=True, timeout=900, check=False)
+        pip = subprocess.run(
+            [str(py), "-m", "pip", "install", "-q", "mplib"], capture_output=True, text=True, timeout=900, check=False
+        )
         if pip.returncode != 0:
             return f"pip install mplib failed: {(pip.stderr or pip.stdout).strip().splitlines()[-1:]}"
         check = subprocess.run([str(py), "-c", "import mplib"], capture_output=True, text=True, check=False)
@@ -189,7 +203,12 @@ def mplib_python() -> Path | str:
 def mplib_spec(cell: Cell, queries: list[Any], time_limit: float, rrt_range: float = 0.1) -> dict[str, Any]:
     scene, s = cell.scene, cell.settings
     boxes = []
-    shapes = [(f.name, sh) for f in s.world.fixtures if f.known for sh in read_fixture_shapes(s.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))]
+    shapes = [
+        (f.name, sh)
+        for f in s.world.fixtures
+        if f.known
+        for sh in read_fixture_shapes(s.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
+    ]
     for name, sh in shapes:
         if sh.kind != "box":
             raise SystemExit(f"fixture {name}: only boxes are passed to mplib, got {sh.kind}")
@@ -204,8 +223,10 @@ def mplib_spec(cell: Cell, queries: list[Any], time_limit: float, rrt_range: flo
         "move_group": scene.tcp_link,
         "excluded_pairs": [list(p) for p in sorted(scene.excluded_pairs)],
         "arm_joints": list(model.arm_joints),
-        "static_links": [ln for ln in model.link_names if model.rigid_parent(ln, movable=model.arm_joints) == model.root],
-        "fixed_qpos": {j: half for j in model.gripper_joints},
+        "static_links": [
+            ln for ln in model.link_names if model.rigid_parent(ln, movable=model.arm_joints) == model.root
+        ],
+        "fixed_qpos": dict.fromkeys(model.gripper_joints, half),
         "boxes": boxes,
         "attached_box": None if held is None else {"size": held[1].tolist(), "pose": held[2].tolist()},
         "vel": cell.limits.max_joint_vel.tolist(),
@@ -236,8 +257,16 @@ def run_mplib(py: Path, cell: Cell, queries: list[Any], time_limit: float, rrt_r
         ok = bool(r["ok"]) and q.shape[0] > 0
         hit = bool(ok and not cell.scene.check_path(q, resolution_rad=FINE_RAD).free)
         length = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) if ok else math.nan
-        rows.append({"ok": ok, "time_s": r["time_s"], "length": length, "duration": (q.shape[0] - 1) * spec["time_step_s"] if ok else math.nan,
-                     "fine_hit": hit, "status": "success" if ok else r["status"][:40]})
+        rows.append(
+            {
+                "ok": ok,
+                "time_s": r["time_s"],
+                "length": length,
+                "duration": (q.shape[0] - 1) * spec["time_step_s"] if ok else math.nan,
+                "fine_hit": hit,
+                "status": "success" if ok else r["status"][:40],
+            }
+        )
     out = summarize(rows)
     out["ompl_median_s"] = float(np.median([r["ompl_s"] for r in answer["results"]]))
     out["topp_median_s"] = float(np.median([r["topp_s"] for r in answer["results"] if r["ok"]] or [math.nan]))
@@ -252,8 +281,12 @@ def main() -> None:
     ap.add_argument("--queries", type=int, default=20, help="queries per scene")
     ap.add_argument("--time-limit", type=float, default=1.0, help="planning time limit per query, s")
     ap.add_argument("--planners", default="all", help="comma-separated ompl.* names (default: every registered one)")
-    ap.add_argument("--straight", choices=("blocked", "free", "any"), default="blocked",
-                    help="which queries: straight joint motion blocked (default), free, or any")
+    ap.add_argument(
+        "--straight",
+        choices=("blocked", "free", "any"),
+        default="blocked",
+        help="which queries: straight joint motion blocked (default), free, or any",
+    )
     ap.add_argument("--all-queries", action="store_true", help="the same as --straight any")
     ap.add_argument("--no-mplib", action="store_true", help="skip the mplib comparison")
     ap.add_argument("--no-limits", action="store_true", help="skip the fail-fast and timeout measurements")
@@ -272,12 +305,20 @@ def main() -> None:
     if "ompl.rrtconnect" in names:
         blocks.insert(
             names.index("ompl.rrtconnect") + 1,
-            ("ompl.rrtconnect (no final check)", PlannerBlock(name="ompl.rrtconnect", params={"verify_resolution_rad": 0, "clearance_m": 0})),
+            (
+                "ompl.rrtconnect (no final check)",
+                PlannerBlock(name="ompl.rrtconnect", params={"verify_resolution_rad": 0, "clearance_m": 0}),
+            ),
         )
     queries = {c.name: c.queries(args.queries, args.seed + i, straight) for i, c in enumerate(cells)}
     which = {"any": "all", "blocked": "straight joint motion blocked", "free": "straight joint motion free"}[straight]
-    print(f"{args.queries} queries per scene ({which}), time limit {args.time_limit:g} s, seeds per query 0..{args.queries - 1}")
-    header = f"  {'planner':34s} {'succ':>6s}  {'med ms':>7s}  {'p95 ms':>7s}  {'len':>6s}  {'dur s':>5s}  hit  failures"
+    print(
+        f"{args.queries} queries per scene ({which}), time limit {args.time_limit:g} s, "
+        f"seeds per query 0..{args.queries - 1}"
+    )
+    header = (
+        f"  {'planner':34s} {'succ':>6s}  {'med ms':>7s}  {'p95 ms':>7s}  {'len':>6s}  {'dur s':>5s}  hit  failures"
+    )
 
     results: dict[str, dict[str, Any]] = {}
     for cell in cells:
@@ -318,7 +359,10 @@ def main() -> None:
         mp["all"] = merge([mp[c.name] for c in cells])
         print_row(f"{label} [all]", mp["all"])
         for c in cells:
-            print(f"    [{c.name}] median OMPL part {mp[c.name]['ompl_median_s'] * 1e3:.1f} ms, TOPP-RA part {mp[c.name]['topp_median_s'] * 1e3:.1f} ms")
+            print(
+                f"    [{c.name}] median OMPL part {mp[c.name]['ompl_median_s'] * 1e3:.1f} ms, "
+                f"TOPP-RA part {mp[c.name]['topp_median_s'] * 1e3:.1f} ms"
+            )
         mplib_runs[label] = mp
     if not mplib_runs:
         return

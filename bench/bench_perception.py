@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from twin.config import PROJECT_ROOT, load_config  # noqa: E402
-from twin.perception.evaluate import run_perception  # noqa: E402
+from twin.config import PROJECT_ROOT, load_config
+from twin.perception.evaluate import run_perception
 
 STAGES = ("render", "noise", "calibration", "cloud", "plane", "dbscan", "classify", "label", "pca", "icp")
 
@@ -33,7 +33,12 @@ def main() -> None:
     ap.add_argument("--detector", default=None, help="RoboCup detector plugin (default: the config's)")
     ap.add_argument("--seed-rules", action="store_true", help="PCA rules only (perception.robocup.height_check=false)")
     ap.add_argument("--no-noise", action="store_true", help="camera.noise.enabled=false")
-    ap.add_argument("--renderer", choices=("auto", "egl", "tiny"), default="auto", help="PyBullet renderer (default: EGL if it loads)")
+    ap.add_argument(
+        "--renderer",
+        choices=("auto", "egl", "tiny"),
+        default="auto",
+        help="PyBullet renderer (default: EGL if it loads)",
+    )
     args = ap.parse_args()
     names = ("warehouse", "robocup") if args.config == "both" else (args.config,)
     for name in names:
@@ -58,23 +63,38 @@ def main() -> None:
                 cal.append((rep.calibration["translation_error_m"], rep.calibration["rotation_error_deg"]))
             if rep.obstacle and rep.obstacle["max_face_error_m"] is not None:
                 boxes.append(rep.obstacle["max_face_error_m"])
-        print(f"\n== {name}: {args.seeds} scenes, {len(rows)} objects, detector {args.detector or settings.perception.detector.name}"
-              f"{', seed rules' if args.seed_rules else ''}{', no noise' if args.no_noise else ''}, renderer {args.renderer}")
+        print(
+            f"\n== {name}: {args.seeds} scenes, {len(rows)} objects, "
+            f"detector {args.detector or settings.perception.detector.name}"
+            f"{', seed rules' if args.seed_rules else ''}{', no noise' if args.no_noise else ''}, "
+            f"renderer {args.renderer}"
+        )
         print(f"{'stage':<12} {'median ms':>10} {'max ms':>10}")
         for k in STAGES:
             if times[k]:
                 print(f"{k:<12} {1e3 * np.median(times[k]):>10.1f} {1e3 * np.max(times[k]):>10.1f}")
-        print(f"{'scene wall':<12} {1e3 * np.median(walls):>10.1f} {1e3 * np.max(walls):>10.1f}  (world build, settle, all stages)")
+        print(
+            f"{'scene wall':<12} {1e3 * np.median(walls):>10.1f} {1e3 * np.max(walls):>10.1f}"
+            "  (world build, settle, all stages)"
+        )
         found = [r for r in rows if r["class_est"] is not None]
         err = np.array([r["position_error_m"] for r in found]) if found else np.array([np.nan])
         print(f"found {len(found)}/{len(rows)}, false positives {fps}")
-        print(f"class accuracy {np.mean([r['class_est'] == r['class_true'] for r in rows]):.3f}; "
-              f"colour accuracy {np.mean([r['color_est'] == r['color_true'] for r in rows]):.3f}; "
-              f"orientation accuracy {np.mean([r['orientation_est'] == r['orientation_true'] for r in rows]):.3f}")
-        print(f"xy error mm: median {1e3 * np.median(err):.1f}, p90 {1e3 * np.percentile(err, 90):.1f}, max {1e3 * np.max(err):.1f}")
+        print(
+            f"class accuracy {np.mean([r['class_est'] == r['class_true'] for r in rows]):.3f}; "
+            f"colour accuracy {np.mean([r['color_est'] == r['color_true'] for r in rows]):.3f}; "
+            f"orientation accuracy {np.mean([r['orientation_est'] == r['orientation_true'] for r in rows]):.3f}"
+        )
+        print(
+            f"xy error mm: median {1e3 * np.median(err):.1f}, p90 {1e3 * np.percentile(err, 90):.1f}, "
+            f"max {1e3 * np.max(err):.1f}"
+        )
         yaw = [r["yaw_error_deg"] for r in rows if r["yaw_error_deg"] is not None]
         if yaw:
-            print(f"grasp yaw error deg: median {np.median(yaw):.1f}, p90 {np.percentile(yaw, 90):.1f}, max {np.max(yaw):.1f}")
+            print(
+                f"grasp yaw error deg: median {np.median(yaw):.1f}, "
+                f"p90 {np.percentile(yaw, 90):.1f}, max {np.max(yaw):.1f}"
+            )
         print(f"mean score S {np.mean([r['score'] for r in rows]):.1f}")
         by_cls: dict[str, list[dict]] = {}
         for r in rows:
@@ -82,16 +102,23 @@ def main() -> None:
         for c, rs in sorted(by_cls.items()):
             lying = [r for r in rs if r["orientation_true"] == "horizontal"]
             e = [r["position_error_m"] for r in rs if r["position_error_m"] is not None]
-            print(f"  {c:<15} n={len(rs):<3} class {np.mean([r['class_est'] == r['class_true'] for r in rs]):.2f}  "
-                  f"orient {np.mean([r['orientation_est'] == r['orientation_true'] for r in rs]):.2f}  "
-                  f"lying {sum(r['orientation_est'] == 'horizontal' for r in lying)}/{len(lying)}  "
-                  f"xy median {1e3 * np.median(e) if e else float('nan'):.1f} mm")
+            print(
+                f"  {c:<15} n={len(rs):<3} class {np.mean([r['class_est'] == r['class_true'] for r in rs]):.2f}  "
+                f"orient {np.mean([r['orientation_est'] == r['orientation_true'] for r in rs]):.2f}  "
+                f"lying {sum(r['orientation_est'] == 'horizontal' for r in lying)}/{len(lying)}  "
+                f"xy median {1e3 * np.median(e) if e else float('nan'):.1f} mm"
+            )
         if cal:
             c = np.array(cal)
-            print(f"calibration: translation median {1e3 * np.median(c[:, 0]):.2f} max {1e3 * c[:, 0].max():.2f} mm, "
-                  f"rotation median {np.median(c[:, 1]):.3f} max {c[:, 1].max():.3f} deg")
+            print(
+                f"calibration: translation median {1e3 * np.median(c[:, 0]):.2f} max {1e3 * c[:, 0].max():.2f} mm, "
+                f"rotation median {np.median(c[:, 1]):.3f} max {c[:, 1].max():.3f} deg"
+            )
         if boxes:
-            print(f"obstacle box largest face error: median {1e3 * np.median(boxes):.1f}, max {1e3 * np.max(boxes):.1f} mm")
+            print(
+                f"obstacle box largest face error: median {1e3 * np.median(boxes):.1f}, "
+                f"max {1e3 * np.max(boxes):.1f} mm"
+            )
 
 
 if __name__ == "__main__":

@@ -24,7 +24,9 @@ from twin.tasks.cell import stage_block  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", action="append", default=None, help="config(s) to run (default: both reference systems)")
+    ap.add_argument(
+        "--config", action="append", default=None, help="config(s) to run (default: both reference systems)"
+    )
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--planner", default=None, help="transfer planner (default: the config's)")
     args = ap.parse_args()
@@ -42,15 +44,25 @@ def main() -> None:
                 if o.placed:
                     cycles.append(o.cycle_time_s)
             failed = [(o.id, o.error) for o in r.objects if not o.placed]
-            print(f"{cfg} seed {seed}: {r.success_rate:.0%} placed, sim {r.sim_time_s:.1f} s, wall {r.wall_time_s:.1f} s {failed if failed else ''}", flush=True)
+            print(
+                f"{cfg} seed {seed}: {r.success_rate:.0%} placed, sim {r.sim_time_s:.1f} s, "
+                f"wall {r.wall_time_s:.1f} s {failed or ''}",
+                flush=True,
+            )
         allp = [p for v in per_class.values() for p in v]
         print(f"\n{cfg} ({args.seeds} seeds, transfer planner {stage_block(settings, 'transfer', args.planner).name}):")
         print(f"  success rate {sum(allp) / len(allp):.1%} ({sum(allp)}/{len(allp)} objects)")
         for cls, v in sorted(per_class.items()):
             print(f"    {cls:15s} {sum(v)}/{len(v)}")
         if cycles:
-            print(f"  mean simulated cycle time per placed object {statistics.mean(cycles):.1f} s (median {statistics.median(cycles):.1f} s)")
-        print(f"  wall time per run: mean {statistics.mean(walls):.1f} s, simulated {statistics.mean(sims):.1f} s; total {time.perf_counter() - t0:.0f} s\n")
+            print(
+                f"  mean simulated cycle time per placed object {statistics.mean(cycles):.1f} s"
+                f" (median {statistics.median(cycles):.1f} s)"
+            )
+        print(
+            f"  wall time per run: mean {statistics.mean(walls):.1f} s, simulated {statistics.mean(sims):.1f} s; "
+            f"total {time.perf_counter() - t0:.0f} s\n"
+        )
 
 
 if __name__ == "__main__":

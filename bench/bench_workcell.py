@@ -20,10 +20,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from twin.collision import PlanningScene  # noqa: E402
-from twin.config import PROJECT_ROOT, Settings, load_config  # noqa: E402
-from twin.kinematics import UR5e  # noqa: E402
-from twin.urdf_model import RobotModel  # noqa: E402
+from twin.collision import PlanningScene
+from twin.config import PROJECT_ROOT, Settings, load_config
+from twin.kinematics import UR5e
+from twin.urdf_model import RobotModel
 
 
 def best_us(fn: Callable[[], object], count: int, repeat: int = 5) -> float:
@@ -74,8 +74,11 @@ def main() -> None:
         ("in_collision_batch, per config", lambda: scene.in_collision_batch(qs), n),
         ("min_distance, free configs", lambda: [scene.min_distance(q) for q in free], len(free)),
         ("min_distance, colliding configs", lambda: [scene.min_distance(q) for q in coll], len(coll)),
-        ("min_distance(include_self=False), free", lambda: [scene.min_distance(q, include_self=False) for q in free],
-         len(free)),
+        (
+            "min_distance(include_self=False), free",
+            lambda: [scene.min_distance(q, include_self=False) for q in free],
+            len(free),
+        ),
         ("min_distance_batch, per config", lambda: scene.min_distance_batch(qs), n),
         ("min_distance along a 200-point path", lambda: [scene.min_distance(q) for q in path], 200),
         ("  same, include_self=False", lambda: [scene.min_distance(q, include_self=False) for q in path], 200),

@@ -48,8 +48,8 @@ def main() -> int:
 
 
 def run(spec: dict[str, Any]) -> dict[str, Any]:
-    import numpy as np
     import mplib
+    import numpy as np
     from mplib import Pose
     from mplib.collision_detection import fcl
 
@@ -105,8 +105,11 @@ def run(spec: dict[str, Any]) -> dict[str, Any]:
         try:
             planner.robot.set_qpos(full_start, True)
             status, path = planner.planner.plan(
-                full_start[arm_idx], [fg[arm_idx] for fg in full_goals],
-                time=spec["time_limit_s"], range=spec["rrt_range"], simplify=True,
+                full_start[arm_idx],
+                [fg[arm_idx] for fg in full_goals],
+                time=spec["time_limit_s"],
+                range=spec["rrt_range"],
+                simplify=True,
             )
             t_ompl = time.perf_counter() - t
             status = str(status)

@@ -62,7 +62,8 @@ class Crash:
 
         d = self.target - q
         if np.abs(d).max() < 1e-6:
-            return MotionResult(Status.SUCCESS, "arrived", Trajectory(np.zeros(1), q[None], np.zeros((1, 6)), np.zeros((1, 6))))
+            arrived = Trajectory(np.zeros(1), q[None], np.zeros((1, 6)), np.zeros((1, 6)))
+            return MotionResult(Status.SUCCESS, "arrived", arrived)
         dq = d * min(1.0, 0.05 / np.abs(d).max())
         t = np.array([0.0, 0.25])
         return Segment(Trajectory(t, np.stack([q, q + dq]), np.zeros((2, 6)), np.zeros((2, 6))), 1e-4, {})
@@ -92,8 +93,12 @@ def twin_register_tasks(registry):
 
 @hookimpl
 def twin_register_planners(registry):
-    registry.add_planner("acme.straight", "acme_twin_plugin:StraightLine", description="straight joint line (test plugin)")
-    registry.add_planner("acme.crash", "acme_twin_plugin:Crash", receding_horizon=True, description="drives into the table (test plugin)")
+    registry.add_planner(
+        "acme.straight", "acme_twin_plugin:StraightLine", description="straight joint line (test plugin)"
+    )
+    registry.add_planner(
+        "acme.crash", "acme_twin_plugin:Crash", receding_horizon=True, description="drives into the table (test plugin)"
+    )
 '''
 
 

@@ -19,7 +19,15 @@ def twin(*args: str, extra_path: Path | None = None) -> subprocess.CompletedProc
     env = dict(os.environ)
     if extra_path is not None:
         env["PYTHONPATH"] = os.pathsep.join([str(extra_path), env.get("PYTHONPATH", "")])
-    return subprocess.run([sys.executable, "-m", "twin", *args], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "twin", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=300,
+        check=False,
+    )
 
 
 def assert_one_line_usage_error(r: subprocess.CompletedProcess, *needles: str) -> None:
@@ -54,7 +62,19 @@ def test_planners_lists_builtins_and_a_third_party_plugin(acme_plugin):
 
 def test_plan_with_a_third_party_plugin_from_the_command_line(acme_plugin, tmp_path):
     out = tmp_path / "plan.json"
-    r = twin("plan", "configs/robocup.yaml", "--planner", "acme.straight", "--start", START, "--goal", GOAL, "--json", str(out), extra_path=acme_plugin)
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "acme.straight",
+        "--start",
+        START,
+        "--goal",
+        GOAL,
+        "--json",
+        str(out),
+        extra_path=acme_plugin,
+    )
     assert r.returncode == 0, r.stderr
     data = json.loads(out.read_text())
     assert data["status"] == "success" and len(data["q"]) == len(data["t"]) > 1
@@ -74,7 +94,18 @@ def test_unknown_config_key_names_the_dotted_path(tmp_path):
 
 
 def test_bad_value_type_in_an_override():
-    r = twin("plan", "configs/robocup.yaml", "--set", "robot.max_joint_vel=fast", "--planner", "ruckig.movej", "--start", START, "--goal", GOAL)
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--set",
+        "robot.max_joint_vel=fast",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        START,
+        "--goal",
+        GOAL,
+    )
     assert_one_line_usage_error(r, "robot.max_joint_vel")
 
 
@@ -91,7 +122,18 @@ def test_malformed_joint_vector():
 def test_no_solution_exits_1(tmp_path):
     # the goal puts the arm straight down through the table
     out = tmp_path / "p.json"
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", "--start", START, "--goal", "0,0.6,0,0,0,0", "--json", str(out))
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        START,
+        "--goal",
+        "0,0.6,0,0,0,0",
+        "--json",
+        str(out),
+    )
     assert r.returncode == 1, (r.stdout, r.stderr)
     data = json.loads(out.read_text())
     assert data["status"] != "success" and data["reason"] and data["q"] == []
@@ -104,7 +146,18 @@ NEG_GOAL = "-0.3,-1.4,1.2,-1.4,-1.57,0.2"
 
 def test_start_and_goal_may_begin_with_a_minus_sign(tmp_path):
     out = tmp_path / "p.json"
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", "--start", NEG_START, "--goal", NEG_GOAL, "--json", str(out))
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        NEG_START,
+        "--goal",
+        NEG_GOAL,
+        "--json",
+        str(out),
+    )
     data = assert_plan_ran(r, out)
     assert data["status"] == "success", data["reason"]
     assert data["q"][0] == pytest.approx([float(v) for v in NEG_START.split(",")])
@@ -113,31 +166,77 @@ def test_start_and_goal_may_begin_with_a_minus_sign(tmp_path):
 
 def test_goal_pose_may_begin_with_a_minus_sign(tmp_path):
     out = tmp_path / "p.json"
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", "--start", NEG_START,
-             "--goal-pose", "-0.45,-0.2,0.3,-3.14159,0,-0.5", "--json", str(out))
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        NEG_START,
+        "--goal-pose",
+        "-0.45,-0.2,0.3,-3.14159,0,-0.5",
+        "--json",
+        str(out),
+    )
     data = assert_plan_ran(r, out)
     assert data["planner"] == "ruckig.movej" and data["reason"] is not None
 
 
 def test_equals_form_and_abbreviations_still_work(tmp_path):
     out = tmp_path / "p.json"
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", f"--start={NEG_START}", "--goal-p", "-0.45,0.2,0.3,3.14159,0,0",
-             "--json", str(out))
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        f"--start={NEG_START}",
+        "--goal-p",
+        "-0.45,0.2,0.3,3.14159,0,0",
+        "--json",
+        str(out),
+    )
     assert_plan_ran(r, out)
 
 
 def test_a_bad_vector_with_a_minus_sign_is_one_line_naming_the_option():
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", "--start", "-0.5,-1.5708,1.5708", "--goal", NEG_GOAL)
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        "-0.5,-1.5708,1.5708",
+        "--goal",
+        NEG_GOAL,
+    )
     assert_one_line_usage_error(r, "--start", "6 comma-separated")
-    r = twin("plan", "configs/robocup.yaml", "--planner", "ruckig.movej", "--start", NEG_START, "--goal", "-0.3,-1.4,1.2,-1.4,-1.57,-inf")
+    r = twin(
+        "plan",
+        "configs/robocup.yaml",
+        "--planner",
+        "ruckig.movej",
+        "--start",
+        NEG_START,
+        "--goal",
+        "-0.3,-1.4,1.2,-1.4,-1.57,-inf",
+    )
     assert_one_line_usage_error(r, "--goal", "finite")
 
 
 def test_vector_values_are_joined_only_for_vector_options():
     from twin.cli import build_parser
 
-    args = build_parser().parse_args(["plan", "c.yaml", "--planner", "x", "--start", NEG_START, "--goal-pose", "-1,-2,-3,-4,-5,-6"])
-    assert args.start == [float(v) for v in NEG_START.split(",")] and args.goal_pose == [-1.0, -2.0, -3.0, -4.0, -5.0, -6.0]
+    args = build_parser().parse_args(
+        ["plan", "c.yaml", "--planner", "x", "--start", NEG_START, "--goal-pose", "-1,-2,-3,-4,-5,-6"]
+    )
+    assert args.start == [float(v) for v in NEG_START.split(",")] and args.goal_pose == [
+        -1.0,
+        -2.0,
+        -3.0,
+        -4.0,
+        -5.0,
+        -6.0,
+    ]
     # a comparison's --set value that looks like numbers is left alone (it is not a vector option)
     args = build_parser().parse_args(["compare", "c.yaml", "--set", "seeds=[0]"])
     assert args.overrides == ["seeds=[0]"]
@@ -145,7 +244,7 @@ def test_vector_values_are_joined_only_for_vector_options():
 
 # ---- configs that are not UTF-8, not YAML, empty or binary: one line, exit 2 ----------------------------
 @pytest.mark.parametrize(
-    "content, needle",
+    ("content", "needle"),
     [
         (b"seed: 3\nname: caf\xe9\n", "not UTF-8"),
         (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x01", "binary"),
@@ -166,7 +265,7 @@ def test_unreadable_configs_are_one_line_errors(tmp_path, content, needle):
 
 
 @pytest.mark.parametrize(
-    "override, needle",
+    ("override", "needle"),
     [
         ("robot.max_joint_vel=.nan", "finite"),
         ("robot.max_joint_vel=.inf", "finite"),
@@ -179,7 +278,9 @@ def test_unreadable_configs_are_one_line_errors(tmp_path, content, needle):
     ids=["nan", "inf", "huge", "mapping-for-list", "deep", "no-name", "newline-value"],
 )
 def test_odd_overrides_are_one_line_errors(override, needle):
-    r = twin("plan", "configs/robocup.yaml", "--set", override, "--planner", "ruckig.movej", "--start", START, "--goal", GOAL)
+    r = twin(
+        "plan", "configs/robocup.yaml", "--set", override, "--planner", "ruckig.movej", "--start", START, "--goal", GOAL
+    )
     assert_one_line_usage_error(r, needle)
 
 

@@ -55,17 +55,23 @@ class BulletReference:
     def __init__(self, settings: Settings, scene: PlanningScene):
         self.cid = pb.connect(pb.DIRECT)
         flags = pb.URDF_USE_IMPLICIT_CYLINDER
-        self.robot = pb.loadURDF(str(settings.resolve(settings.robot.urdf)), useFixedBase=True, flags=flags,
-                                 physicsClientId=self.cid)
+        self.robot = pb.loadURDF(
+            str(settings.resolve(settings.robot.urdf)), useFixedBase=True, flags=flags, physicsClientId=self.cid
+        )
         self.joint, link = {}, {"base_link": -1}
         for i in range(pb.getNumJoints(self.robot, physicsClientId=self.cid)):
             info = pb.getJointInfo(self.robot, i, physicsClientId=self.cid)
             self.joint[info[1].decode()] = i
             link[info[12].decode()] = i
         fixtures = {
-            f.name: pb.loadURDF(str(settings.resolve(f.urdf)), basePosition=f.position,
-                                baseOrientation=pb.getQuaternionFromEuler(f.rpy), useFixedBase=True, flags=flags,
-                                physicsClientId=self.cid)
+            f.name: pb.loadURDF(
+                str(settings.resolve(f.urdf)),
+                basePosition=f.position,
+                baseOrientation=pb.getQuaternionFromEuler(f.rpy),
+                useFixedBase=True,
+                flags=flags,
+                physicsClientId=self.cid,
+            )
             for f in settings.world.fixtures
         }
         m = scene.model
@@ -74,7 +80,7 @@ class BulletReference:
         self.pairs += [(self.robot, self.robot, link[a], link[b], a, b) for a, b in scene.allowed_self_pairs()]
 
     def min_distance(self, q: np.ndarray, opening: float = 0.085) -> tuple[float, str, str]:
-        for name, v in zip(JOINT_NAMES, q):
+        for name, v in zip(JOINT_NAMES, q, strict=True):
             pb.resetJointState(self.robot, self.joint[name], float(v), physicsClientId=self.cid)
         for name in ("left_finger_joint", "right_finger_joint"):
             pb.resetJointState(self.robot, self.joint[name], opening / 2, physicsClientId=self.cid)
@@ -372,7 +378,7 @@ def test_sequential_queries_along_a_path_match_fresh_scenes(settings):
     s = _fresh(settings)
     path = np.linspace(_q_for_tcp((-0.45, -0.2, 0.30)), _q_for_tcp((-0.45, 0.25, 0.05)), 25)
     along = [s.min_distance(q, include_self=False) for q in path]
-    for q, r in zip(path, along):
+    for q, r in zip(path, along, strict=True):
         f = _fresh(settings).min_distance(q, include_self=False)
         assert r.distance == pytest.approx(f.distance, abs=1e-12)  # names may differ on exact ties (fingers)
 
@@ -393,8 +399,19 @@ def test_sequential_queries_along_a_path_match_fresh_scenes(settings):
         lambda s: s.set_gripper_opening(0.2),
         lambda s: s.check_path(np.zeros((2, 6)), resolution_rad=0.0),
     ],
-    ids=["q-5", "q-nan", "qs-3x5", "neg-size", "pose-3x3", "pose-scaled", "bounds-flipped",
-         "replace-fixture", "remove-unknown", "opening-too-wide", "zero-resolution"],
+    ids=[
+        "q-5",
+        "q-nan",
+        "qs-3x5",
+        "neg-size",
+        "pose-3x3",
+        "pose-scaled",
+        "bounds-flipped",
+        "replace-fixture",
+        "remove-unknown",
+        "opening-too-wide",
+        "zero-resolution",
+    ],
 )
 def test_bad_input_raises_invalid_request(settings, call):
     with pytest.raises(InvalidRequestError):
@@ -414,7 +431,9 @@ def test_run_time_boxes_are_listed_with_their_bounds_and_the_held_box_with_its_s
     scene = PlanningScene.from_settings(settings_from_dict({}))
     scene.add_box_bounds("obstacle", [-0.5, -0.2, 0.0], [-0.4, 0.3, 0.2])
     b = scene.box_bounds()["obstacle"]
-    np.testing.assert_allclose([b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max], [-0.5, -0.4, -0.2, 0.3, 0.0, 0.2], atol=1e-12)
+    np.testing.assert_allclose(
+        [b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max], [-0.5, -0.4, -0.2, 0.3, 0.0, 0.2], atol=1e-12
+    )
     assert "table" not in scene.boxes()
     scene.remove("obstacle")
     assert scene.box_bounds() == {}

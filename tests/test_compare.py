@@ -32,8 +32,17 @@ from twin.config import load_config
 from twin.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent
-TRAJECTORY_KEYS = ("duration_s", "joint_path_length_rad", "tcp_path_length_m", "max_jerk", "min_clearance_m",
-                   "contacts", "contact_time_s", "goal_error_m", "goal_error_rad")
+TRAJECTORY_KEYS = (
+    "duration_s",
+    "joint_path_length_rad",
+    "tcp_path_length_m",
+    "max_jerk",
+    "min_clearance_m",
+    "contacts",
+    "contact_time_s",
+    "goal_error_m",
+    "goal_error_rad",
+)
 
 # 2 planners x 3 random queries x 2 seeds = 12 runs
 SWEEP: dict[str, Any] = {
@@ -141,7 +150,10 @@ def test_killed_in_the_middle_and_resumed_each_run_is_there_exactly_once(tmp_pat
     results = out / "results.jsonl"
     proc = subprocess.Popen(
         [sys.executable, "-m", "twin", "compare", str(spec), "--out", str(out), "--workers", "1"],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
     )
     try:
         for _ in range(12_000):  # poll for up to ~2 minutes until two rows are written (or it ended)
@@ -190,10 +202,15 @@ def test_an_existing_sweep_is_not_overwritten_without_resume(sweep):
 def test_task_scenarios_are_skipped_when_twin_tasks_is_missing(tmp_path, monkeypatch):
     monkeypatch.setattr("twin.compare.runner.tasks_available", lambda: False)
     data = {
-        "name": "mixed", "planners": ["ruckig.movej"], "seeds": [0],
+        "name": "mixed",
+        "planners": ["ruckig.movej"],
+        "seeds": [0],
         "scenarios": [
-            {"name": "q", "scene": str(ROOT / "configs" / "robocup.yaml"),
-             "queries": [{"start": [0, -1.6, 1.5, -1.5, -1.57, 0], "goal": [0.3, -1.4, 1.2, -1.4, -1.57, 0.2]}]},
+            {
+                "name": "q",
+                "scene": str(ROOT / "configs" / "robocup.yaml"),
+                "queries": [{"start": [0, -1.6, 1.5, -1.5, -1.57, 0], "goal": [0.3, -1.4, 1.2, -1.4, -1.57, 0.2]}],
+            },
             {"name": "sorting", "task": str(ROOT / "configs" / "robocup.yaml"), "seeds": [2]},
         ],
     }
@@ -225,13 +242,13 @@ def test_spec_errors_name_the_key(tmp_path):
     bad = dict(SWEEP, scenarios=[dict(scenario, bogus=1)])
     with pytest.raises(ConfigError, match=r"unknown key 'scenarios\.0\.bogus'"):
         load_compare_config(write_spec(tmp_path / "a.yaml", bad))
+    twice = dict(SWEEP, planners=["ruckig.movej", {"name": "ruckig.movej"}])
     with pytest.raises(ConfigError, match="labels must be unique"):
-        twice = dict(SWEEP, planners=["ruckig.movej", {"name": "ruckig.movej"}])
         load_compare_config(write_spec(tmp_path / "b.yaml", twice))
     with pytest.raises(ConfigError, match="config file not found"):
         load_compare_config(write_spec(tmp_path / "c.yaml", dict(SWEEP, scenarios=[dict(scenario, scene="nope.yaml")])))
+    no_queries = dict(SWEEP, scenarios=[{"name": "x", "scene": scenario["scene"]}])
     with pytest.raises(ConfigError, match="exactly one of `queries`"):
-        no_queries = dict(SWEEP, scenarios=[{"name": "x", "scene": scenario["scene"]}])
         load_compare_config(write_spec(tmp_path / "d.yaml", no_queries))
     child = tmp_path / "child.yaml"
     child.write_text("extends: e.yaml\nseeds: [5]\n")
@@ -304,15 +321,23 @@ def test_task_runs_take_the_whole_planner_block_as_transfer_planner(monkeypatch)
 
     def fake_run_task(settings: Any, **kw: Any) -> RunSummary:
         seen.append((settings, kw))
-        return RunSummary(config="robocup.yaml", seed=kw["seed"], planner=settings.planners["transfer"].name,
-                          objects=(), sim_time_s=1.0, wall_time_s=0.1)
+        return RunSummary(
+            config="robocup.yaml",
+            seed=kw["seed"],
+            planner=settings.planners["transfer"].name,
+            objects=(),
+            sim_time_s=1.0,
+            wall_time_s=0.1,
+        )
 
     monkeypatch.setattr(twin.tasks, "run_task", fake_run_task)
     block = {"name": "ompl.rrtconnect", "params": {"range": 0.5}, "retimer": "ruckig", "retimer_params": {}}
-    spec = compare_spec_from_dict({
-        "planners": [dict(block, label="rrtc-ruckig")],
-        "scenarios": [{"name": "sorting", "task": str(ROOT / "configs" / "robocup.yaml"), "seeds": [2]}],
-    })
+    spec = compare_spec_from_dict(
+        {
+            "planners": [dict(block, label="rrtc-ruckig")],
+            "scenarios": [{"name": "sorting", "task": str(ROOT / "configs" / "robocup.yaml"), "seeds": [2]}],
+        }
+    )
     [task] = expand_runs(spec)
     row = execute_run(task)
     assert row["status"] != "error", row["reason"]
@@ -341,7 +366,9 @@ def test_resume_with_a_changed_planner_block_names_the_change_unless_forced(tmp_
     over = {r.planner: r for r in forced.summary.overall}["quintic-slow"]
     assert over.runs == 1 and over.stats["duration_s"].median >= 4.0  # ... but leaves the summary
 
-    assert_one_line_usage_error(twin("compare", str(spec), "--out", str(tmp_path / "o2"), "--force"), "--force", "--resume")
+    assert_one_line_usage_error(
+        twin("compare", str(spec), "--out", str(tmp_path / "o2"), "--force"), "--force", "--resume"
+    )
 
 
 def test_rows_that_ended_in_error_are_rerun_on_resume_and_replace_the_old_row(tmp_path):
@@ -392,7 +419,12 @@ def test_cli_dry_run_counts_and_writes_nothing(tmp_path):
     r = twin("compare", "configs/compare-smoke.yaml", "--dry-run", "--out", str(tmp_path / "out"))
     assert r.returncode == 0, r.stderr
     n = plan_comparison(ROOT / "configs" / "compare-smoke.yaml").total
-    assert f"{n} runs" in r.stdout and "would skip 2 runs: nmpc cannot reach pose goals" in r.stdout and "ompl.rrtconnect" in r.stdout and "warehouse-blocked" in r.stdout
+    assert (
+        f"{n} runs" in r.stdout
+        and "would skip 2 runs: nmpc cannot reach pose goals" in r.stdout
+        and "ompl.rrtconnect" in r.stdout
+        and "warehouse-blocked" in r.stdout
+    )
     assert not (tmp_path / "out").exists()
 
 
@@ -400,13 +432,22 @@ def test_a_region_that_cannot_yield_blocked_queries_is_a_config_error_before_any
     # the default region over the RoboCup table has nothing between start and goal
     data = {
         "planners": ["ruckig.movej"],
-        "scenarios": [{"name": "nothing-in-the-way", "scene": str(ROOT / "configs" / "robocup.yaml"),
-                       "random": {"count": 1, "straight": "blocked"}}],
+        "scenarios": [
+            {
+                "name": "nothing-in-the-way",
+                "scene": str(ROOT / "configs" / "robocup.yaml"),
+                "random": {"count": 1, "straight": "blocked"},
+            }
+        ],
     }
     spec = write_spec(tmp_path / "impossible.yaml", data)
-    with pytest.raises(ConfigError, match=r"scenarios\.0 \(nothing-in-the-way\)\.random: .*blocked straight joint motion"):
+    with pytest.raises(
+        ConfigError, match=r"scenarios\.0 \(nothing-in-the-way\)\.random: .*blocked straight joint motion"
+    ):
         plan_comparison(spec)
-    assert_one_line_usage_error(twin("compare", str(spec), "--out", str(tmp_path / "out")), "nothing-in-the-way", "blocked")
+    assert_one_line_usage_error(
+        twin("compare", str(spec), "--out", str(tmp_path / "out")), "nothing-in-the-way", "blocked"
+    )
     assert not (tmp_path / "out").exists()
 
 
@@ -424,7 +465,10 @@ def test_straight_option_draws_queries_of_the_asked_difficulty():
             spec = RandomQueries(count=1, goal=goal, straight=straight).model_dump()
             for i in range(3):
                 q = sample_query(spec, np.random.default_rng([i, 7]), scene=cell.scene, kin=cell.kin, home=home)
-                assert straight_free(q, scene=cell.scene, kin=cell.kin, resolution_rad=0.01) is (straight == "free"), (goal, i)
+                assert straight_free(q, scene=cell.scene, kin=cell.kin, resolution_rad=0.01) is (straight == "free"), (
+                    goal,
+                    i,
+                )
 
 
 OMPL_TRIO = ["ompl.rrtconnect", "ompl.rrtstar", "ompl.bitstar"]
@@ -442,8 +486,13 @@ def test_on_blocked_queries_ompl_planners_search_and_their_rows_differ(tmp_path)
         "time_limit_s": 0.5,
         "execute": False,
         "planners": OMPL_TRIO,
-        "scenarios": [{"name": "wall", "scene": str(ROOT / "configs" / "warehouse.yaml"),
-                       "random": {"count": 3, "goal": "joint", "straight": "blocked"}}],
+        "scenarios": [
+            {
+                "name": "wall",
+                "scene": str(ROOT / "configs" / "warehouse.yaml"),
+                "random": {"count": 3, "goal": "joint", "straight": "blocked"},
+            }
+        ],
     }
     result = run_comparison(compare_spec_from_dict(data), out_dir=tmp_path / "out", workers=0, plots=False)
     rows = result.rows
@@ -467,10 +516,22 @@ def test_on_blocked_queries_ompl_planners_search_and_their_rows_differ(tmp_path)
 
 
 def test_summary_shows_the_closest_pair_and_the_query_difficulty(tmp_path):
-    data = dict(SWEEP, seeds=[0], scenarios=[
-        {"name": "wall-blocked", "scene": SWEEP["scenarios"][0]["scene"], "random": {"count": 2, "goal": "pose", "straight": "blocked"}},
-        {"name": "wall-free", "scene": SWEEP["scenarios"][0]["scene"], "random": {"count": 2, "goal": "pose", "straight": "free"}},
-    ])
+    data = dict(
+        SWEEP,
+        seeds=[0],
+        scenarios=[
+            {
+                "name": "wall-blocked",
+                "scene": SWEEP["scenarios"][0]["scene"],
+                "random": {"count": 2, "goal": "pose", "straight": "blocked"},
+            },
+            {
+                "name": "wall-free",
+                "scene": SWEEP["scenarios"][0]["scene"],
+                "random": {"count": 2, "goal": "pose", "straight": "free"},
+            },
+        ],
+    )
     result = run_comparison(compare_spec_from_dict(data), out_dir=tmp_path / "out", workers=0, plots=False)
     ok = [r for r in result.rows if r["success"]]
     assert ok and all(r["clearance_pair"] and "->" in r["clearance_pair"] for r in ok)
@@ -499,8 +560,9 @@ def test_a_run_that_hangs_or_kills_its_worker_is_an_error_row_and_the_sweep_goes
 
     from twin.compare.runner import _run_local
 
-    spec = compare_spec_from_dict(dict(SWEEP, seeds=[0], planners=["ruckig.movej"],
-                                       scenarios=[dict(SWEEP["scenarios"][0], random={"count": 4})]))
+    spec = compare_spec_from_dict(
+        dict(SWEEP, seeds=[0], planners=["ruckig.movej"], scenarios=[dict(SWEEP["scenarios"][0], random={"count": 4})])
+    )
     tasks = [replace(t, timeout_s=2.0) for t in expand_runs(spec)]
     rows = {r["run_id"]: r for r in _run_local(tasks, 2, run=hang_or_crash)}
     assert set(rows) == {t.run_id for t in tasks}

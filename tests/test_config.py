@@ -72,5 +72,5 @@ def test_overrides_apply_last_and_are_validated(tmp_path):
     assert s.planners["transfer"].name == "ruckig.movej"
     with pytest.raises(ConfigError, match=r"unknown key 'robot\.nope'"):
         load_config(cfg, ["robot.nope=1"])
-    with pytest.raises(ConfigError, match="key.path=value"):
+    with pytest.raises(ConfigError, match=r"key\.path=value"):
         load_config(cfg, ["seed"])

@@ -100,7 +100,9 @@ def _full(name: str) -> dict[str, Any]:
 
 
 BASES: dict[str, dict[str, Any]] = {name: _full(name) for name in SCENES}
-SHIPPED: dict[str, dict[str, Any]] = {name: yaml.safe_load((ROOT / "configs" / f"{name}.yaml").read_text()) for name in SCENES}
+SHIPPED: dict[str, dict[str, Any]] = {
+    name: yaml.safe_load((ROOT / "configs" / f"{name}.yaml").read_text()) for name in SCENES
+}
 
 
 def _paths(node: Any, max_depth: int = 12) -> list[tuple[Any, ...]]:
@@ -141,15 +143,71 @@ def _nested(depth: int, as_list: bool) -> Any:
 
 
 EDGES = [-1, 0, -0.5, 0.5, 1, 2, 1e-300, 1e300, 2**31, 2**63 - 1, -(2**63 - 1), 1e6]
-NUMBERS = [0, -1, -0.0, 1e-300, -1e9, 1e9, 1e308, -1e308, 2**63, -(2**63), 2**64 + 1, 10**30, math.nan, math.inf, -math.inf, 0.5, 3]
+NUMBERS = [
+    0,
+    -1,
+    -0.0,
+    1e-300,
+    -1e9,
+    1e9,
+    1e308,
+    -1e308,
+    2**63,
+    -(2**63),
+    2**64 + 1,
+    10**30,
+    math.nan,
+    math.inf,
+    -math.inf,
+    0.5,
+    3,
+]
 ODD = [
-    None, "", " ", "x", "a\nb", "\x85\u2028", "1,2,3", "nan", "-inf", True, False, [], {}, [1, 2], [1, 2, 3, 4, 5, 6, 7],
-    {"a": 1}, [[1, 2], [3]], "🤖", "../../../../etc/passwd", "\u0000",
+    None,
+    "",
+    " ",
+    "x",
+    "a\nb",
+    "\x85\u2028",
+    "1,2,3",
+    "nan",
+    "-inf",
+    True,
+    False,
+    [],
+    {},
+    [1, 2],
+    [1, 2, 3, 4, 5, 6, 7],
+    {"a": 1},
+    [[1, 2], [3]],
+    "🤖",
+    "../../../../etc/passwd",
+    "\u0000",
 ]
 URDFS = [
-    "", "nope.urdf", "urdf", "urdf/", "/", ".", "configs/robocup.yaml", "README.md", "urdf/table.urdf ", "/dev/null",
-    "/dev/zero", "/proc/self/status", "urdf/objects", "urdf/ur5e.urdf", "urdf/bin_blue.urdf", "a" * 300, "x/" * 200,
-    "urdf/table.urdf\u0000", "C:\\table.urdf", "~/table.urdf", 3, None, ["urdf/table.urdf"],
+    "",
+    "nope.urdf",
+    "urdf",
+    "urdf/",
+    "/",
+    ".",
+    "configs/robocup.yaml",
+    "README.md",
+    "urdf/table.urdf ",
+    "/dev/null",
+    "/dev/zero",
+    "/proc/self/status",
+    "urdf/objects",
+    "urdf/ur5e.urdf",
+    "urdf/bin_blue.urdf",
+    "a" * 300,
+    "x/" * 200,
+    "urdf/table.urdf\u0000",
+    "C:\\table.urdf",
+    "~/table.urdf",
+    3,
+    None,
+    ["urdf/table.urdf"],
 ]
 CLASSES = ["bottle", "can", "spam", "cube", "marker", "warehouse_cube", "obstacle", "Bottle", "", "robot", 1, None]
 COLORS = ["red", "blue", "green", "black", "yellow", "purple", "", "#ff0000", None, 3, "RED"]
@@ -157,7 +215,13 @@ COUNTS = [-1, 0, 1, 2, 5, 50, 51, 1000, "3", 2.5, None, True, math.nan]
 GROUPS = ["movej", "movel", "transfer", "extra", "", "a.b"]
 # mutation operators, weighted: plausible changes (numbers within a few times their value, planner blocks)
 # reach the scene, planner and world stages; the rest mostly stop at validation
-OPS = ["plausible"] * 4 + ["edge"] * 3 + ["planner"] * 3 + ["fixture", "objects", "region"] * 2 + ["drop", "set", "numeric", "retype", "unknown", "deep"]
+OPS = (
+    ["plausible"] * 4
+    + ["edge"] * 3
+    + ["planner"] * 3
+    + ["fixture", "objects", "region"] * 2
+    + ["drop", "set", "numeric", "retype", "unknown", "deep"]
+)
 
 
 def _registered() -> list[str]:
@@ -203,19 +267,34 @@ def values() -> st.SearchStrategy[Any]:
 
 @st.composite
 def planner_blocks(draw: st.DrawFn) -> Any:
-    name = draw(st.sampled_from(PLANNER_NAMES + [n for n in NAMES if n.startswith(("ompl.", "ruckig", "toppra", "nmpc", "seed."))]))
+    name = draw(
+        st.sampled_from(
+            PLANNER_NAMES + [n for n in NAMES if n.startswith(("ompl.", "ruckig", "toppra", "nmpc", "seed."))]
+        )
+    )
     keys = _params_of(name) if isinstance(name, str) else []
     params: dict[Any, Any] = {}
     for _ in range(draw(st.integers(0, 3))):
         key = draw(st.sampled_from(keys + ["nope", "Range", ""])) if keys else draw(st.sampled_from(["range", "x"]))
-        params[key] = draw(st.one_of(st.sampled_from([0.1, 0.5, 1, 2, 10, 50, True, False, "full", "compact", "toppra", "ruckig"]), scalars(), values()))
+        params[key] = draw(
+            st.one_of(
+                st.sampled_from([0.1, 0.5, 1, 2, 10, 50, True, False, "full", "compact", "toppra", "ruckig"]),
+                scalars(),
+                values(),
+            )
+        )
     block: dict[str, Any] = {"name": name}
     if params or draw(st.booleans()):
         block["params"] = draw(st.sampled_from([params, params, params, [1], "x", None]))
     if draw(st.integers(0, 4)) == 0:
         block["retimer"] = draw(st.sampled_from(RETIMERS))
         if draw(st.booleans()):
-            block["retimer_params"] = draw(st.one_of(st.just({}), st.dictionaries(st.sampled_from(["x", "grid_points", "gridpoints"]), scalars(), max_size=2)))
+            block["retimer_params"] = draw(
+                st.one_of(
+                    st.just({}),
+                    st.dictionaries(st.sampled_from(["x", "grid_points", "gridpoints"]), scalars(), max_size=2),
+                )
+            )
     if draw(st.integers(0, 6)) == 0:
         block[draw(st.sampled_from(["nme", "param", "extra"]))] = 1
     return draw(st.sampled_from([block, block, block, block, name, [block], None]))
@@ -246,11 +325,15 @@ def mutated(draw: st.DrawFn) -> dict[str, Any]:
         paths = _paths(data)
         op = draw(st.sampled_from(OPS))
         if op == "edge":  # one number at a boundary, everything else valid: reaches the later stages
-            numeric = [p for p in paths if isinstance(_get(data, p), (int, float)) and not isinstance(_get(data, p), bool)]
+            numeric = [
+                p for p in paths if isinstance(_get(data, p), (int, float)) and not isinstance(_get(data, p), bool)
+            ]
             if numeric:
                 _set(data, draw(st.sampled_from(numeric)), draw(st.sampled_from(EDGES)))
         elif op == "plausible":
-            numeric = [p for p in paths if isinstance(_get(data, p), (int, float)) and not isinstance(_get(data, p), bool)]
+            numeric = [
+                p for p in paths if isinstance(_get(data, p), (int, float)) and not isinstance(_get(data, p), bool)
+            ]
             if numeric:
                 path = draw(st.sampled_from(numeric))
                 old = _get(data, path)
@@ -288,13 +371,20 @@ def mutated(draw: st.DrawFn) -> dict[str, Any]:
             if not isinstance(fixtures, list) or not fixtures or draw(st.integers(0, 3)) == 0:
                 world["fixtures"] = fixtures = [{"name": "table", "urdf": "urdf/table.urdf"}]
             i = draw(st.integers(0, len(fixtures)))
-            fx = {"name": draw(st.sampled_from(["table", "bin_x", "aruco_plate", "", "robot"])), "urdf": "urdf/table.urdf"}
+            fx = {
+                "name": draw(st.sampled_from(["table", "bin_x", "aruco_plate", "", "robot"])),
+                "urdf": "urdf/table.urdf",
+            }
             if i == len(fixtures):
                 fixtures.append(fx)
             elif not isinstance(fixtures[i], dict):
                 fixtures[i] = fx
             field = draw(st.sampled_from(["urdf", "urdf", "urdf", "position", "rpy", "name", "known"]))
-            value = draw(st.sampled_from(URDFS)) if field == "urdf" else draw(st.one_of(scalars(), st.lists(scalars(), max_size=4)))
+            value = (
+                draw(st.sampled_from(URDFS))
+                if field == "urdf"
+                else draw(st.one_of(scalars(), st.lists(scalars(), max_size=4)))
+            )
             fixtures[min(i, len(fixtures) - 1)][field] = value
         elif op == "objects":
             world = data.setdefault("world", {})
@@ -314,7 +404,19 @@ def mutated(draw: st.DrawFn) -> dict[str, Any]:
             objects = world.setdefault("objects", {})
             if isinstance(objects, dict):
                 key = draw(st.sampled_from(["region_x", "region_y"]))
-                objects[key] = draw(st.sampled_from([[0.0, 0.0], [1.0, -1.0], [-0.5, -0.499], [-1e9, 1e9], [-100.0, 100.0], [0.2], [-0.6, -0.3, 0.1]]))
+                objects[key] = draw(
+                    st.sampled_from(
+                        [
+                            [0.0, 0.0],
+                            [1.0, -1.0],
+                            [-0.5, -0.499],
+                            [-1e9, 1e9],
+                            [-100.0, 100.0],
+                            [0.2],
+                            [-0.6, -0.3, 0.1],
+                        ]
+                    )
+                )
                 if draw(st.booleans()):
                     objects["min_gap_m"] = draw(st.sampled_from([0.0, 0.5, 10.0, 1e6]))
     return data
@@ -332,7 +434,11 @@ def config_files(draw: st.DrawFn) -> bytes:
     """The bytes of a config file: a mutated mapping written as YAML, maybe damaged afterwards."""
     data = draw(mutated())
     text = _dump(data)
-    how = draw(st.sampled_from(["as-is"] * 12 + ["truncate", "insert", "latin-1", "utf-16", "bom", "binary", "empty", "tabs", "flow"]))
+    how = draw(
+        st.sampled_from(
+            ["as-is"] * 12 + ["truncate", "insert", "latin-1", "utf-16", "bom", "binary", "empty", "tabs", "flow"]
+        )
+    )
     raw = text.encode()
     if how == "truncate":
         return raw[: draw(st.integers(0, len(raw)))]
@@ -340,7 +446,9 @@ def config_files(draw: st.DrawFn) -> bytes:
         at = draw(st.integers(0, len(raw)))
         return raw[:at] + draw(st.binary(min_size=1, max_size=8)) + raw[at:]
     if how == "latin-1":
-        return (text.replace("name: ", "name: caf\u00e9", 1) if "name: " in text else text + "name: caf\u00e9\n").encode("latin-1", "replace")
+        return (
+            text.replace("name: ", "name: caf\u00e9", 1) if "name: " in text else text + "name: caf\u00e9\n"
+        ).encode("latin-1", "replace")
     if how == "utf-16":
         return text.encode("utf-16")
     if how == "bom":
@@ -382,7 +490,21 @@ def test_malformed_configs_are_accepted_or_rejected_in_one_line(content: bytes) 
 
 
 @settings(FUZZ, max_examples=120)
-@given(st.builds(lambda d: _dump(d).encode(), mutated()), st.sampled_from(["robot.max_joint_vel", "seed", "world.objects.items", "planners.transfer", "camera.position", "x.y.z", "world.fixtures"]), values())
+@given(
+    st.builds(lambda d: _dump(d).encode(), mutated()),
+    st.sampled_from(
+        [
+            "robot.max_joint_vel",
+            "seed",
+            "world.objects.items",
+            "planners.transfer",
+            "camera.position",
+            "x.y.z",
+            "world.fixtures",
+        ]
+    ),
+    values(),
+)
 def test_overrides_are_accepted_or_rejected_in_one_line(content: bytes, key: str, value: Any) -> None:
     """`--set key=value` on a mutated config: the value is any YAML a user could type."""
     from twin.config import load_config

@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 import pytest
-from twin_motion.ik import DefensiveIK, DefensiveIKParams, condition_numbers
 
 from twin.kinematics import DH_D, UR5e
 from twin.types import Pose
+from twin_motion.ik import DefensiveIK, DefensiveIKParams, condition_numbers
 
 HOME = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])  # tcp z axis pointing down
@@ -125,7 +125,10 @@ def test_every_analytic_branch_is_a_candidate(kin: UR5e, ik: DefensiveIK) -> Non
         S, why = ik.branches(T)
         assert why == "" and 1 <= S.shape[0] <= 8
         full = kin.ik(T)
-        wrapped = lambda a, b: np.abs((a - b + math.pi) % (2 * math.pi) - math.pi).max(axis=-1)
+
+        def wrapped(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return np.abs((a - b + math.pi) % (2 * math.pi) - math.pi).max(axis=-1)
+
         for s in S:  # every branch is a solution of the core IK (up to 2*pi) ...
             if ik.accurate(s, T):
                 assert wrapped(full, s).min() < 1e-6
@@ -213,6 +216,6 @@ def test_fast_jacobians_match_core(kin: UR5e, ik: DefensiveIK) -> None:
     qs = rng.uniform(-math.pi, math.pi, (10, 6))
     conds = condition_numbers(kin, qs, "tcp")
     np.testing.assert_allclose(ik.tool("tcp"), kin.tool_transform("tcp"), atol=1e-12)
-    for q, c in zip(qs, conds):
+    for q, c in zip(qs, conds, strict=True):
         assert c == pytest.approx(kin.condition_number(q), rel=1e-9)
         assert ik.condition(q) == pytest.approx(kin.condition_number(q), rel=1e-9)

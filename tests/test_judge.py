@@ -41,7 +41,16 @@ def quat(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
 
 
 def state(cls: str, position, q=(0.0, 0.0, 0.0, 1.0)) -> ObjectState:
-    return ObjectState(0, cls, cls, None, np.asarray(position, dtype=float), np.asarray(q, dtype=float), False, OBJECT_TEMPLATES[cls].size)
+    return ObjectState(
+        0,
+        cls,
+        cls,
+        None,
+        np.asarray(position, dtype=float),
+        np.asarray(q, dtype=float),
+        False,
+        OBJECT_TEMPLATES[cls].size,
+    )
 
 
 # ---- geometry, no physics ---------------------------------------------------------------------------
@@ -156,7 +165,9 @@ def test_the_robocup_referee_names_the_stage_of_every_failure():
         world.set_object_pose(cubes[0].id, blue.world(np.array([0.0, 0.0, 0.05])), quat())
 
         # what the task records about an object it released
-        done = SimpleNamespace(error=None, done=True, cycle_time_s=12.0, first_estimate=cubes[1].position.copy(), true_ids={cubes[1].id})
+        done = SimpleNamespace(
+            error=None, done=True, cycle_time_s=12.0, first_estimate=cubes[1].position.copy(), true_ids={cubes[1].id}
+        )
         out = {o.id: o for o in referee.outcomes([done])}
     assert out[cubes[0].name].placed and out[cubes[0].name].error is None  # placed, even if nobody saw it
     released = out[cubes[1].name]

@@ -49,7 +49,7 @@ def bullet():
 
 def _bullet_pose(bullet, q: np.ndarray, link: str, fingers: float = 0.0) -> np.ndarray:
     cid, body, joints, links = bullet
-    for name, v in zip(JOINT_NAMES, q):
+    for name, v in zip(JOINT_NAMES, q, strict=True):
         pb.resetJointState(body, joints[name], float(v), physicsClientId=cid)
     for name in ("left_finger_joint", "right_finger_joint"):
         pb.resetJointState(body, joints[name], fingers, physicsClientId=cid)

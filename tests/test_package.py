@@ -82,8 +82,11 @@ def test_compare_configs_and_their_scenes_load_by_name(tmp_path, monkeypatch):
     assert spec.name == "compare-smoke"
     for sc in spec.scenarios:
         assert Path(sc.scene).is_file() and Path(sc.scene).name in ("warehouse.yaml", "robocup.yaml")
-    mine = write(tmp_path / "cmp.yaml", "name: x\nseeds: [0]\nplanners: [ruckig.movej]\nscenarios:\n"
-                 "  - {name: w, scene: warehouse, random: {count: 1, goal: joint}}\n")
+    mine = write(
+        tmp_path / "cmp.yaml",
+        "name: x\nseeds: [0]\nplanners: [ruckig.movej]\nscenarios:\n"
+        "  - {name: w, scene: warehouse, random: {count: 1, goal: joint}}\n",
+    )
     assert Path(load_compare_config(mine).scenarios[0].scene).name == "warehouse.yaml"
 
 
@@ -94,8 +97,11 @@ def test_urdfs_resolve_next_to_the_config_then_in_the_shipped_data(tmp_path, mon
     monkeypatch.chdir(tmp_path / "elsewhere")
     table = write(d / "urdf" / "table.urdf", (ROOT / "urdf" / "table.urdf").read_text())
     write(d / "parts" / "bin.urdf", (ROOT / "urdf" / "bin_blue.urdf").read_text())
-    base = write(d / "parts" / "base.yaml", "world:\n  fixtures:\n    - {name: table, urdf: urdf/table.urdf}\n"
-                 "    - {name: bin, urdf: bin.urdf, position: [-0.3, 0.4, 0]}\n")
+    base = write(
+        d / "parts" / "base.yaml",
+        "world:\n  fixtures:\n    - {name: table, urdf: urdf/table.urdf}\n"
+        "    - {name: bin, urdf: bin.urdf, position: [-0.3, 0.4, 0]}\n",
+    )
     cfg = write(d / "cell.yaml", f"extends: {base.relative_to(d)}\nrobot: {{urdf: urdf/ur5e.urdf}}\n")
     s = load_config(cfg)
     assert s.resolve("urdf/table.urdf") == table  # beside the config: it wins over the shipped one
@@ -145,7 +151,13 @@ def _build_wheel(tmp: Path) -> Path:
     # without isolation when this environment's setuptools can build the project (no download needed)
     new_setuptools = int(importlib.metadata.version("setuptools").split(".")[0]) >= 77
     cmd = [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-q", "-w", str(tmp / "dist")]
-    r = subprocess.run(cmd + (["--no-build-isolation"] if new_setuptools else []), capture_output=True, text=True, timeout=300, check=False)
+    r = subprocess.run(
+        cmd + (["--no-build-isolation"] if new_setuptools else []),
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     (wheel,) = (tmp / "dist").glob("twin-*.whl")
     return wheel
@@ -156,8 +168,13 @@ def test_an_installed_wheel_runs_from_an_empty_directory(tmp_path):
         pytest.skip("pip is not available in this environment")
     wheel = _build_wheel(tmp_path)
     target = tmp_path / "site"
-    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(wheel)],
-                       capture_output=True, text=True, timeout=300, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     work = tmp_path / "empty"
     work.mkdir()
@@ -165,10 +182,15 @@ def test_an_installed_wheel_runs_from_an_empty_directory(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(target), TWIN_CACHE=str(tmp_path / "cache"))
 
     def run(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=work, env=env, timeout=300, check=False)
+        return subprocess.run(
+            [sys.executable, *args], capture_output=True, text=True, cwd=work, env=env, timeout=300, check=False
+        )
 
-    r = run("-c", "import twin, twin_motion; from twin.config import load_config; s = load_config('robocup'); "
-                  "print(twin.__file__); print(twin_motion.__file__); print(s.resolve(s.robot.urdf))")
+    r = run(
+        "-c",
+        "import twin, twin_motion; from twin.config import load_config; s = load_config('robocup'); "
+        "print(twin.__file__); print(twin_motion.__file__); print(s.resolve(s.robot.urdf))",
+    )
     assert r.returncode == 0, r.stderr
     for line in r.stdout.split():
         assert Path(line).is_relative_to(target), r.stdout

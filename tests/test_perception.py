@@ -144,8 +144,17 @@ def test_robocup_median_centroid_xy_error_within_1cm(robocup_reports):
 
 def test_robocup_report_fields_and_score(robocup_reports):
     rep = robocup_reports[0].to_dict()
-    keys = {"class_true", "class_est", "orientation_true", "orientation_est", "color_true", "color_est",
-            "position_error_m", "yaw_error_deg", "score"}
+    keys = {
+        "class_true",
+        "class_est",
+        "orientation_true",
+        "orientation_est",
+        "color_true",
+        "color_est",
+        "position_error_m",
+        "yaw_error_deg",
+        "score",
+    }
     assert all(keys <= set(o) for o in rep["objects"])
     assert set(rep["calibration"]) >= {"translation_error_m", "rotation_error_deg"}
     assert isinstance(rep["false_positives"], int)

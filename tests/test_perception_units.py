@@ -44,7 +44,9 @@ def test_depth_noise_grows_with_distance_like_a_d435i():
         noisy = apply_sensor_noise(flat_frame(z), s, np.random.default_rng(0)).depth_m
         valid = noisy > 0
         assert 0.0 < 1.0 - valid.mean() < 0.01  # a few dropouts
-        assert np.std(noisy[valid]) == pytest.approx(math.hypot(depth_noise_rms(z, s), s.depth_unit_m / math.sqrt(12)), rel=0.1)
+        assert np.std(noisy[valid]) == pytest.approx(
+            math.hypot(depth_noise_rms(z, s), s.depth_unit_m / math.sqrt(12)), rel=0.1
+        )
 
 
 def test_noise_is_seeded_and_can_be_switched_off():
@@ -136,7 +138,9 @@ def test_pca_yaw_rules():
     box = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]  # the top face of an upright spam
     fb = pca_features(box @ rot_z(0.3).T)
     assert wrap_half_turn(pca_yaw(fb, "spam")) == pytest.approx(wrap_half_turn(0.3 + math.pi / 2), abs=0.03)
-    assert wrap_half_turn(pca_yaw(fb, "cube")) == pytest.approx(wrap_half_turn(0.3 + math.pi / 2 + math.pi / 4), abs=0.03)
+    assert wrap_half_turn(pca_yaw(fb, "cube")) == pytest.approx(
+        wrap_half_turn(0.3 + math.pi / 2 + math.pi / 4), abs=0.03
+    )
 
 
 # ---- colours, scoring ----------------------------------------------------------------------------
@@ -167,7 +171,9 @@ def test_yaw_error_uses_the_object_symmetry():
         R = rpy_matrix((0, 0, yaw)) @ (rpy_matrix(OBJECT_TEMPLATES[cls].lying_rpy) if lying else np.eye(3))
         T = np.eye(4)
         T[:3, :3] = R
-        return ObjectState(0, cls, cls, None, np.zeros(3), Pose.from_matrix(T).quat_xyzw, lying, OBJECT_TEMPLATES[cls].size)
+        return ObjectState(
+            0, cls, cls, None, np.zeros(3), Pose.from_matrix(T).quat_xyzw, lying, OBJECT_TEMPLATES[cls].size
+        )
 
     assert yaw_error_deg(0.3 + math.pi / 4 + math.pi / 2, obj("cube", 0.3)) == pytest.approx(0.0, abs=1e-6)
     assert yaw_error_deg(1.0, obj("can", 0.2)) is None  # upright cylinder: any yaw
@@ -179,12 +185,16 @@ def test_yaw_error_uses_the_object_symmetry():
 
 # ---- config --------------------------------------------------------------------------------------
 def test_grasp_lookup_entries_merge_with_the_defaults():
-    s = settings_from_dict({"perception": {"robocup": {"grasp": {"can_vertical": {"z_grasp_m": 0.09, "w_grip_m": 0.08}}}}})
+    s = settings_from_dict(
+        {"perception": {"robocup": {"grasp": {"can_vertical": {"z_grasp_m": 0.09, "w_grip_m": 0.08}}}}}
+    )
     g = s.perception.robocup.grasp
     assert g["can_vertical"].z_grasp_m == 0.09 and g["bottle_horizontal"].z_grasp_m > 0
     with pytest.raises(ConfigError, match="grasp"):
-        settings_from_dict({"perception": {"robocup": {"grasp": {"can_sideways": {"z_grasp_m": 0.1, "w_grip_m": 0.08}}}}})
-    with pytest.raises(ConfigError, match="unknown key 'camera.noise.sigma'"):
+        settings_from_dict(
+            {"perception": {"robocup": {"grasp": {"can_sideways": {"z_grasp_m": 0.1, "w_grip_m": 0.08}}}}}
+        )
+    with pytest.raises(ConfigError, match=r"unknown key 'camera\.noise\.sigma'"):
         settings_from_dict({"camera": {"noise": {"sigma": 1}}})
 
 
@@ -300,8 +310,17 @@ def test_cli_perceive_and_calibrate_write_the_issue_fields(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert len(data["objects"]) == 8 and isinstance(data["false_positives"], int)
     for o in data["objects"]:
-        assert {"class_true", "class_est", "orientation_true", "orientation_est", "color_true", "color_est",
-                "position_error_m", "yaw_error_deg", "score"} <= set(o)
+        assert {
+            "class_true",
+            "class_est",
+            "orientation_true",
+            "orientation_est",
+            "color_true",
+            "color_est",
+            "position_error_m",
+            "yaw_error_deg",
+            "score",
+        } <= set(o)
     assert {"translation_error_m", "rotation_error_deg"} <= set(data["calibration"])
     assert "mean score S" in capsys.readouterr().out
 

@@ -25,10 +25,11 @@ def _twin_imports(path: Path) -> list[tuple[int, str]]:
     bad: list[tuple[int, str]] = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
         if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name == "twin" or alias.name.startswith("twin."):
-                    if alias.name != "twin.plugin":
-                        bad.append((node.lineno, f"import {alias.name}"))
+            bad.extend(
+                (node.lineno, f"import {alias.name}")
+                for alias in node.names
+                if (alias.name == "twin" or alias.name.startswith("twin.")) and alias.name != "twin.plugin"
+            )
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module is not None:
             mod = node.module
             if (mod == "twin" or mod.startswith("twin.")) and mod != "twin.plugin":
@@ -63,6 +64,7 @@ def test_the_scan_catches_core_imports(tmp_path: Path) -> None:
 def test_every_exported_name_resolves() -> None:
     plugin = importlib.import_module("twin.plugin")
     assert len(plugin.__all__) == len(set(plugin.__all__)), "duplicate names in twin.plugin.__all__"
+    assert set(plugin._LAZY) <= set(plugin.__all__), "a lazy name missing from twin.plugin.__all__"
     missing = []
     for name in plugin.__all__:
         try:

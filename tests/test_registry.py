@@ -75,7 +75,7 @@ def test_registration_is_lazy_and_a_missing_backend_names_the_extra():
 
 
 def test_duplicate_name_is_an_immediate_error():
-    with pytest.raises(DuplicateNameError, match="demo.echo"):
+    with pytest.raises(DuplicateNameError, match=r"demo\.echo"):
         fresh(_PluginA(), _PluginDup())
 
 
@@ -108,7 +108,8 @@ def test_builtin_plugins_register_through_entry_points():
 def test_importing_twin_loads_no_heavy_backend():
     import subprocess
 
-    code = "import sys, twin, twin.registry; print(sorted(m for m in ('pybullet','fcl','toppra','ruckig','open3d','casadi','ompl') if m in sys.modules))"
+    heavy = ("pybullet", "fcl", "toppra", "ruckig", "open3d", "casadi", "ompl")
+    code = f"import sys, twin, twin.registry; print(sorted(m for m in {heavy!r} if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]"
 
@@ -169,7 +170,12 @@ def test_ompl_planners_the_bindings_lack_are_unavailable_with_the_reason():
     og = pytest.importorskip("ompl.geometric")
     reg = default_registry()
     assert reg.entry("ompl.rrtconnect").availability()
-    for name, cls in (("ompl.lazyprmstar", "LazyPRMstar"), ("ompl.bitrrt", "BiTRRT"), ("ompl.fmt", "FMT"), ("ompl.bfmt", "BFMT")):
+    for name, cls in (
+        ("ompl.lazyprmstar", "LazyPRMstar"),
+        ("ompl.bitrrt", "BiTRRT"),
+        ("ompl.fmt", "FMT"),
+        ("ompl.bfmt", "BFMT"),
+    ):
         a = reg.entry(name).availability()
         assert a.available == hasattr(og, cls), (name, a)
         if not a:

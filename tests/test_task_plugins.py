@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from twin.config import load_config
-from twin.errors import UnknownNameError
+from twin.errors import ConfigError, UnknownNameError
 from twin.registry import Kind, default_registry
 from twin.tasks import make_task, run_task
 
@@ -27,7 +27,7 @@ def test_the_task_is_chosen_by_the_config_name():
 
 
 def test_an_unknown_task_name_is_a_one_line_error_listing_the_tasks():
-    with pytest.raises(Exception) as e:
+    with pytest.raises(ConfigError) as e:
         load_config("robocup", ["task.kind=robocop"])
     msg = str(e.value)
     assert "\n" not in msg and "robocop" in msg and "robocup" in msg and "warehouse" in msg

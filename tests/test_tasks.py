@@ -64,8 +64,13 @@ def test_warehouse_places_at_least_90_percent_of_cubes_in_their_drop_zones():
 
 
 @pytest.mark.parametrize(
-    "settings, planner",
-    [(WAREHOUSE, "ompl.rrtconnect"), (WAREHOUSE, "ruckig.movej"), (ROBOCUP, "ompl.rrtconnect"), (ROBOCUP, "seed.quintic_movej")],
+    ("settings", "planner"),
+    [
+        (WAREHOUSE, "ompl.rrtconnect"),
+        (WAREHOUSE, "ruckig.movej"),
+        (ROBOCUP, "ompl.rrtconnect"),
+        (ROBOCUP, "seed.quintic_movej"),
+    ],
     ids=["warehouse-ompl", "warehouse-ruckig", "robocup-ompl", "robocup-quintic"],
 )
 def test_swapping_the_transfer_planner_needs_no_code_change(settings, planner):
@@ -141,7 +146,10 @@ def test_an_object_lost_on_the_way_up_fails_the_ascent_by_the_finger_position():
     from twin.tasks.robocup import run_robocup
     from twin.world import World
 
-    s = load_config(ROOT / "configs/robocup.yaml", ["world.objects.items=[{class: cube, color: red}, {class: can}]", "task.robocup.retries=0"])
+    s = load_config(
+        ROOT / "configs/robocup.yaml",
+        ["world.objects.items=[{class: cube, color: red}, {class: can}]", "task.robocup.retries=0"],
+    )
     snatched: list[str] = []
 
     def snatch(w: World) -> None:
@@ -171,7 +179,12 @@ def test_twin_run_writes_the_summary_json(tmp_path):
     out = tmp_path / "run.json"
     r = subprocess.run(
         [sys.executable, "-m", "twin", "run", "configs/warehouse.yaml", "--seed", "0", "--json", str(out)],
-        capture_output=True, text=True, cwd=ROOT, env=dict(os.environ), timeout=600, check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=dict(os.environ),
+        timeout=600,
+        check=False,
     )
     assert r.returncode == 0, r.stderr[-2000:]
     data = json.loads(out.read_text())
@@ -185,7 +198,11 @@ def test_twin_run_writes_the_summary_json(tmp_path):
 def test_twin_run_with_an_unknown_planner_is_one_line_and_exit_2():
     r = subprocess.run(
         [sys.executable, "-m", "twin", "run", "configs/robocup.yaml", "--planner", "ompl.rrtconect"],
-        capture_output=True, text=True, cwd=ROOT, timeout=300, check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+        check=False,
     )
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "Did you mean 'ompl.rrtconnect'" in r.stderr
@@ -221,7 +238,16 @@ def test_a_run_reads_ground_truth_only_in_the_judge(config, monkeypatch):
 
         monkeypatch.setattr(World, name, read)
 
-    for name in ("grasped_object", "grasp_settled", "objects", "object_state", "object_pose", "object_velocity", "marker_pose", "body_ids"):
+    for name in (
+        "grasped_object",
+        "grasp_settled",
+        "objects",
+        "object_state",
+        "object_pose",
+        "object_velocity",
+        "marker_pose",
+        "body_ids",
+    ):
         guard(name)
     r = run_task(s, seed=1)
     assert not offenders, offenders
@@ -236,7 +262,12 @@ def test_release_spots_keep_what_goes_into_a_bin_inside_its_walls_and_apart():
 
     b = bin_geometries(ROBOCUP)["bin_green"]
     # (object, object and opened fingers) half extents along the tcp's x (closing) and y, m
-    items = [((0.034, 0.0985), (0.051, 0.0985)), ((0.033, 0.033), (0.050, 0.033)), ((0.030, 0.051), (0.047, 0.051)), ((0.0105, 0.0605), (0.026, 0.0605))]
+    items = [
+        ((0.034, 0.0985), (0.051, 0.0985)),
+        ((0.033, 0.033), (0.050, 0.033)),
+        ((0.030, 0.051), (0.047, 0.051)),
+        ((0.0105, 0.0605), (0.026, 0.0605)),
+    ]
     placed = []
     for obj, reach in items:
         p, yaw, footprint = _release_spot(b, placed, np.array(obj), np.array(reach), 0.3)

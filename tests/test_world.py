@@ -78,7 +78,9 @@ def ik_near(T_tcp: np.ndarray, q_near: np.ndarray) -> np.ndarray:
     return best
 
 
-def move_tcp_line(world: World, q: np.ndarray, p0: np.ndarray, p1: np.ndarray, yaw: float, duration_s: float) -> np.ndarray:
+def move_tcp_line(
+    world: World, q: np.ndarray, p0: np.ndarray, p1: np.ndarray, yaw: float, duration_s: float
+) -> np.ndarray:
     """Straight top-down tcp line with a quintic time law, one joint target per physics step."""
     n = max(1, round(duration_s / world.dt))
     for k in range(1, n + 1):
@@ -134,7 +136,7 @@ def poses(world: World) -> np.ndarray:
 
 # ---- physical grasp -------------------------------------------------------------------------------
 @pytest.mark.parametrize(
-    "cls, yaw, dx",
+    ("cls", "yaw", "dx"),
     [
         ("cube", 0.0, 0.0),
         ("cube", 0.35, 0.004),
@@ -173,8 +175,10 @@ def test_closing_on_nothing_closes_fully_and_opening_is_symmetric() -> None:
         assert world.gripper_settled()
         world.set_gripper_opening(0.05)
         world.step(240)
-        left, right = (pb.getJointState(world.robot_id, world.link_indices()[n], physicsClientId=world.client_id)[0]
-                       for n in ("left_finger", "right_finger"))
+        left, right = (
+            pb.getJointState(world.robot_id, world.link_indices()[n], physicsClientId=world.client_id)[0]
+            for n in ("left_finger", "right_finger")
+        )
         assert world.gripper_opening() == pytest.approx(0.05, abs=1e-3)
         assert left == pytest.approx(right, abs=2e-4)
 

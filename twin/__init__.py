@@ -24,21 +24,21 @@ from twin.hookspecs import hookimpl
 __version__ = "0.1.0"
 
 __all__ = [
-    "hookimpl",
-    "load_config",
-    "Settings",
-    "World",
-    "PlanningScene",
-    "UR5e",
-    "plan",
-    "TwinError",
     "ConfigError",
-    "UnknownNameError",
-    "DuplicateNameError",
     "DependencyMissing",
+    "DuplicateNameError",
     "InvalidRequestError",
     "PlanningError",
+    "PlanningScene",
+    "Settings",
+    "TwinError",
+    "UR5e",
+    "UnknownNameError",
+    "World",
     "WorldError",
+    "hookimpl",
+    "load_config",
+    "plan",
 ]
 
 _LAZY = {

@@ -9,10 +9,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from twin.config import CameraSettings
 
-__all__ = ["Intrinsics", "RGBDFrame", "camera_pose", "look_at", "gl_view_matrix", "gl_projection_matrix", "depth_from_zbuffer", "point_cloud"]
+__all__ = [
+    "Intrinsics",
+    "RGBDFrame",
+    "camera_pose",
+    "depth_from_zbuffer",
+    "gl_projection_matrix",
+    "gl_view_matrix",
+    "look_at",
+    "point_cloud",
+]
 
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 
@@ -35,7 +45,7 @@ class Intrinsics:
         return (self.height - 1) / 2.0
 
     @classmethod
-    def from_settings(cls, cam: CameraSettings) -> "Intrinsics":
+    def from_settings(cls, cam: CameraSettings) -> Intrinsics:
         return cls(cam.width, cam.height, cam.fx, cam.fy)
 
     def matrix(self) -> np.ndarray:
@@ -53,7 +63,7 @@ class RGBDFrame:
     intrinsics: Intrinsics
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> np.ndarray:
     """(4, 4) pose of an OpenCV camera at `eye` looking at `target`, image 'up' towards `up`."""
     eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
     z = target - eye

@@ -12,7 +12,7 @@ import logging
 import math
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -37,7 +37,7 @@ class _Parser(argparse.ArgumentParser):
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise SystemExit(EXIT_USAGE)
 
-    def parse_known_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> tuple[Any, list[str]]:
+    def parse_known_args(self, args: Iterable[str] | None = None, namespace: Any = None) -> tuple[Any, list[str]]:
         """Join `--start -0.5,...` into `--start=-0.5,...` first: argparse reads a separate value that
         begins with '-' (and is not one plain number) as another option and reports a missing argument."""
         argv = list(sys.argv[1:] if args is None else args)
@@ -55,7 +55,12 @@ class _Parser(argparse.ArgumentParser):
                 out.extend(argv[i:])
                 break
             option = self._vector_option(arg, vector_options)
-            if option is not None and i + 1 < len(argv) and argv[i + 1].startswith("-") and _NUMBER_LIST.fullmatch(argv[i + 1]):
+            if (
+                option is not None
+                and i + 1 < len(argv)
+                and argv[i + 1].startswith("-")
+                and _NUMBER_LIST.fullmatch(argv[i + 1])
+            ):
                 out.append(f"{option}={argv[i + 1]}")
                 i += 2
                 continue
@@ -80,7 +85,9 @@ def _floats(text: str, n: int, what: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
     if len(vals) != n or not all(math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"{what} must be {n} comma-separated finite numbers, got {len(vals)} in {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"{what} must be {n} comma-separated finite numbers, got {len(vals)} in {text!r}"
+        )
     return vals
 
 
@@ -111,13 +118,24 @@ _pose_vector.is_vector = True  # type: ignore[attr-defined]
 
 def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="YAML config file (see configs/)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a config value by dotted key, e.g. --set world.objects.lying_probability=0.5")
-    p.add_argument("--seed", type=_seed, default=None, help="scene seed, a non-negative integer (default: the config's seed)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config value by dotted key, e.g. --set world.objects.lying_probability=0.5",
+    )
+    p.add_argument(
+        "--seed", type=_seed, default=None, help="scene seed, a non-negative integer (default: the config's seed)"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="twin", description="A PyBullet digital twin of a UR5e sorting cell: plan, run and compare motion planners.")
+    parser = _Parser(
+        prog="twin",
+        description="A PyBullet digital twin of a UR5e sorting cell: plan, run and compare motion planners.",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
@@ -134,46 +152,91 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", required=True, type=_joint_vector, help="six comma-separated joint angles, rad")
     goal = p.add_mutually_exclusive_group(required=True)
     goal.add_argument("--goal", type=_joint_vector, help="six comma-separated joint angles, rad")
-    goal.add_argument("--goal-pose", type=_pose_vector, help="tcp pose in the base frame: x,y,z,roll,pitch,yaw (m, rad)")
+    goal.add_argument(
+        "--goal-pose", type=_pose_vector, help="tcp pose in the base frame: x,y,z,roll,pitch,yaw (m, rad)"
+    )
     p.add_argument("--time-limit", type=float, default=1.0, help="planning time limit, s (default 1)")
-    p.add_argument("--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here")
+    p.add_argument(
+        "--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here"
+    )
 
     p = sub.add_parser("run", help="run a sorting task end to end (perception to placed objects) and judge it")
     _add_config_args(p)
     p.add_argument("--planner", default=None, help="transfer planner name (replaces planners.transfer)")
     p.add_argument("--gui", action="store_true", help="open PyBullet's window")
-    p.add_argument("--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera")
+    p.add_argument(
+        "--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera"
+    )
     p.add_argument("--json", dest="json_path", default=None, help="write the run summary here")
 
-    p = sub.add_parser("compare", help="compare planners: planners x scenarios x seeds -> results.jsonl, summary, plots")
+    p = sub.add_parser(
+        "compare", help="compare planners: planners x scenarios x seeds -> results.jsonl, summary, plots"
+    )
     p.add_argument("config", help="comparison YAML (see configs/compare.yaml, configs/compare-smoke.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a comparison config value by dotted key, e.g. --set seeds=[0]")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a comparison config value by dotted key, e.g. --set seeds=[0]",
+    )
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: out/<name> of the config)")
-    p.add_argument("--workers", type=int, default=None, metavar="N", help="parallel runs (default: all CPUs; 0: in this process)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local", help="local process pool (default) or Ray (twin[ray])")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the sweep in DIR: skip runs already in results.jsonl, rerun those that ended in 'error'")
-    p.add_argument("--force", action="store_true",
-                   help="with --resume: accept a changed config (its changed runs are run anew; old rows leave the summary)")
-    p.add_argument("--dry-run", action="store_true",
-                   help="check every planner block and scenario and count the runs; run and write nothing")
+    p.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="parallel runs (default: all CPUs; 0: in this process)"
+    )
+    p.add_argument(
+        "--backend", choices=("local", "ray"), default="local", help="local process pool (default) or Ray (twin[ray])"
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the sweep in DIR: skip runs already in results.jsonl, rerun those that ended in 'error'",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --resume: accept a changed config (its changed runs are run anew; old rows leave the summary)",
+    )
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="check every planner block and scenario and count the runs; run and write nothing",
+    )
 
-    p = sub.add_parser("perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth")
+    p = sub.add_parser(
+        "perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth"
+    )
     _add_config_args(p)
-    p.add_argument("--detector", default=None, help="detector plugin (replaces perception.detector.name), e.g. geometric, oracle")
-    p.add_argument("--json", dest="json_path", default=None, help="write objects, false_positives, calibration, timings here")
+    p.add_argument(
+        "--detector", default=None, help="detector plugin (replaces perception.detector.name), e.g. geometric, oracle"
+    )
+    p.add_argument(
+        "--json", dest="json_path", default=None, help="write objects, false_positives, calibration, timings here"
+    )
 
-    p = sub.add_parser("calibrate", help="estimate the camera-to-base transform from the base ArUco marker; error against the truth")
+    p = sub.add_parser(
+        "calibrate", help="estimate the camera-to-base transform from the base ArUco marker; error against the truth"
+    )
     _add_config_args(p)
     p.add_argument("--json", dest="json_path", default=None, help="write the calibration (errors and poses) here")
 
-    p = sub.add_parser("check-planner", help="check a planner against the planner contract (twin.testing.check_planner)")
+    p = sub.add_parser(
+        "check-planner", help="check a planner against the planner contract (twin.testing.check_planner)"
+    )
     p.add_argument("name", help="registered planner name, e.g. ompl.rrtconnect (see `twin planners`)")
-    p.add_argument("--config", default=None, help="config (a file or a shipped name) whose scene and limits are used (default: robocup)")
-    p.add_argument("--seed", type=_seed, default=0, help="seed of the queries and requests, a non-negative integer (default 0)")
+    p.add_argument(
+        "--config",
+        default=None,
+        help="config (a file or a shipped name) whose scene and limits are used (default: robocup)",
+    )
+    p.add_argument(
+        "--seed", type=_seed, default=0, help="seed of the queries and requests, a non-negative integer (default 0)"
+    )
     p.add_argument("--time-limit", type=float, default=1.0, help="the requests' planning time limit, s (default 1)")
-    p.add_argument("--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here")
+    p.add_argument(
+        "--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here"
+    )
     return parser
 
 
@@ -214,11 +277,20 @@ def _cmd_planners(args: argparse.Namespace) -> int:
         table.add_row(e.name, e.kind.value, e.provider, "yes" if a else f"no: {a.reason}", e.description)
     Console(width=200).print(table)
     if args.json_path:
-        _write_json(args.json_path, [
-            {"name": e.name, "kind": e.kind.value, "provider": e.provider, "description": e.description,
-             "available": available[e.name].available, "unavailable_reason": available[e.name].reason or None}
-            for e in entries
-        ])
+        _write_json(
+            args.json_path,
+            [
+                {
+                    "name": e.name,
+                    "kind": e.kind.value,
+                    "provider": e.provider,
+                    "description": e.description,
+                    "available": available[e.name].available,
+                    "unavailable_reason": available[e.name].reason or None,
+                }
+                for e in entries
+            ],
+        )
     return EXIT_OK
 
 
@@ -245,7 +317,13 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         from twin.errors import InvalidRequestError
 
         raise InvalidRequestError(f"--time-limit must be positive, got {args.time_limit}")
-    request = MotionRequest(start=args.start, goal=goal, limits=limits_from_settings(settings), time_limit_s=args.time_limit, seed=settings.seed)
+    request = MotionRequest(
+        start=args.start,
+        goal=goal,
+        limits=limits_from_settings(settings),
+        time_limit_s=args.time_limit,
+        seed=settings.seed,
+    )
     result = plan(settings, args.planner, request)
     traj = result.trajectory
     summary = {
@@ -276,7 +354,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     settings = _settings(args)
     console = Console(stderr=True)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console, transient=True) as progress:
+    with Progress(
+        SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console, transient=True
+    ) as progress:
         bar = progress.add_task(f"{settings.name} seed {settings.seed}: starting", total=None)
         summary = run_task(
             settings,
@@ -293,12 +373,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
         table.add_column(col)
     for o in summary.objects:
         table.add_row(
-            o.id, o.cls, o.color or "", o.target_bin, "yes" if o.placed else "no", f"{o.cycle_time_s:.1f}",
-            "" if o.pose_error_m is None else f"{o.pose_error_m * 1e3:.1f}", o.error or "",
+            o.id,
+            o.cls,
+            o.color or "",
+            o.target_bin,
+            "yes" if o.placed else "no",
+            f"{o.cycle_time_s:.1f}",
+            "" if o.pose_error_m is None else f"{o.pose_error_m * 1e3:.1f}",
+            o.error or "",
         )
     Console(width=200).print(table)
-    print(f"placed {sum(o.placed for o in summary.objects)}/{len(summary.objects)} "
-          f"({summary.success_rate:.0%}), simulated {summary.sim_time_s:.1f} s, wall {summary.wall_time_s:.1f} s")
+    print(
+        f"placed {sum(o.placed for o in summary.objects)}/{len(summary.objects)} "
+        f"({summary.success_rate:.0%}), simulated {summary.sim_time_s:.1f} s, wall {summary.wall_time_s:.1f} s"
+    )
     return EXIT_OK
 
 
@@ -319,8 +407,11 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if args.dry_run:
         dry = plan_comparison(args.config, overrides=args.overrides)
         cases = dry.cases()
-        print(f"{Path(args.config).name}: {dry.total} runs ({len(dry.spec.planners)} planners, {sum(cases.values())} cases, "
-              f"{len(dry.skipped)} pairs skipped); checked every planner block and scenario, ran nothing")
+        print(
+            f"{Path(args.config).name}: {dry.total} runs ({len(dry.spec.planners)} planners, "
+            f"{sum(cases.values())} cases, {len(dry.skipped)} pairs skipped); "
+            "checked every planner block and scenario, ran nothing"
+        )
         print("per planner:")
         for label, n in dry.per_planner().items():
             print(f"  {label:32s} {n:6d}")
@@ -337,14 +428,22 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         print(line, flush=True)
 
     result = run_comparison(
-        args.config, out_dir=args.out, workers=args.workers, backend=args.backend, resume=args.resume,
-        force=args.force, overrides=args.overrides, on_row=progress,
+        args.config,
+        out_dir=args.out,
+        workers=args.workers,
+        backend=args.backend,
+        resume=args.resume,
+        force=args.force,
+        overrides=args.overrides,
+        on_row=progress,
     )
     Console(width=200).print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
     _print_skipped(result.skipped, "skipped")
     again = f", {result.retried} rerun after an error" if result.retried else ""
-    print(f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before{again}); wrote "
-          + ", ".join(str(f) for f in result.files))
+    print(
+        f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before{again}); wrote "
+        + ", ".join(str(f) for f in result.files)
+    )
     return EXIT_OK
 
 
@@ -384,16 +483,32 @@ def _cmd_perceive(args: argparse.Namespace) -> int:
     fmt = "{:<24} {:<15} {:<15} {:<11} {:<11} {:<7} {:<7} {:>8} {:>8} {:>6}"
     print(fmt.format("object", "class", "estimate", "orient", "estimate", "color", "est", "dxy mm", "yaw deg", "S"))
     for o in rep.objects:
+
         def show(v: Any, scale: float = 1.0, nd: int = 1) -> str:
             return "-" if v is None else f"{v * scale:.{nd}f}"
-        print(fmt.format(o["name"], o["class_true"], o["class_est"] or "MISSED", o["orientation_true"], o["orientation_est"] or "-",
-                         o["color_true"] or "-", o["color_est"] or "-", show(o["position_error_m"], 1e3), show(o["yaw_error_deg"]),
-                         f"{o['score']:.1f}"))
+
+        print(
+            fmt.format(
+                o["name"],
+                o["class_true"],
+                o["class_est"] or "MISSED",
+                o["orientation_true"],
+                o["orientation_est"] or "-",
+                o["color_true"] or "-",
+                o["color_est"] or "-",
+                show(o["position_error_m"], 1e3),
+                show(o["yaw_error_deg"]),
+                f"{o['score']:.1f}",
+            )
+        )
     cal = rep.calibration
     cal_txt = f"{cal['translation_error_m'] * 1e3:.2f} mm, {cal['rotation_error_deg']:.3f} deg" if cal else "no marker"
     print(f"false positives: {rep.false_positives}; calibration error: {cal_txt}; mean score S: {rep.score_mean:.1f}")
     if rep.obstacle is not None and rep.obstacle["max_face_error_m"] is not None:
-        print(f"obstacle box: largest face error {rep.obstacle['max_face_error_m'] * 1e3:.1f} mm ({rep.obstacle['points']} points)")
+        print(
+            f"obstacle box: largest face error {rep.obstacle['max_face_error_m'] * 1e3:.1f} mm"
+            f" ({rep.obstacle['points']} points)"
+        )
     if args.json_path:
         _write_json(args.json_path, rep.to_dict())
     return EXIT_OK
@@ -421,12 +536,20 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
         settings = load_config(args.config)
     console = Console(stderr=True)
     with console.status(f"checking {args.name}") as status:
-        report = check_planner(args.name, settings=settings, seed=args.seed, time_limit_s=args.time_limit,
-                               config_name=args.config, on_progress=lambda text: status.update(f"{args.name}: {text}"))
+        report = check_planner(
+            args.name,
+            settings=settings,
+            seed=args.seed,
+            time_limit_s=args.time_limit,
+            config_name=args.config,
+            on_progress=lambda text: status.update(f"{args.name}: {text}"),
+        )
     if args.json_path:
         _write_json(args.json_path, report.to_json())
-    table = Table(title=f"{report.planner} ({report.kind}) against the planner contract: {report.config}, seed {report.seed}, "
-                        f"time limit {report.time_limit_s:g} s (+{time_slack_s(report.time_limit_s):.2f} s slack)")
+    table = Table(
+        title=f"{report.planner} ({report.kind}) against the planner contract: {report.config}, seed {report.seed}, "
+        f"time limit {report.time_limit_s:g} s (+{time_slack_s(report.time_limit_s):.2f} s slack)"
+    )
     for col in ("rule", "check", "verdict", "plugin", "checked", "detail"):
         table.add_column(col)
     mark = {True: "ok", False: "FAIL"}
@@ -434,8 +557,10 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
         table.add_row(str(r.number), r.rule, "pass" if r.passed else "FAIL", mark[r.raw], mark[r.checked], r.detail)
     Console(width=200).print(table)
     n_fail = len(report.failures)
-    print(f"{report.planner}: {'keeps every rule' if report.ok else f'breaks {n_fail} of {len(report.results)} checks'} "
-          f"({len(report.requests)} requests, {report.wall_time_s:.1f} s)")
+    print(
+        f"{report.planner}: {'keeps every rule' if report.ok else f'breaks {n_fail} of {len(report.results)} checks'} "
+        f"({len(report.requests)} requests, {report.wall_time_s:.1f} s)"
+    )
     return EXIT_OK if report.ok else EXIT_NO_SOLUTION
 
 
@@ -448,7 +573,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return EXIT_USAGE
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
     try:
         return _COMMANDS[args.command](args)
     except TwinError as e:

@@ -19,14 +19,14 @@ import difflib
 from collections.abc import Iterable
 
 __all__ = [
-    "TwinError",
     "ConfigError",
-    "UnknownNameError",
-    "DuplicateNameError",
-    "PluginError",
     "DependencyMissing",
+    "DuplicateNameError",
     "InvalidRequestError",
     "PlanningError",
+    "PluginError",
+    "TwinError",
+    "UnknownNameError",
     "WorldError",
 ]
 

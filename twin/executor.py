@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.world import World
 
-__all__ = ["ExecutionReport", "execute", "plan_and_execute", "MotionRecord", "WorldPlant", "CONTACT_CHECK_EVERY"]
+__all__ = ["CONTACT_CHECK_EVERY", "ExecutionReport", "MotionRecord", "WorldPlant", "execute", "plan_and_execute"]
 
 log = logging.getLogger("twin")
 
@@ -60,7 +60,7 @@ class MotionRecord:
 
 
 def execute(
-    world: "World",
+    world: World,
     traj: Trajectory,
     *,
     hold_s: float = 0.0,
@@ -110,7 +110,7 @@ def execute(
 class WorldPlant:
     """The simulated arm as a plant for `CheckedPlanner.drive`: encoders in, checked pieces out, contacts watched."""
 
-    def __init__(self, world: "World", *, ignore_bodies: tuple[int, ...] = (), fingers_may_touch_objects: bool = False):
+    def __init__(self, world: World, *, ignore_bodies: tuple[int, ...] = (), fingers_may_touch_objects: bool = False):
         self.world = world
         self.ignore_bodies = ignore_bodies
         self.fingers_may_touch_objects = fingers_may_touch_objects
@@ -122,7 +122,9 @@ class WorldPlant:
         return self.world.joint_positions()
 
     def run(self, traj: Trajectory) -> str | None:
-        rep = execute(self.world, traj, ignore_bodies=self.ignore_bodies, fingers_may_touch_objects=self.fingers_may_touch_objects)
+        rep = execute(
+            self.world, traj, ignore_bodies=self.ignore_bodies, fingers_may_touch_objects=self.fingers_may_touch_objects
+        )
         self.duration_s += rep.sim_duration_s
         self.max_tracking_error_rad = max(self.max_tracking_error_rad, rep.max_tracking_error_rad)
         if rep.stopped_by is not None:
@@ -131,10 +133,10 @@ class WorldPlant:
 
 
 def plan_and_execute(
-    world: "World",
+    world: World,
     planner: Any,
     request: MotionRequest,
-    scene: "PlanningScene",
+    scene: PlanningScene,
     context: PluginContext,
     *,
     stage: str,
@@ -151,9 +153,18 @@ def plan_and_execute(
         world.step(int(round(hold_s / world.dt)))
     info = result.info
     record = MotionRecord(
-        stage, planner_name, result.status.value, result.reason, result.planning_time_s, plant.duration_s,
-        solves=int(info.get("solves", 0)), fallback_steps=int(info.get("fallback_steps", 0)),
+        stage,
+        planner_name,
+        result.status.value,
+        result.reason,
+        result.planning_time_s,
+        plant.duration_s,
+        solves=int(info.get("solves", 0)),
+        fallback_steps=int(info.get("fallback_steps", 0)),
         unexpected_contacts=len(plant.stops),
-        info={"max_tracking_error_rad": plant.max_tracking_error_rad, "solve_times_s": list(info.get("solve_times_s", []))},
+        info={
+            "max_tracking_error_rad": plant.max_tracking_error_rad,
+            "solve_times_s": list(info.get("solve_times_s", [])),
+        },
     )
     return result, record

@@ -16,7 +16,7 @@ import pluggy
 if TYPE_CHECKING:
     from twin.registry import Registry
 
-__all__ = ["hookspec", "hookimpl", "TwinSpec"]
+__all__ = ["TwinSpec", "hookimpl", "hookspec"]
 
 hookspec = pluggy.HookspecMarker("twin")
 hookimpl = pluggy.HookimplMarker("twin")
@@ -26,7 +26,7 @@ class TwinSpec:
     """The hooks twin calls; every plugin may implement any subset."""
 
     @hookspec
-    def twin_register_planners(self, registry: "Registry") -> None:
+    def twin_register_planners(self, registry: Registry) -> None:
         """Add motion planners with `registry.add_planner(name, "module:Class", receding_horizon=...)`.
 
         One-shot planners implement `plan(request, scene) -> MotionResult`; receding-horizon planners
@@ -35,7 +35,7 @@ class TwinSpec:
         """
 
     @hookspec
-    def twin_register_retimers(self, registry: "Registry") -> None:
+    def twin_register_retimers(self, registry: Registry) -> None:
         """Add retimers with `registry.add_retimer(name, "module:Class")`.
 
         A retimer implements `retime(path (m, 6), limits) -> Trajectory` and turns a geometric joint path
@@ -43,14 +43,14 @@ class TwinSpec:
         """
 
     @hookspec
-    def twin_register_detectors(self, registry: "Registry") -> None:
+    def twin_register_detectors(self, registry: Registry) -> None:
         """Add perception detectors with `registry.add_detector(name, "module:Class")`.
 
         A detector turns an RGB-D frame into detections. Called once per plugin.
         """
 
     @hookspec
-    def twin_register_tasks(self, registry: "Registry") -> None:
+    def twin_register_tasks(self, registry: Registry) -> None:
         """Add tasks with `registry.add_task(name, "module:Class")`.
 
         A task is what `twin run` runs when a config's `task.kind` names it: built as `cls(params, context)`

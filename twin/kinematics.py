@@ -8,15 +8,28 @@ closed form of `ur_analytic_ik` (8 branches), then adds every 2*pi wrap that sta
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 import ur_analytic_ik
 
 from twin.errors import InvalidRequestError
 
-__all__ = ["UR5e", "DHParameters", "dh_frames", "jacobians", "jacobian_one", "DH_D", "DH_A", "DH_ALPHA", "JOINT_NAMES", "JOINT_LIMITS", "TCP_OFFSET_M", "wrap_to_pi"]
+__all__ = [
+    "DH_A",
+    "DH_ALPHA",
+    "DH_D",
+    "JOINT_LIMITS",
+    "JOINT_NAMES",
+    "TCP_OFFSET_M",
+    "DHParameters",
+    "UR5e",
+    "dh_frames",
+    "jacobian_one",
+    "jacobians",
+    "wrap_to_pi",
+]
 
 JOINT_NAMES = (
     "shoulder_pan_joint",
@@ -36,6 +49,10 @@ TCP_OFFSET_M = 0.135  # tcp frame of urdf/ur5e.urdf, along tool0 z
 _FRAMES = ("tcp", "flange")
 
 
+@overload
+def wrap_to_pi(a: float) -> float: ...
+@overload
+def wrap_to_pi(a: np.ndarray) -> np.ndarray: ...
 def wrap_to_pi(a: np.ndarray | float) -> np.ndarray | float:
     """Angles mapped to [-pi, pi): the shortest angular difference for continuous joints."""
     return (np.asarray(a) + math.pi) % _TWO_PI - math.pi
@@ -118,7 +135,7 @@ def jacobian_one(q: np.ndarray, tool: np.ndarray) -> np.ndarray:
     py = oy + r10 * t0 + r11 * t1 + r12 * t2
     pz = oz + r20 * t0 + r21 * t1 + r22 * t2
     cols = []
-    for (zx, zy, zz), (qx, qy, qz) in zip(zs, os_):
+    for (zx, zy, zz), (qx, qy, qz) in zip(zs, os_, strict=True):
         dx, dy, dz = px - qx, py - qy, pz - qz
         cols.append((zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx, zx, zy, zz))
     return np.array(cols).T

@@ -12,6 +12,7 @@ a plant: the kinematic model (`plan`) or the simulated arm (`twin.executor`).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import time
@@ -30,32 +31,32 @@ if TYPE_CHECKING:
     from twin.kinematics import UR5e
 
 __all__ = [
-    "CheckedPlanner",
-    "as_checked",
-    "cannot_reach",
-    "declared_goal_kinds",
     "GOAL_KINDS",
-    "PathPlanner",
-    "SceneView",
-    "accepts_retimer",
-    "jerk_limited",
+    "CheckedPlanner",
     "KinematicPlant",
-    "Plant",
-    "colliding_pair",
-    "describe_goal_kinds",
-    "goal_miss",
     "OneShotPlanner",
+    "PathPlanner",
+    "Plant",
     "RecedingHorizonPlanner",
     "Retimer",
+    "SceneView",
     "Segment",
+    "accepts_retimer",
+    "as_checked",
+    "cannot_reach",
+    "colliding_pair",
+    "declared_goal_kinds",
+    "densify",
+    "densify_path",
+    "describe_goal_kinds",
+    "first_collision",
+    "goal_miss",
+    "jerk_limited",
     "limits_from_settings",
     "make_context",
     "make_planner",
     "plan",
     "plan_with",
-    "densify",
-    "densify_path",
-    "first_collision",
 ]
 
 log = logging.getLogger("twin")
@@ -92,7 +93,7 @@ class SceneView(Protocol):
 class OneShotPlanner(Protocol):
     """Plans a whole trajectory at once."""
 
-    def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult: ...
+    def plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult: ...
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,7 @@ class Segment:
 class RecedingHorizonPlanner(Protocol):
     """Plans a short segment from the latest measured state, again and again, until done."""
 
-    def reset(self, request: MotionRequest, scene: "PlanningScene") -> None: ...
+    def reset(self, request: MotionRequest, scene: PlanningScene) -> None: ...
 
     def step(self, q: np.ndarray) -> Segment | MotionResult:
         """The next segment from measured joint state `q` (6,), or a final MotionResult when done."""
@@ -132,9 +133,9 @@ class PathPlanner:
     the config chose, or None (the planner then uses its own default)."""
 
     accepts_retimer: ClassVar[bool] = True
-    retimer: "Retimer | None" = None
+    retimer: Retimer | None = None
 
-    def set_retimer(self, retimer: "Retimer") -> None:
+    def set_retimer(self, retimer: Retimer) -> None:
         self.retimer = retimer
 
     @property
@@ -165,7 +166,7 @@ GOAL_KINDS: frozenset[str] = frozenset({"joint", "pose", "position"})
 _GOAL_KIND_WORDS = {"joint": "joint goals", "pose": "pose goals with an orientation", "position": "position goals"}
 
 
-def describe_goal_kinds(kinds: "frozenset[str] | set[str]") -> str:
+def describe_goal_kinds(kinds: frozenset[str] | set[str]) -> str:
     """'joint goals, pose goals with an orientation' (sorted, for messages)."""
     return ", ".join(_GOAL_KIND_WORDS[k] for k in sorted(kinds))
 
@@ -180,18 +181,18 @@ def cannot_reach(name: str, kind: str, kinds: frozenset[str]) -> str:
     return f"{name} cannot reach {describe_goal_kinds({kind})}; it serves {describe_goal_kinds(kinds)}"
 
 
-def limits_from_settings(settings: "Settings", *, tcp_speed: float | None = None) -> Limits:
+def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) -> Limits:
     r = settings.robot
     return Limits.uniform(r.max_joint_vel, r.max_joint_acc, r.max_joint_jerk, tcp_speed)
 
 
-def make_context(settings: "Settings", registry: Registry | None = None, kinematics: "UR5e | None" = None) -> PluginContext:
+def make_context(settings: Settings, registry: Registry | None = None, kinematics: UR5e | None = None) -> PluginContext:
     from twin.kinematics import UR5e
 
     return PluginContext(settings=settings, kinematics=kinematics or UR5e(), registry=registry or default_registry())
 
 
-def make_planner(block: "PlannerBlock | str", context: PluginContext) -> "CheckedPlanner":
+def make_planner(block: PlannerBlock | str, context: PluginContext) -> CheckedPlanner:
     """Instantiate a planner from a config block `{name, params, retimer}` or a bare name, wrapped in the
     one check every planner gets (`CheckedPlanner`)."""
     from twin.config import PlannerBlock
@@ -207,11 +208,13 @@ def make_planner(block: "PlannerBlock | str", context: PluginContext) -> "Checke
 
             raise ConfigError(f"planner {block.name!r} produces trajectories itself and takes no retimer")
         planner.set_retimer(context.registry.retimer(block.retimer, block.retimer_params, context))
-    return CheckedPlanner(planner, name=block.name, receding_horizon=entry.kind is Kind.RECEDING_HORIZON, context=context)
+    return CheckedPlanner(
+        planner, name=block.name, receding_horizon=entry.kind is Kind.RECEDING_HORIZON, context=context
+    )
 
 
 # ---- trajectory checks ----------------------------------------------------------------------------
-def densify(traj: Trajectory, kin: "UR5e", *, max_step_rad: float, max_step_m: float) -> np.ndarray:
+def densify(traj: Trajectory, kin: UR5e, *, max_step_rad: float, max_step_m: float) -> np.ndarray:
     """(k, 6) configurations along `traj`, no joint moving more than `max_step_rad` and the TCP no more
     than `max_step_m` between neighbours.
 
@@ -242,13 +245,15 @@ def densify_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
     original waypoint is kept; a segment of length L gets ceil(L / max_step_rad) - 1 points, evenly spaced."""
     path = np.asarray(path, dtype=float)
     out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in itertools.pairwise(path):
         k = max(1, math.ceil(float(np.linalg.norm(b - a)) / max_step_rad - 1e-9))
         out.append(a + np.outer(np.arange(1, k + 1) / k, b - a))
     return np.concatenate(out)
 
 
-def first_collision(traj: Trajectory, scene: "PlanningScene", kin: "UR5e", *, max_step_rad: float = 0.01, max_step_m: float = 0.01) -> int | None:
+def first_collision(
+    traj: Trajectory, scene: PlanningScene, kin: UR5e, *, max_step_rad: float = 0.01, max_step_m: float = 0.01
+) -> int | None:
     """Index (into the densified samples) of the first colliding configuration, or None if free."""
     qs = densify(traj, kin, max_step_rad=max_step_rad, max_step_m=max_step_m)
     hits = scene.in_collision_batch(qs)
@@ -260,7 +265,7 @@ def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: "UR5e") -> str | None:
+def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: UR5e) -> str | None:
     """Why `q_end` (6,) does not reach `goal` within the goal's own tolerances, or None when it does.
 
     The one definition of "reached" for every planner: a joint goal, every joint within `tolerance_rad`;
@@ -268,7 +273,11 @@ def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: "UR5e") -> str
     `orientation_tolerance_rad`."""
     if isinstance(goal, JointGoal):
         err = float(np.abs(q_end - goal.q).max())
-        return None if err <= goal.tolerance_rad else f"ends {err:.2e} rad from the joint goal (tolerance {goal.tolerance_rad:g} rad)"
+        return (
+            None
+            if err <= goal.tolerance_rad
+            else f"ends {err:.2e} rad from the joint goal (tolerance {goal.tolerance_rad:g} rad)"
+        )
     T = kin.fk(q_end, goal.frame)
     G = goal.pose.matrix()
     d = float(np.linalg.norm(T[:3, 3] - G[:3, 3]))
@@ -297,7 +306,7 @@ def _still(q: np.ndarray) -> Trajectory:
     return Trajectory(np.zeros(1), np.asarray(q, dtype=float)[None], np.zeros((1, 6)), np.zeros((1, 6)))
 
 
-def colliding_pair(scene: "PlanningScene", q: np.ndarray) -> str:
+def colliding_pair(scene: PlanningScene, q: np.ndarray) -> str:
     """'forearm_link with table' for the closest (penetrating) pair at q, for failure reasons."""
     try:
         d = scene.min_distance(q)
@@ -349,7 +358,9 @@ class CheckedPlanner:
 
     def __init__(self, inner: Any, *, name: str, receding_horizon: bool, context: PluginContext):
         if receding_horizon and not isinstance(inner, RecedingHorizonPlanner):
-            raise PlanningError(f"{name!r} is registered as receding-horizon but {type(inner).__name__} has no reset()/step()")
+            raise PlanningError(
+                f"{name!r} is registered as receding-horizon but {type(inner).__name__} has no reset()/step()"
+            )
         if not receding_horizon and not isinstance(inner, OneShotPlanner):
             raise PlanningError(f"{name!r} is registered as one-shot but {type(inner).__name__} has no plan()")
         self.inner = inner
@@ -359,9 +370,11 @@ class CheckedPlanner:
         self.goal_kinds = declared_goal_kinds(type(inner))
         unknown = self.goal_kinds - GOAL_KINDS
         if unknown:
-            raise PlanningError(f"{name!r} declares unknown goal kinds {sorted(unknown)}; allowed: {sorted(GOAL_KINDS)}")
+            raise PlanningError(
+                f"{name!r} declares unknown goal kinds {sorted(unknown)}; allowed: {sorted(GOAL_KINDS)}"
+            )
         self._request: MotionRequest | None = None
-        self._scene: "PlanningScene | None" = None
+        self._scene: PlanningScene | None = None
         self._fallback_steps = 0
         self._segments = 0
 
@@ -378,7 +391,7 @@ class CheckedPlanner:
         return kind in self.goal_kinds
 
     # ---- receding horizon, checked --------------------------------------------------------------
-    def reset(self, request: MotionRequest, scene: "PlanningScene") -> None:
+    def reset(self, request: MotionRequest, scene: PlanningScene) -> None:
         if not self.receding_horizon:
             raise PlanningError(f"{self.name} is a one-shot planner: call plan(), not reset()/step()")
         if request.goal.kind not in self.goal_kinds:
@@ -399,19 +412,33 @@ class CheckedPlanner:
                 q_end = out.trajectory.q[-1] if out.trajectory is not None else q
                 why = goal_miss(self._request.goal, q_end, self.context.kinematics)
                 if why is not None:
-                    return MotionResult(Status.NO_SOLUTION, f"{self.name} reported success but {why}", info=dict(out.info, **info_extra))
+                    return MotionResult(
+                        Status.NO_SOLUTION, f"{self.name} reported success but {why}", info=dict(out.info, **info_extra)
+                    )
             return replace(out, info=dict(out.info, **info_extra))
         if not isinstance(out, Segment):
-            raise PlanningError(f"{type(self.inner).__name__}.step returned {type(out).__name__}, not Segment or MotionResult")
+            raise PlanningError(
+                f"{type(self.inner).__name__}.step returned {type(out).__name__}, not Segment or MotionResult"
+            )
         traj = out.trajectory
         off = float(np.abs(traj.q[0] - q).max())
         if off > 1e-6:
-            raise PlanningError(f"{self.name}: segment {self._segments + 1} starts {off:.2e} rad away from the measured state")
+            raise PlanningError(
+                f"{self.name}: segment {self._segments + 1} starts {off:.2e} rad away from the measured state"
+            )
         col = self.context.settings.collision
-        hit = first_collision(traj, self._scene, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+        hit = first_collision(
+            traj,
+            self._scene,
+            self.context.kinematics,
+            max_step_rad=col.check_resolution_rad,
+            max_step_m=col.check_resolution_m,
+        )
         self._segments += 1
         if hit is not None:
-            qs = densify(traj, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+            qs = densify(
+                traj, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m
+            )
             kind = "fallback segment" if out.fallback else "segment"
             log.warning("%s: %s %d collides; not executed", self.name, kind, self._segments)
             return MotionResult(
@@ -424,7 +451,7 @@ class CheckedPlanner:
         return out
 
     # ---- one-shot, checked ----------------------------------------------------------------------
-    def _plan_one_shot(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+    def _plan_one_shot(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         t0 = time.perf_counter()
         result = self.inner.plan(request, scene)
         elapsed = time.perf_counter() - t0
@@ -437,7 +464,9 @@ class CheckedPlanner:
         return _checked(result, request, scene, self.context)
 
     # ---- the one loop ---------------------------------------------------------------------------
-    def drive(self, request: MotionRequest, scene: "PlanningScene", plant: Plant, *, max_segments: int = 1000) -> MotionResult:
+    def drive(
+        self, request: MotionRequest, scene: PlanningScene, plant: Plant, *, max_segments: int = 1000
+    ) -> MotionResult:
         """Plan and hand every checked piece to `plant`: a one-shot plan is one piece, a receding-horizon
         planner gives one piece per step from the plant's measured state. Nothing unchecked reaches the
         plant. The result's trajectory is what was commanded; `info` holds `solve_times_s`, `solves`,
@@ -450,7 +479,13 @@ class CheckedPlanner:
                 assert result.trajectory is not None
                 stop = plant.run(result.trajectory)
                 if stop is not None:
-                    return replace(result, status=Status.EXECUTION_STOPPED, reason=stop, trajectory=None, info=dict(result.info, execution_stop=stop))
+                    return replace(
+                        result,
+                        status=Status.EXECUTION_STOPPED,
+                        reason=stop,
+                        trajectory=None,
+                        info=dict(result.info, execution_stop=stop),
+                    )
             return result
         t0 = time.perf_counter()
         self.reset(request, scene)
@@ -466,10 +501,18 @@ class CheckedPlanner:
             pieces.append(out.trajectory)
             stop = plant.run(out.trajectory)
             if stop is not None:
-                final = MotionResult(Status.EXECUTION_STOPPED, stop, info={"execution_stop": stop, "fallback_steps": self._fallback_steps})
+                final = MotionResult(
+                    Status.EXECUTION_STOPPED,
+                    stop,
+                    info={"execution_stop": stop, "fallback_steps": self._fallback_steps},
+                )
                 break
         if final is None:
-            final = MotionResult(Status.NO_SOLUTION, f"no end after {max_segments} segments", info={"fallback_steps": self._fallback_steps})
+            final = MotionResult(
+                Status.NO_SOLUTION,
+                f"no end after {max_segments} segments",
+                info={"fallback_steps": self._fallback_steps},
+            )
         info = dict(final.info, solve_times_s=solve_times, solves=len(solve_times))
         planning_time = float(sum(solve_times)) or time.perf_counter() - t0
         if final.success:
@@ -477,7 +520,7 @@ class CheckedPlanner:
             return replace(final, trajectory=traj, info=info, planning_time_s=planning_time)
         return replace(final, trajectory=None, info=info, planning_time_s=planning_time)
 
-    def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+    def plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         """Plan `request` without a robot: one-shot as is, receding horizon on the kinematic model."""
         return self.drive(request, scene, KinematicPlant(request.start))
 
@@ -494,13 +537,15 @@ def as_checked(planner: Any, context: PluginContext, *, name: str | None = None)
     raise PlanningError(f"{type(planner).__name__} has neither plan() nor reset()/step()")
 
 
-def plan_with(planner: Any, request: MotionRequest, scene: "PlanningScene", context: PluginContext) -> MotionResult:
+def plan_with(planner: Any, request: MotionRequest, scene: PlanningScene, context: PluginContext) -> MotionResult:
     """Plan `request` with an instantiated planner (from `make_planner`, or a bare plugin instance, which
     gets the same check) on the kinematic model."""
     return as_checked(planner, context).plan(request, scene)
 
 
-def _checked(result: MotionResult, request: MotionRequest, scene: "PlanningScene", context: PluginContext) -> MotionResult:
+def _checked(
+    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext
+) -> MotionResult:
     traj = result.trajectory
     assert traj is not None
     kin = context.kinematics
@@ -515,16 +560,21 @@ def _checked(result: MotionResult, request: MotionRequest, scene: "PlanningScene
     if hit is not None:
         log.warning("planner returned a colliding trajectory; reported as COLLISION")
         qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
-        return replace(result, status=Status.COLLISION, trajectory=None, reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})")
+        return replace(
+            result,
+            status=Status.COLLISION,
+            trajectory=None,
+            reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})",
+        )
     return result
 
 
 def plan(
-    settings: "Settings",
-    planner: "PlannerBlock | str",
+    settings: Settings,
+    planner: PlannerBlock | str,
     request: MotionRequest,
     *,
-    scene: "PlanningScene | None" = None,
+    scene: PlanningScene | None = None,
     registry: Registry | None = None,
 ) -> MotionResult:
     """Plan one request with the planner named in `planner` (a config block or a name).

@@ -31,12 +31,12 @@ class Recorder:
         self.T = look_at(OVERVIEW_EYE, OVERVIEW_TARGET)
         self.frames: list[np.ndarray] = []
 
-    def attach(self, world: "World") -> "Recorder":
+    def attach(self, world: World) -> Recorder:
         world.observe(self._grab, every_s=1.0 / self.fps)
         self._grab(world)
         return self
 
-    def _grab(self, world: "World") -> None:
+    def _grab(self, world: World) -> None:
         self.frames.append(world.render(self.T, self.intr, near_m=0.05, far_m=6.0).rgb)
 
     def save(self) -> Path:
@@ -57,7 +57,7 @@ class Recorder:
             import cv2
 
             h, w = self.frames[0].shape[:2]
-            out = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+            out = cv2.VideoWriter(str(self.path), cv2.VideoWriter.fourcc(*"mp4v"), self.fps, (w, h))
             if not out.isOpened():
                 raise ConfigError(f"cannot write {self.path}")
             for f in self.frames:

@@ -79,7 +79,9 @@ class Entry:
             mod = importlib.import_module(module)
         except ImportError as e:
             hint = f" Install it with `pip install 'twin[{self.extra}]'`." if self.extra else ""
-            raise DependencyMissing(f"{self.kind.value} {self.name!r} needs {e.name or module!r}, which is not installed.{hint}") from e
+            raise DependencyMissing(
+                f"{self.kind.value} {self.name!r} needs {e.name or module!r}, which is not installed.{hint}"
+            ) from e
         try:
             return getattr(mod, attr)
         except AttributeError:
@@ -114,9 +116,9 @@ def _unavailable_reason(cls: type) -> str | None:
 class PluginContext:
     """What a plugin gets besides its parameters: the settings, the kinematics and the registry."""
 
-    settings: "Settings"
-    kinematics: "UR5e"
-    registry: "Registry"
+    settings: Settings
+    kinematics: UR5e
+    registry: Registry
 
 
 def validate_params(entry: Entry, cls: type, params: dict[str, Any] | BaseModel | None) -> Any:
@@ -155,7 +157,9 @@ class Registry:
         self._provider = "(direct)"
 
     # ---- registration (called from hooks) ------------------------------------------------------
-    def add(self, kind: Kind, name: str, target: str | type, *, description: str = "", extra: str | None = None) -> None:
+    def add(
+        self, kind: Kind, name: str, target: str | type, *, description: str = "", extra: str | None = None
+    ) -> None:
         if not name or name != name.strip() or name.lower() != name:
             raise TwinError(f"plugin names are lower-case dotted words, got {name!r}")
         if name in self._entries:
@@ -165,9 +169,23 @@ class Registry:
             raise TwinError(f"{name!r}: target must be 'module:Class', got {target!r}")
         self._entries[name] = Entry(name, kind, target, self._provider, description, extra)
 
-    def add_planner(self, name: str, target: str | type, *, receding_horizon: bool = False, description: str = "", extra: str | None = None) -> None:
+    def add_planner(
+        self,
+        name: str,
+        target: str | type,
+        *,
+        receding_horizon: bool = False,
+        description: str = "",
+        extra: str | None = None,
+    ) -> None:
         """Register a planner: one-shot (`plan`) or receding-horizon (`reset`/`step`)."""
-        self.add(Kind.RECEDING_HORIZON if receding_horizon else Kind.PLANNER, name, target, description=description, extra=extra)
+        self.add(
+            Kind.RECEDING_HORIZON if receding_horizon else Kind.PLANNER,
+            name,
+            target,
+            description=description,
+            extra=extra,
+        )
 
     def add_retimer(self, name: str, target: str | type, *, description: str = "", extra: str | None = None) -> None:
         self.add(Kind.RETIMER, name, target, description=description, extra=extra)
@@ -220,7 +238,7 @@ class Registry:
 
     # ---- building from plugins ------------------------------------------------------------------
     @classmethod
-    def from_plugin_manager(cls, pm: pluggy.PluginManager) -> "Registry":
+    def from_plugin_manager(cls, pm: pluggy.PluginManager) -> Registry:
         """Ask every plugin of `pm`, one at a time, to register its names (so each name has a provider)."""
         reg = cls()
         dists = {id(plugin): f"{d.project_name} {d.version}" for plugin, d in pm.list_plugin_distinfo()}
@@ -258,7 +276,10 @@ def _check_hooks(pm: pluggy.PluginManager) -> None:
             for name, caller in vars(pm.hook).items()
             if not caller.has_spec() and any(impl.plugin is e.plugin for impl in caller.get_hookimpls())
         )
-        raise PluginError(f"plugin {plugin!r} implements unknown hook(s) {', '.join(unknown) or '?'}; twin's hooks are: {', '.join(hooks)}") from None
+        raise PluginError(
+            f"plugin {plugin!r} implements unknown hook(s) {', '.join(unknown) or '?'}; "
+            f"twin's hooks are: {', '.join(hooks)}"
+        ) from None
 
 
 @lru_cache(maxsize=1)

@@ -32,22 +32,22 @@ from twin.errors import ConfigError, WorldError
 from twin.transforms import pose_from_xyz_rpy
 
 __all__ = [
-    "ObjectTemplate",
-    "OBJECT_TEMPLATES",
-    "COLORS",
     "ARUCO_PLATE_URDF",
-    "PLATE_SIZE_M",
-    "PLATE_THICKNESS_M",
+    "COLORS",
     "MARKER_LIFT_M",
     "MARKER_MARGIN_FRACTION",
-    "color_rgba",
-    "is_marker_plate",
-    "find_marker_plate",
-    "marker_pose_in_base",
-    "marker_corners_in_base",
-    "marker_quad_size_m",
+    "OBJECT_TEMPLATES",
+    "PLATE_SIZE_M",
+    "PLATE_THICKNESS_M",
+    "ObjectTemplate",
     "Placement",
+    "color_rgba",
+    "find_marker_plate",
+    "is_marker_plate",
     "keepout_rects",
+    "marker_corners_in_base",
+    "marker_pose_in_base",
+    "marker_quad_size_m",
     "sample_layout",
 ]
 
@@ -124,7 +124,6 @@ def color_rgba(name: str) -> tuple[float, float, float, float]:
         return COLORS[name.lower()]
     except KeyError:
         raise ConfigError(f"unknown colour {name!r}; known colours: {', '.join(sorted(COLORS))}") from None
-
 
 
 def is_marker_plate(fixture: FixtureSettings) -> bool:

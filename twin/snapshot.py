@@ -23,7 +23,9 @@ def render_views(settings: Settings, *, settle_s: float = 0.5) -> dict[str, np.n
         world.step(int(round(settle_s * settings.world.physics_hz)))
         T_cam = camera_pose(cam, world.link_matrix("tool0"))
         views = {"camera": world.render(T_cam, intr, near_m=cam.near_m, far_m=cam.far_m).rgb}
-        wide = Intrinsics(cam.width, cam.height, cam.width / 2.0 / np.tan(np.radians(30)), cam.width / 2.0 / np.tan(np.radians(30)))
+        wide = Intrinsics(
+            cam.width, cam.height, cam.width / 2.0 / np.tan(np.radians(30)), cam.width / 2.0 / np.tan(np.radians(30))
+        )
         views["overview"] = world.render(look_at(OVERVIEW_EYE, OVERVIEW_TARGET), wide, near_m=0.05, far_m=6.0).rgb
     return views
 

@@ -88,7 +88,10 @@ log = logging.getLogger("twin")
 # rule name -> (number of the rule in the contract, what it demands)
 RULES: dict[str, tuple[int, str]] = {
     "statuses": (1, "a status, never an exception; unreachable and colliding goals get a failure status with a reason"),
-    "start_goal": (2, "starts exactly at the start (segments: at the measured state), ends on the goal within its tolerance"),
+    "start_goal": (
+        2,
+        "starts exactly at the start (segments: at the measured state), ends on the goal within its tolerance",
+    ),
     "velocity": (3, "joint velocities within the request's limits"),
     "acceleration": (3, "joint accelerations within the request's limits"),
     "jerk": (3, "joint jerks within the request's limits"),
@@ -141,8 +144,15 @@ class CheckResult:
         return RULES[self.rule][1]
 
     def to_json(self) -> dict[str, Any]:
-        return {"rule": self.rule, "number": self.number, "passed": self.passed, "raw": self.raw, "checked": self.checked,
-                "detail": self.detail, "description": self.description}
+        return {
+            "rule": self.rule,
+            "number": self.number,
+            "passed": self.passed,
+            "raw": self.raw,
+            "checked": self.checked,
+            "detail": self.detail,
+            "description": self.description,
+        }
 
 
 @dataclass(frozen=True)
@@ -298,7 +308,9 @@ def contract_queries(
         if len(out) == 0 and not s.line_free(a, _top_down(pb, yb)):  # free for a Cartesian line as well
             continue
         out.append(Query(a, b, free, "straight joint motion " + ("free" if free else "blocked")))
-    raise TwinError(f"found only {len(out)} of {n} collision-free queries in the scene (seed {seed}); is the work area blocked?")
+    raise TwinError(
+        f"found only {len(out)} of {n} collision-free queries in the scene (seed {seed}); is the work area blocked?"
+    )
 
 
 def _goal(kind: str, q: np.ndarray, kin: UR5e) -> JointGoal | PoseGoal:
@@ -404,7 +416,11 @@ class _Outcome:
 
     @property
     def segments(self) -> list[Any]:
-        return [c.output for c in self.calls if c.what == "step" and c.output is not None and not isinstance(c.output, MotionResult)]
+        return [
+            c.output
+            for c in self.calls
+            if c.what == "step" and c.output is not None and not isinstance(c.output, MotionResult)
+        ]
 
     @property
     def raw_result(self) -> MotionResult | None:
@@ -470,7 +486,12 @@ def _thinned(t: np.ndarray, min_dt: float) -> np.ndarray:
 
 
 def limit_violations(
-    traj: Trajectory, limits: Limits, *, tolerance: float = LIMIT_TOLERANCE, from_rest: bool = True, to_rest: bool = True
+    traj: Trajectory,
+    limits: Limits,
+    *,
+    tolerance: float = LIMIT_TOLERANCE,
+    from_rest: bool = True,
+    to_rest: bool = True,
 ) -> dict[str, str]:
     """{'velocity' | 'acceleration' | 'jerk': why} for every limit `traj` exceeds by more than `tolerance`
     (relative). Judged on the declared qd and qdd (jerk: differences of qdd between samples) and on the
@@ -488,11 +509,19 @@ def limit_violations(
         if from_rest:
             h = t[1] - t[0]
             t = np.concatenate([t[0] - h * k[:, 0], t])
-            q, qd, qdd = np.vstack([np.repeat(q[:1], 3, 0), q]), np.vstack([np.zeros((3, 6)), qd]), np.vstack([np.zeros((3, 6)), qdd])
+            q, qd, qdd = (
+                np.vstack([np.repeat(q[:1], 3, 0), q]),
+                np.vstack([np.zeros((3, 6)), qd]),
+                np.vstack([np.zeros((3, 6)), qdd]),
+            )
         if to_rest:
             h = t[-1] - t[-2]
             t = np.concatenate([t, t[-1] + h * k[::-1, 0]])
-            q, qd, qdd = np.vstack([q, np.repeat(q[-1:], 3, 0)]), np.vstack([qd, np.zeros((3, 6))]), np.vstack([qdd, np.zeros((3, 6))])
+            q, qd, qdd = (
+                np.vstack([q, np.repeat(q[-1:], 3, 0)]),
+                np.vstack([qd, np.zeros((3, 6))]),
+                np.vstack([qdd, np.zeros((3, 6))]),
+            )
     dt = np.diff(t)[:, None]
     d1 = np.diff(q, axis=0) / dt
     d2 = 2.0 * np.diff(d1, axis=0) / (t[2:] - t[:-2])[:, None] if t.shape[0] > 2 else np.zeros((0, 6))
@@ -501,7 +530,12 @@ def limit_violations(
     checks = (
         ("velocity", limits.max_joint_vel, "rad/s", (("declared qd", qd), ("differences of q", d1))),
         ("acceleration", limits.max_joint_acc, "rad/s^2", (("declared qdd", qdd), ("second differences of q", d2))),
-        ("jerk", limits.max_joint_jerk, "rad/s^3", (("differences of qdd", jerk_declared), ("third differences of q", d3))),
+        (
+            "jerk",
+            limits.max_joint_jerk,
+            "rad/s^3",
+            (("differences of qdd", jerk_declared), ("third differences of q", d3)),
+        ),
     )
     for name, lim, unit, sources in checks:
         worst: tuple[float, str, int, float] | None = None
@@ -580,8 +614,18 @@ def _err(e: BaseException) -> str:
 
 
 class _Checker:
-    def __init__(self, checked: CheckedPlanner, name: str, settings: Settings, scene: PlanningScene,
-                 context: PluginContext, *, seed: int, time_limit_s: float, progress: Callable[[str], None]):
+    def __init__(
+        self,
+        checked: CheckedPlanner,
+        name: str,
+        settings: Settings,
+        scene: PlanningScene,
+        context: PluginContext,
+        *,
+        seed: int,
+        time_limit_s: float,
+        progress: Callable[[str], None],
+    ):
         self.checked = checked
         self.name = name
         self.settings = settings
@@ -611,7 +655,9 @@ class _Checker:
         except Exception as e:  # noqa: BLE001 - judged: rule 1 (the plugin raised) or CheckedPlanner refused
             error = e
         wall = time.perf_counter() - t0
-        log.debug("check %s: %s -> %s in %.3f s", self.name, label, error or (result.status.value if result else None), wall)
+        log.debug(
+            "check %s: %s -> %s in %.3f s", self.name, label, error or (result.status.value if result else None), wall
+        )
         return _Outcome(label, purpose, request, list(self.recorder.calls), result, error, wall, plant.step_times)
 
     def request(self, start: np.ndarray, goal: JointGoal | PoseGoal, seed: int) -> MotionRequest:
@@ -629,7 +675,7 @@ class _Checker:
             outcomes.append(o)
         # determinism: the query that made it search if it was solved, else the first one solved
         solved = [o for o in outcomes if o.raw_result is not None and o.raw_result.success]
-        blocked = [o for o, qu in zip(outcomes, queries) if not qu.straight_free and o in solved]
+        blocked = [o for o, qu in zip(outcomes, queries, strict=True) if not qu.straight_free and o in solved]
         first = (blocked or solved or outcomes)[0]
         repeat = self.ask(f"{first.label}, asked again", "repeat", first.request)
         outcomes.append(repeat)
@@ -646,14 +692,22 @@ class _Checker:
             g = _served_goal(self.kinds, far, q_out, kind)
             if g is not None:
                 what = "outside the joint limits" if kind == "joint" else "2.5 m away"
-                outcomes.append(self.ask(f"unreachable {kind} goal ({what})", "unreachable", self.request(a, g, self.seed)))
+                outcomes.append(
+                    self.ask(f"unreachable {kind} goal ({what})", "unreachable", self.request(a, g, self.seed))
+                )
             g = _served_goal(self.kinds, T_in, q_in, kind)
             if g is not None:
                 outcomes.append(self.ask(f"{kind} goal in the table", "colliding_goal", self.request(a, g, self.seed)))
         # a start in collision, towards the first query's goal
         if q_in is not None:
             g0 = outcomes[0].request.goal
-            outcomes.append(self.ask("start in collision (tool 2 cm below the table top)", "invalid_start", self.request(q_in, g0, self.seed)))
+            outcomes.append(
+                self.ask(
+                    "start in collision (tool 2 cm below the table top)",
+                    "invalid_start",
+                    self.request(q_in, g0, self.seed),
+                )
+            )
         results = [
             self.rule_statuses(outcomes),
             *self.rules_trajectories(outcomes),
@@ -686,7 +740,11 @@ class _Checker:
                     continue
                 ok_types: tuple[type, ...] = (MotionResult,) if c.what == "plan" else (MotionResult, Segment)
                 if not isinstance(c.output, ok_types):
-                    v.fail("raw", f"{o.label}: {c.what}() returned {type(c.output).__name__}, not {' or '.join(t.__name__ for t in ok_types)}")
+                    v.fail(
+                        "raw",
+                        f"{o.label}: {c.what}() returned {type(c.output).__name__}, "
+                        f"not {' or '.join(t.__name__ for t in ok_types)}",
+                    )
                     break
             if o.error is not None and not isinstance(o.error, PlanningError):
                 v.fail("checked", f"{o.label}: CheckedPlanner raised {_err(o.error)}")
@@ -702,7 +760,11 @@ class _Checker:
             if o.result is not None and o.result.success:
                 v.fail("checked", f"{o.label}: reported success")
         n = sum(o.purpose in ("unreachable", "colliding_goal") for o in outcomes)
-        return v.result("statuses", f"no exception in {len(outcomes)} requests; {n} unreachable or colliding goals got failure statuses with reasons")
+        return v.result(
+            "statuses",
+            f"no exception in {len(outcomes)} requests; "
+            f"{n} unreachable or colliding goals got failure statuses with reasons",
+        )
 
     def rules_trajectories(self, outcomes: list[_Outcome]) -> list[CheckResult]:
         """Rules 2, 3 and 7 on every request with a valid start (a start in collision is rule 6's)."""
@@ -718,7 +780,11 @@ class _Checker:
             for k, tr in enumerate(trajs):
                 off = float(np.abs(tr.q[0] - at).max())
                 if off > START_TOLERANCE_RAD:
-                    what = f"segment {k + 1} starts {off:.2e} rad from the measured state" if self.rh else f"the trajectory starts {off:.2e} rad from the start"
+                    what = (
+                        f"segment {k + 1} starts {off:.2e} rad from the measured state"
+                        if self.rh
+                        else f"the trajectory starts {off:.2e} rad from the start"
+                    )
                     sg.fail("raw", f"{o.label}: {what}")
                     break
                 at = tr.q[-1]
@@ -736,7 +802,9 @@ class _Checker:
             for k, tr in enumerate(trajs):
                 hit = self._collision(tr)
                 if hit is not None:
-                    col.fail("raw", f"{o.label}: {f'segment {k + 1}' if self.rh else 'the trajectory'} collides ({hit})")
+                    col.fail(
+                        "raw", f"{o.label}: {f'segment {k + 1}' if self.rh else 'the trajectory'} collides ({hit})"
+                    )
                     break
             # what the run got through CheckedPlanner (a PlanningError is CheckedPlanner refusing the plugin's
             # output: nothing reached the run, and the plugin's own failure is reported above)
@@ -756,17 +824,28 @@ class _Checker:
                 col.fail("checked", f"{o.label}: the trajectory collides ({hit})")
         solved = [o for o in judged if o.purpose == "query" and o.raw_result is not None and o.raw_result.success]
         if not solved:
-            why = f"none of the {sum(o.purpose == 'query' for o in outcomes)} collision-free queries was solved, so no trajectory could be judged"
+            n_queries = sum(o.purpose == "query" for o in outcomes)
+            why = f"none of the {n_queries} collision-free queries was solved, so no trajectory could be judged"
             for v in (sg, col, *lim.values()):
                 v.both(why)
         tol = f"{LIMIT_TOLERANCE:.1%}"
         judged_text = f"{n_raw} trajectories of the planner, {n_checked} checked"
         return [
-            sg.result("start_goal", f"{len(solved)} {'query' if len(solved) == 1 else 'queries'} solved: every trajectory starts within {START_TOLERANCE_RAD:g} rad of its start and ends on its goal"),
-            lim["velocity"].result("velocity", f"{judged_text}: within max_joint_vel (+{tol}), declared qd and differences of q"),
-            lim["acceleration"].result("acceleration", f"{judged_text}: within max_joint_acc (+{tol}), declared qdd and differences of q"),
+            sg.result(
+                "start_goal",
+                f"{len(solved)} {'query' if len(solved) == 1 else 'queries'} solved: "
+                f"every trajectory starts within {START_TOLERANCE_RAD:g} rad of its start and ends on its goal",
+            ),
+            lim["velocity"].result(
+                "velocity", f"{judged_text}: within max_joint_vel (+{tol}), declared qd and differences of q"
+            ),
+            lim["acceleration"].result(
+                "acceleration", f"{judged_text}: within max_joint_acc (+{tol}), declared qdd and differences of q"
+            ),
             self._jerk_result(lim["jerk"], judged_text, tol),
-            col.result("collision_free", f"{judged_text}: free at {self.res_rad:g} rad / {self.res_m:g} m of tool travel"),
+            col.result(
+                "collision_free", f"{judged_text}: free at {self.res_rad:g} rad / {self.res_m:g} m of tool travel"
+            ),
         ]
 
     def _jerk_result(self, verdict: _Verdict, judged_text: str, tol: str) -> CheckResult:
@@ -788,18 +867,27 @@ class _Checker:
             for c in o.calls:
                 worst_raw = max(worst_raw, c.elapsed_s)
                 if c.elapsed_s > allowed:
-                    v.fail("raw", f"{o.label}: {c.what}() took {c.elapsed_s:.2f} s, limit {limit:g} s (+{time_slack_s(limit):.2f} s slack)")
+                    v.fail(
+                        "raw",
+                        f"{o.label}: {c.what}() took {c.elapsed_s:.2f} s, "
+                        f"limit {limit:g} s (+{time_slack_s(limit):.2f} s slack)",
+                    )
                     break
             checked_times = o.checked_step_times if self.rh else [o.wall_s]
             for t in checked_times:
                 worst_checked = max(worst_checked, t)
                 if t > allowed:
-                    v.fail("checked", f"{o.label}: a checked {'step' if self.rh else 'plan'} took {t:.2f} s, limit {limit:g} s (+{time_slack_s(limit):.2f} s slack)")
+                    v.fail(
+                        "checked",
+                        f"{o.label}: a checked {'step' if self.rh else 'plan'} took {t:.2f} s, "
+                        f"limit {limit:g} s (+{time_slack_s(limit):.2f} s slack)",
+                    )
                     break
         per = "reset()/step() call" if self.rh else "plan() call"
         return v.result(
             "time_limit",
-            f"slowest {per} {worst_raw:.2f} s, checked {worst_checked:.2f} s; limit {self.time_limit_s:g} s + {time_slack_s(self.time_limit_s):.2f} s slack",
+            f"slowest {per} {worst_raw:.2f} s, checked {worst_checked:.2f} s; "
+            f"limit {self.time_limit_s:g} s + {time_slack_s(self.time_limit_s):.2f} s slack",
         )
 
     def rule_determinism(self, first: _Outcome, again: _Outcome) -> CheckResult:
@@ -810,7 +898,7 @@ class _Checker:
             if why is None and len(a) != len(b):
                 why = f"{len(a)} then {len(b)} segments"
             if why is None:
-                why = next((w for w in (_same_traj(x, y) for x, y in zip(a, b)) if w is not None), None)
+                why = next((w for w in (_same_traj(x, y) for x, y in zip(a, b, strict=True)) if w is not None), None)
             if why is not None:
                 v.fail("raw", f"{first.label}: {why}")
             why = _same(first.result, again.result)
@@ -868,7 +956,9 @@ def _default_settings() -> Settings:
     return load_config(DEFAULT_CONFIG)
 
 
-def _block(planner: PlannerBlock | str | dict[str, Any] | type, registry: Registry | None) -> tuple[PlannerBlock, Registry | None]:
+def _block(
+    planner: PlannerBlock | str | dict[str, Any] | type, registry: Registry | None
+) -> tuple[PlannerBlock, Registry | None]:
     """A config block for `planner` (a name, a block or its dict, or a planner class, registered here
     under 'check.<class name>' in a registry of every installed plugin plus this class)."""
     from twin.config import PlannerBlock
@@ -934,8 +1024,16 @@ def check_planner(
         raise InvalidRequestError(f"queries must be at least 1, got {n}")
     scene = PlanningScene.from_settings(settings)
     scene.add_unknown_fixtures(settings)  # obstacles perception would report, reported perfectly
-    checker = _Checker(checked, block.name, settings, scene, context, seed=seed, time_limit_s=time_limit_s,
-                       progress=on_progress or (lambda _: None))
+    checker = _Checker(
+        checked,
+        block.name,
+        settings,
+        scene,
+        context,
+        seed=seed,
+        time_limit_s=time_limit_s,
+        progress=on_progress or (lambda _: None),
+    )
     results, outcomes = checker.run(n)
     return ConformanceReport(
         planner=block.name,
@@ -950,7 +1048,9 @@ def check_planner(
     )
 
 
-def assert_conformant(planner: PlannerBlock | str | dict[str, Any] | type, *, ignore: Iterable[str] = (), **kwargs: Any) -> ConformanceReport:
+def assert_conformant(
+    planner: PlannerBlock | str | dict[str, Any] | type, *, ignore: Iterable[str] = (), **kwargs: Any
+) -> ConformanceReport:
     """`check_planner(planner, **kwargs)`, raising AssertionError that lists every failed rule (those in
     `ignore` aside); returns the report. For a plugin's own test suite."""
     report = check_planner(planner, **kwargs)
@@ -961,5 +1061,7 @@ def assert_conformant(planner: PlannerBlock | str | dict[str, Any] | type, *, ig
     failed = [r for r in report.failures if r.rule not in skip]
     if failed:
         lines = "\n".join(f"  rule {r.number} {r.rule}: {r.detail}" for r in failed)
-        raise AssertionError(f"{report.planner} breaks the planner contract ({report.config}, seed {report.seed}):\n{lines}")
+        raise AssertionError(
+            f"{report.planner} breaks the planner contract ({report.config}, seed {report.seed}):\n{lines}"
+        )
     return report

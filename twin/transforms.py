@@ -19,12 +19,12 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "rpy_to_matrix",
+    "matrix_to_quat",
     "matrix_to_rpy",
     "pose_from_xyz_rpy",
-    "matrix_to_quat",
     "quat_to_matrix",
     "quats_to_matrices",
+    "rpy_to_matrix",
 ]
 
 

@@ -18,25 +18,25 @@ from twin.transforms import matrix_to_quat, quat_to_matrix, rpy_to_matrix
 rpy_matrix = rpy_to_matrix  # the old name of twin.transforms.rpy_to_matrix, kept for importers
 
 __all__ = [
-    "Pose",
-    "JointGoal",
-    "PoseGoal",
+    "EXACT_JOINT_TOLERANCE_RAD",
+    "EXACT_ORIENTATION_TOLERANCE_RAD",
+    "EXACT_POSITION_TOLERANCE_M",
+    "BoxBounds",
     "Goal",
+    "JointGoal",
     "Limits",
     "MotionRequest",
-    "Status",
     "MotionResult",
-    "Trajectory",
-    "BoxBounds",
     "ObjectOutcome",
+    "Pose",
+    "PoseGoal",
     "RunSummary",
+    "Status",
+    "Trajectory",
     "as_q",
-    "EXACT_JOINT_TOLERANCE_RAD",
-    "EXACT_POSITION_TOLERANCE_M",
-    "EXACT_ORIENTATION_TOLERANCE_RAD",
-    "rpy_matrix",
     "matrix_to_quat",
     "quat_to_matrix",
+    "rpy_matrix",
 ]
 
 
@@ -62,12 +62,12 @@ class Pose:
     quat_xyzw: np.ndarray
 
     @classmethod
-    def from_matrix(cls, T: np.ndarray) -> "Pose":
+    def from_matrix(cls, T: np.ndarray) -> Pose:
         T = np.asarray(T, dtype=float)
         return cls(T[:3, 3].copy(), matrix_to_quat(T[:3, :3]))
 
     @classmethod
-    def from_xyz_rpy(cls, xyz: Any, rpy: Any) -> "Pose":
+    def from_xyz_rpy(cls, xyz: Any, rpy: Any) -> Pose:
         """Position and fixed-axis roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
         R = rpy_to_matrix(rpy)
         return cls(np.array(xyz, dtype=float), matrix_to_quat(R))
@@ -146,7 +146,7 @@ class Limits:
     max_tcp_speed: float | None = None
 
     @classmethod
-    def uniform(cls, vel: float, acc: float, jerk: float, tcp_speed: float | None = None) -> "Limits":
+    def uniform(cls, vel: float, acc: float, jerk: float, tcp_speed: float | None = None) -> Limits:
         return cls(np.full(6, float(vel)), np.full(6, float(acc)), np.full(6, float(jerk)), tcp_speed)
 
     def __post_init__(self) -> None:
@@ -221,8 +221,12 @@ class Trajectory:
         ts = np.atleast_1d(np.asarray(t, dtype=float))
         ts = np.clip(ts, self.t[0], self.t[-1])
         if self.t.shape[0] == 1:
-            rep = lambda a: np.repeat(a[:1], ts.shape[0], axis=0)  # noqa: E731
-            out = rep(self.q), rep(self.qd), rep(self.qdd)
+            n = ts.shape[0]
+            out = (
+                np.repeat(self.q[:1], n, axis=0),
+                np.repeat(self.qd[:1], n, axis=0),
+                np.repeat(self.qdd[:1], n, axis=0),
+            )
         else:
             i = np.clip(np.searchsorted(self.t, ts, side="right") - 1, 0, self.t.shape[0] - 2)
             h = (self.t[i + 1] - self.t[i])[:, None]
@@ -237,7 +241,7 @@ class Trajectory:
             return out[0][0], out[1][0], out[2][0]
         return out
 
-    def resampled(self, dt: float) -> "Trajectory":
+    def resampled(self, dt: float) -> Trajectory:
         """The same motion sampled every `dt` seconds (last sample at the end time)."""
         ts = np.arange(self.t[0], self.t[-1], dt)
         ts = np.append(ts, self.t[-1]) if ts.size == 0 or ts[-1] < self.t[-1] - 1e-12 else ts
@@ -290,7 +294,7 @@ class BoxBounds:
     def hi(self) -> np.ndarray:
         return np.array([self.x_max, self.y_max, self.z_max])
 
-    def extended_y(self, margin_m: float) -> "BoxBounds":
+    def extended_y(self, margin_m: float) -> BoxBounds:
         """The box grown by `margin_m` in +y and -y (the warehouse system's trick to force going over)."""
         return BoxBounds(self.x_min, self.x_max, self.y_min - margin_m, self.y_max + margin_m, self.z_min, self.z_max)
 

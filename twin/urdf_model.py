@@ -28,17 +28,17 @@ from twin.errors import ConfigError, InvalidRequestError
 from twin.transforms import pose_from_xyz_rpy, rpy_to_matrix  # re-exported: importers use these names from here
 
 __all__ = [
-    "Shape",
+    "RGBA",
+    "FixtureShape",
     "Joint",
     "Link",
     "RobotModel",
-    "FixtureShape",
+    "Shape",
+    "pose_from_xyz_rpy",
     "read_fixture_shapes",
     "rpy_to_matrix",
-    "pose_from_xyz_rpy",
-    "RGBA",
-    "urdf_rgba",
     "urdf_link_rgba",
+    "urdf_rgba",
 ]
 
 _MOVABLE = ("revolute", "continuous", "prismatic")
@@ -213,8 +213,17 @@ def _parse(source: str | Path, text: str | None = None) -> tuple[str, dict[str, 
         if name in joints:
             raise ConfigError(f"{where}: joint {name!r} is defined twice")
         joints[name] = Joint(
-            name, jtype, pe.get("link") or "", ce.get("link") or "", _origin(je.find("origin"), w), axis,
-            lower, upper, effort, velocity, mimic,
+            name,
+            jtype,
+            pe.get("link") or "",
+            ce.get("link") or "",
+            _origin(je.find("origin"), w),
+            axis,
+            lower,
+            upper,
+            effort,
+            velocity,
+            mimic,
         )
     robot_name = root.get("name") or Path(str(source)).stem
     return robot_name, links, joints
@@ -283,13 +292,13 @@ class RobotModel:
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
-    def from_urdf(cls, path: str | Path, **kwargs: object) -> "RobotModel":
+    def from_urdf(cls, path: str | Path, **kwargs: object) -> RobotModel:
         """Read a URDF file; raises ConfigError for a missing file or malformed content."""
         name, links, joints = _parse(path)
         return cls(name, links, joints, source=str(path), **kwargs)  # type: ignore[arg-type]
 
     @classmethod
-    def from_string(cls, text: str, **kwargs: object) -> "RobotModel":
+    def from_string(cls, text: str, **kwargs: object) -> RobotModel:
         """Read URDF XML text."""
         name, links, joints = _parse("<string>", text)
         return cls(name, links, joints, **kwargs)  # type: ignore[arg-type]

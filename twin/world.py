@@ -53,12 +53,12 @@ from twin.scene_layout import (
 from twin.transforms import rpy_to_matrix
 
 __all__ = [
-    "World",
-    "ObjectState",
-    "ContactPoint",
     "ARM_JOINT_NAMES",
     "FINGER_JOINT_NAMES",
     "FINGER_TRAVEL_M",
+    "ContactPoint",
+    "ObjectState",
+    "World",
     "marker_pose_in_base",
 ]
 
@@ -121,7 +121,7 @@ def _flush_c_stdout() -> None:
         import ctypes
 
         ctypes.CDLL(None).fflush(None)
-    except Exception:  # not on every platform; then some noise may get through
+    except Exception:  # noqa: BLE001 - not on every platform; then some noise may get through
         pass
 
 
@@ -213,7 +213,10 @@ class World:
         self._build_scene()
         log.debug(
             "world built: %d fixtures, %d objects, renderer %s, seed %d",
-            len(self._fixtures), len(self._objects), self.renderer, self.seed,
+            len(self._fixtures),
+            len(self._objects),
+            self.renderer,
+            self.seed,
         )
 
     def _build_scene(self) -> None:
@@ -248,7 +251,7 @@ class World:
                 if plugin >= 0:
                     self._egl = True
                     return "egl"
-        except Exception as e:  # any failure means: use the software TinyRenderer
+        except Exception as e:  # noqa: BLE001 - any failure means: use the software TinyRenderer
             log.debug("EGL renderer unavailable (%s), using TinyRenderer", e)
         return "tiny"
 
@@ -262,8 +265,12 @@ class World:
         c = self._cid
         try:
             self.robot_id = pb.loadURDF(
-                self._urdf(self.settings.robot.urdf), [0, 0, 0], [0, 0, 0, 1],
-                useFixedBase=True, flags=_URDF_FLAGS, physicsClientId=c,
+                self._urdf(self.settings.robot.urdf),
+                [0, 0, 0],
+                [0, 0, 0, 1],
+                useFixedBase=True,
+                flags=_URDF_FLAGS,
+                physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load robot URDF {self.settings.robot.urdf}: {e}") from None
@@ -283,16 +290,23 @@ class World:
         for link in _FINGER_LINKS:
             # friction anchors stop the slow creep of a friction grip under gravity
             pb.changeDynamics(
-                self.robot_id, self._link_index[link], lateralFriction=self.settings.gripper.finger_friction,
-                frictionAnchor=1, physicsClientId=c,
+                self.robot_id,
+                self._link_index[link],
+                lateralFriction=self.settings.gripper.finger_friction,
+                frictionAnchor=1,
+                physicsClientId=c,
             )
 
     def _load_fixture(self, name: str, urdf: str, position: Sequence[float], rpy: Sequence[float]) -> None:
         c = self._cid
         try:
             bid = pb.loadURDF(
-                self._urdf(urdf), list(position), pb.getQuaternionFromEuler(list(rpy)),
-                useFixedBase=True, flags=_URDF_FLAGS, physicsClientId=c,
+                self._urdf(urdf),
+                list(position),
+                pb.getQuaternionFromEuler(list(rpy)),
+                useFixedBase=True,
+                flags=_URDF_FLAGS,
+                physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load fixture {name!r} from {urdf}: {e}") from None
@@ -306,18 +320,22 @@ class World:
         c = self._cid
         side = marker_quad_size_m(self.settings.aruco.size_m)
         if side > PLATE_SIZE_M:
-            log.warning("ArUco quad (%.3f m with its white border) is wider than the plate (%.3f m)", side, PLATE_SIZE_M)
+            log.warning(
+                "ArUco quad (%.3f m with its white border) is wider than the plate (%.3f m)", side, PLATE_SIZE_M
+            )
         obj = marker_quad_obj(self.settings.aruco)  # generated once, in the cache directory
-        vs = pb.createVisualShape(
-            pb.GEOM_MESH, fileName=str(obj), meshScale=[side, side, 1.0], physicsClientId=c
-        )
+        vs = pb.createVisualShape(pb.GEOM_MESH, fileName=str(obj), meshScale=[side, side, 1.0], physicsClientId=c)
         if vs < 0:
             raise WorldError(f"could not load the marker quad {obj}")
         T = marker_pose_in_base(self.settings)
         quat = matrix_to_quat(T[:3, :3])
         self._marker_id = pb.createMultiBody(
-            baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=vs,
-            basePosition=T[:3, 3].tolist(), baseOrientation=quat.tolist(), physicsClientId=c,
+            baseMass=0,
+            baseCollisionShapeIndex=-1,
+            baseVisualShapeIndex=vs,
+            basePosition=T[:3, 3].tolist(),
+            baseOrientation=quat.tolist(),
+            physicsClientId=c,
         )
         self._bodies["aruco_marker"] = self._marker_id
 
@@ -326,8 +344,9 @@ class World:
         c = self._cid
         boxes = [pb.getAABB(self.robot_id, -1, physicsClientId=c)]
         for bid in self._fixtures.values():
-            for link in range(-1, pb.getNumJoints(bid, physicsClientId=c)):
-                boxes.append(pb.getAABB(bid, link, physicsClientId=c))
+            boxes.extend(
+                pb.getAABB(bid, link, physicsClientId=c) for link in range(-1, pb.getNumJoints(bid, physicsClientId=c))
+            )
         return boxes
 
     def _load_object(self, sp: Placement) -> None:
@@ -337,8 +356,11 @@ class World:
             R = R @ rpy_to_matrix(sp.template.lying_rpy)
         try:
             bid = pb.loadURDF(
-                self._urdf(sp.template.urdf), list(sp.position), matrix_to_quat(R).tolist(),
-                flags=_URDF_FLAGS, physicsClientId=c,
+                self._urdf(sp.template.urdf),
+                list(sp.position),
+                matrix_to_quat(R).tolist(),
+                flags=_URDF_FLAGS,
+                physicsClientId=c,
             )
         except pb.error as e:
             raise WorldError(f"cannot load object {sp.name!r} from {sp.template.urdf}: {e}") from None
@@ -353,7 +375,7 @@ class World:
         """Robot at home, motors holding home, gripper open: the state `reset()` returns to."""
         home = np.asarray(self.settings.robot.home, dtype=float)
         c = self._cid
-        for j, q in zip(self._arm, home):
+        for j, q in zip(self._arm, home, strict=True):
             pb.resetJointState(self.robot_id, j, float(q), 0.0, physicsClientId=c)
         half = self.settings.gripper.max_opening_m / 2.0
         for j in self._fingers:
@@ -395,7 +417,7 @@ class World:
                     if self._steps % every == 0:
                         fn(self)
 
-    def observe(self, fn: "Callable[[World], None]", *, every_s: float) -> None:
+    def observe(self, fn: Callable[[World], None], *, every_s: float) -> None:
         """Call `fn(world)` every `every_s` simulated seconds while stepping (recorders, GUI pacing)."""
         self._observers.append((max(1, int(round(every_s / self.dt))), fn))
 
@@ -420,20 +442,24 @@ class World:
                 pass
             self._cid = -1
 
-    def __enter__(self) -> "World":
+    def __enter__(self) -> World:
         return self
 
     def __exit__(self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None) -> None:
         self.close()
 
     def __del__(self) -> None:
-        try:
+        # A finaliser must not raise. Not contextlib.suppress: at interpreter shutdown this module's globals
+        # (`suppress` too) may already be None, while the builtin Exception is still there.
+        try:  # noqa: SIM105
             self.close()
-        except Exception:
+        except Exception:  # noqa: BLE001
             pass
 
     # ---- arm ------------------------------------------------------------------------------------
-    def set_joint_targets(self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray | None = None) -> None:
+    def set_joint_targets(
+        self, q: Sequence[float] | np.ndarray, qd: Sequence[float] | np.ndarray | None = None
+    ) -> None:
         """Joint position targets for the arm (held until changed), with optional velocity feed-forward.
 
         Force-limited by robot.max_joint_force, position gain robot.position_gain, velocity capped at
@@ -445,9 +471,16 @@ class World:
         r = self.settings.robot
         for k, j in enumerate(self._arm):
             pb.setJointMotorControl2(
-                self.robot_id, j, pb.POSITION_CONTROL, targetPosition=float(q[k]), targetVelocity=float(qd[k]),
-                force=float(r.max_joint_force[k]), positionGain=r.position_gain, velocityGain=1.0,
-                maxVelocity=r.max_joint_vel, physicsClientId=c,
+                self.robot_id,
+                j,
+                pb.POSITION_CONTROL,
+                targetPosition=float(q[k]),
+                targetVelocity=float(qd[k]),
+                force=float(r.max_joint_force[k]),
+                positionGain=r.position_gain,
+                velocityGain=1.0,
+                maxVelocity=r.max_joint_vel,
+                physicsClientId=c,
             )
 
     def reset_joints(self, q: Sequence[float] | np.ndarray) -> None:
@@ -477,8 +510,16 @@ class World:
         v = (g.speed_m_s if speed_m_s is None else float(speed_m_s)) / 2.0
         for j in self._fingers:
             pb.setJointMotorControl2(
-                self.robot_id, j, pb.POSITION_CONTROL, targetPosition=half, targetVelocity=0.0,
-                force=g.force_n, positionGain=0.2, velocityGain=1.0, maxVelocity=v, physicsClientId=c,
+                self.robot_id,
+                j,
+                pb.POSITION_CONTROL,
+                targetPosition=half,
+                targetVelocity=0.0,
+                force=g.force_n,
+                positionGain=0.2,
+                velocityGain=1.0,
+                maxVelocity=v,
+                physicsClientId=c,
             )
 
     def open_gripper(self) -> None:
@@ -571,8 +612,14 @@ class World:
         pos, quat = self.object_pose(body_id)
         z_axis = np.array(pb.getMatrixFromQuaternion(quat.tolist())).reshape(3, 3)[:, 2]
         return ObjectState(
-            id=body_id, name=sp.name, cls=sp.template.cls, color=sp.color, position=pos,
-            orientation_xyzw=quat, lying=bool(abs(z_axis[2]) < math.sqrt(0.5)), size=sp.template.size,
+            id=body_id,
+            name=sp.name,
+            cls=sp.template.cls,
+            color=sp.color,
+            position=pos,
+            orientation_xyzw=quat,
+            lying=bool(abs(z_axis[2]) < math.sqrt(0.5)),
+            size=sp.template.size,
         )
 
     def objects(self) -> list[ObjectState]:
@@ -588,7 +635,9 @@ class World:
             raise InvalidRequestError(f"{body_id} is not an object id; objects: {self.object_ids()}")
         pos = _as_vec(position, 3, "position")
         quat = _as_vec(orientation_xyzw, 4, "orientation_xyzw")
-        pb.resetBasePositionAndOrientation(body_id, pos.tolist(), (quat / np.linalg.norm(quat)).tolist(), physicsClientId=c)
+        pb.resetBasePositionAndOrientation(
+            body_id, pos.tolist(), (quat / np.linalg.norm(quat)).tolist(), physicsClientId=c
+        )
         pb.resetBaseVelocity(body_id, [0, 0, 0], [0, 0, 0], physicsClientId=c)
 
     def link_pose(self, link_name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -604,7 +653,7 @@ class World:
             pos, quat = s[4], s[5]
         return np.array(pos), np.array(quat)
 
-    def render(self, T_world_camera: np.ndarray, intrinsics: "Intrinsics", *, near_m: float, far_m: float) -> "RGBDFrame":
+    def render(self, T_world_camera: np.ndarray, intrinsics: Intrinsics, *, near_m: float, far_m: float) -> RGBDFrame:
         """Render an RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics.
 
         Depth is converted from PyBullet's non-linear z-buffer to metres along the optical axis.
@@ -649,8 +698,14 @@ class World:
     def _points(raw: Sequence[Any]) -> list[ContactPoint]:
         return [
             ContactPoint(
-                body_a=p[1], body_b=p[2], link_a=p[3], link_b=p[4], position_on_a=np.array(p[5]),
-                position_on_b=np.array(p[6]), normal_on_b=np.array(p[7]), distance=float(p[8]),
+                body_a=p[1],
+                body_b=p[2],
+                link_a=p[3],
+                link_b=p[4],
+                position_on_a=np.array(p[5]),
+                position_on_b=np.array(p[6]),
+                normal_on_b=np.array(p[7]),
+                distance=float(p[8]),
                 normal_force=float(p[9]),
             )
             for p in raw
@@ -673,7 +728,9 @@ class World:
         skip = set(ignore)
         return [p for p in self.contacts(self.robot_id) if p.body_b not in skip and p.body_b != self.robot_id]
 
-    def unexpected_contacts(self, *, ignore: Sequence[int] = (), fingers_may_touch_objects: bool = False) -> list[tuple[str, str]]:
+    def unexpected_contacts(
+        self, *, ignore: Sequence[int] = (), fingers_may_touch_objects: bool = False
+    ) -> list[tuple[str, str]]:
         """(robot link, body) names of the robot's contacts in the last step that a protective stop reacts to.
 
         Not counted: bodies in `ignore` (the held object), the robot with itself, the base link on what it

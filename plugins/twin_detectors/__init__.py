@@ -12,10 +12,14 @@ from twin.plugin import Registry, hookimpl
 @hookimpl
 def twin_register_detectors(registry: Registry) -> None:
     registry.add_detector(
-        "geometric", "twin_detectors.geometric:GeometricDetector",
-        description="clusters above the table, classified by size, shape and colour", extra="perception",
+        "geometric",
+        "twin_detectors.geometric:GeometricDetector",
+        description="clusters above the table, classified by size, shape and colour",
+        extra="perception",
     )
     registry.add_detector(
-        "oracle", "twin_detectors.oracle:OracleDetector",
-        description="ORACLE: ground-truth classes and masks (ablations only)", extra="perception",
+        "oracle",
+        "twin_detectors.oracle:OracleDetector",
+        description="ORACLE: ground-truth classes and masks (ablations only)",
+        extra="perception",
     )

@@ -82,7 +82,7 @@ class GeometricDetector:
         color_weight: float = Field(10.0, ge=0)
         max_distance: float = Field(6.0, gt=0)
 
-    def __init__(self, params: "GeometricDetector.Params | None", context: Any) -> None:
+    def __init__(self, params: GeometricDetector.Params | None, context: Any) -> None:
         self.params = params if params is not None else self.Params()
         self.settings = context.settings
         self.prototypes = self._prototypes()
@@ -131,7 +131,11 @@ class GeometricDetector:
             keep &= ~np.all((cloud.points >= np.array(lo)) & (cloud.points <= np.array(hi)), axis=1)
         t0 = time.perf_counter()
         clusters = cluster_points(
-            cloud.points[keep], cloud.rgb[keep], eps_m=p.eps_m, min_points=p.min_points, voxel_m=p.voxel_m,
+            cloud.points[keep],
+            cloud.rgb[keep],
+            eps_m=p.eps_m,
+            min_points=p.min_points,
+            voxel_m=p.voxel_m,
             pixels=cloud.pixels[keep],
         )
         t1 = time.perf_counter()
@@ -143,16 +147,32 @@ class GeometricDetector:
             top = float(np.percentile(cloud.table.distance(cl.points), 98))
             fp = footprint(cl.points)
             proto, d = self.classify(top, fp.length, fp.width, cl.mean_rgb)
-            feats = {"top_m": top, "length_m": fp.length, "width_m": fp.width, "mean_rgb": cl.mean_rgb.tolist(), "distance": d}
+            feats = {
+                "top_m": top,
+                "length_m": fp.length,
+                "width_m": fp.width,
+                "mean_rgb": cl.mean_rgb.tolist(),
+                "distance": d,
+            }
             if d > p.max_distance:
-                log.debug("geometric: rejected a cluster of %d points %s (nearest %s at %.1f)", cl.n_points, feats, proto.cls, d)
+                log.debug(
+                    "geometric: rejected a cluster of %d points %s (nearest %s at %.1f)",
+                    cl.n_points,
+                    feats,
+                    proto.cls,
+                    d,
+                )
                 continue
             px = np.asarray(cl.pixels)
             v, u = px // W, px % W
             out.append(
                 Detection(
-                    proto.cls, proto.color, float(math.exp(-0.5 * (d / 3.0) ** 2)), px,
-                    (int(u.min()), int(v.min()), int(u.max()), int(v.max())), feats,
+                    proto.cls,
+                    proto.color,
+                    float(math.exp(-0.5 * (d / 3.0) ** 2)),
+                    px,
+                    (int(u.min()), int(v.min()), int(u.max()), int(v.max())),
+                    feats,
                 )
             )
         self.last_timings_s = {"dbscan": t1 - t0, "classify": time.perf_counter() - t1}

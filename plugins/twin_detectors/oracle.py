@@ -31,7 +31,7 @@ class OracleDetector:
         margin_m: float = Field(0.006, ge=0)
         min_pixels: int = Field(20, ge=1)
 
-    def __init__(self, params: "OracleDetector.Params | None", context: Any) -> None:
+    def __init__(self, params: OracleDetector.Params | None, context: Any) -> None:
         self.params = params if params is not None else self.Params()
         self.settings = context.settings
 
@@ -62,7 +62,11 @@ class OracleDetector:
             v, u = px // W, px % W
             out.append(
                 Detection(
-                    obj.cls, obj.color, 1.0, px, (int(u.min()), int(v.min()), int(u.max()), int(v.max())),
+                    obj.cls,
+                    obj.color,
+                    1.0,
+                    px,
+                    (int(u.min()), int(v.min()), int(u.max()), int(v.max())),
                     {"oracle": True, "name": getattr(obj, "name", None)},
                 )
             )

@@ -15,4 +15,4 @@ from twin.collision.rules import CollisionRules
 from twin.collision.scene import DistanceResult, FixtureSpec, PathCheck, PlanningScene
 from twin.urdf_model import read_fixture_shapes
 
-__all__ = ["PlanningScene", "DistanceResult", "PathCheck", "FixtureSpec", "CollisionRules", "read_fixture_shapes"]
+__all__ = ["CollisionRules", "DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "read_fixture_shapes"]

@@ -20,18 +20,18 @@ from twin.errors import ConfigError
 from twin.urdf_model import RobotModel, Shape
 
 __all__ = [
-    "FAR",
     "COLLISION_REQUEST",
     "DISTANCE_REQUEST",
-    "fcl_geometry",
-    "bounding_radius",
-    "fcl_transform",
-    "primitive_shapes",
+    "FAR",
     "BufferView",
     "CollideFlag",
-    "collide_callback",
     "DistanceAccumulator",
+    "bounding_radius",
+    "collide_callback",
     "distance_callback",
+    "fcl_geometry",
+    "fcl_transform",
+    "primitive_shapes",
 ]
 
 FAR = 1e9  # "no distance measured yet": larger than any distance in a robot cell, m

@@ -34,11 +34,11 @@ __all__ = [
     "CONTACT_TOL_M",
     "HELD",
     "CollisionRules",
+    "contact_pairs",
+    "gripper_links",
     "gripper_stroke_m",
     "rigid_body_links",
-    "gripper_links",
     "structural_pairs",
-    "contact_pairs",
 ]
 
 log = logging.getLogger("twin")
@@ -112,7 +112,10 @@ def contact_pairs(
         L = model.link_pose_array(qs, finger_opening=w)
         for Lq in L:
             poses = [Lq[model.link_index[s.link]] @ s.origin for s in shapes]
-            objs = [fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl_transform(T)) for s, T in zip(shapes, poses)]
+            objs = [
+                fcl.CollisionObject(fcl_geometry(s.kind, s.size), fcl_transform(T))
+                for s, T in zip(shapes, poses, strict=True)
+            ]
             for i, k in itertools.combinations(range(len(shapes)), 2):
                 a, b = shapes[i].link, shapes[k].link
                 if a == b or (a, b) in done:
@@ -143,7 +146,7 @@ class CollisionRules:
         tcp_link: str,
         reference_configs: Iterable[Sequence[float]] = (),
         extra_excluded_pairs: Iterable[Pair] = (),
-    ) -> "CollisionRules":
+    ) -> CollisionRules:
         """Rules 1-4 for `model` (module docstring); the all-zeros posture is always a reference.
         Raises ConfigError when an extra pair names a link the model does not have."""
         refs = [np.zeros(len(model.arm_joints))] + [np.asarray(r, dtype=float) for r in reference_configs]

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import fcl
 import numpy as np
+from numpy.typing import ArrayLike
 
 from twin.collision.geometry import COLLISION_REQUEST as _CREQ
 from twin.collision.geometry import DISTANCE_REQUEST as _DREQ
@@ -53,7 +54,7 @@ from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 if TYPE_CHECKING:
     from twin.config import Settings
 
-__all__ = ["PlanningScene", "DistanceResult", "PathCheck", "FixtureSpec"]
+__all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene"]
 
 log = logging.getLogger("twin")
 
@@ -191,7 +192,7 @@ class PlanningScene:
         self._boxes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._fixture_names: set[str] = set()
 
-    def padded(self, extra_m: float) -> "PlanningScene":
+    def padded(self, extra_m: float) -> PlanningScene:
         """A copy of this scene whose environment (fixtures and boxes) is inflated by `extra_m` more on
         each side (`padding_m` becomes `padding_m + extra_m`); robot, exclusions, held object and gripper
         opening are the same. The original is not changed; `padded(0.0)` is an equal copy.
@@ -224,7 +225,7 @@ class PlanningScene:
         return new
 
     @classmethod
-    def from_settings(cls, settings: "Settings") -> "PlanningScene":
+    def from_settings(cls, settings: Settings) -> PlanningScene:
         """Robot from settings.robot.urdf (gripper fully open), fixtures from settings.world.fixtures,
         padding from settings.collision.padding_m; the home posture is an exclusion reference.
 
@@ -312,7 +313,11 @@ class PlanningScene:
         # transfer buffer: per object a (4, 3) block = [R^T ; t], i.e. R column-major then t (see _Vec)
         self._buf = np.zeros((len(objects), 4, 3))
         self._t = self._buf[:, 3]  # translations = bounding-sphere centres
-        self._sinks = [(_Vec(memoryview(self._buf[i, :3])), _Vec(memoryview(self._buf[i, 3]))) for i in self._moving]
+        # numpy's stubs declare ndarray.__buffer__ only for Python >= 3.12; the buffer protocol is there on 3.11
+        self._sinks = [
+            (_Vec(memoryview(self._buf[i, :3])), _Vec(memoryview(self._buf[i, 3])))  # type: ignore[arg-type]
+            for i in self._moving
+        ]
         self._fast = self._probe_fast_path()
         self._moving_manager = fcl.DynamicAABBTreeCollisionManager()
         self._moving_manager.registerObjects(self._moving_objects)
@@ -353,7 +358,7 @@ class PlanningScene:
             o.setRotation(self._sinks[0][0])
             o.setTranslation(self._sinks[0][1])
             ok = bool(np.allclose(o.getRotation(), T[:3, :3]) and np.allclose(o.getTranslation(), T[:3, 3]))
-        except Exception:  # pragma: no cover - depends on the python-fcl version
+        except Exception:  # noqa: BLE001  # pragma: no cover - depends on the python-fcl version
             ok = False
         self._buf[i] = saved
         if not ok:  # pragma: no cover
@@ -424,11 +429,11 @@ class PlanningScene:
     def _push(self) -> None:
         """Move the moving FCL objects to the poses in the transfer buffer and refit their tree."""
         if self._fast:
-            for o, (rv, tv) in zip(self._moving_objects, self._sinks):
+            for o, (rv, tv) in zip(self._moving_objects, self._sinks, strict=True):
                 o.setRotation(rv)
                 o.setTranslation(tv)
         else:  # pragma: no cover
-            for i, o in zip(self._moving, self._moving_objects):
+            for i, o in zip(self._moving, self._moving_objects, strict=True):
                 o.setRotation(np.ascontiguousarray(self._buf[i, :3].T))
                 o.setTranslation(self._buf[i, 3].copy())
         self._moving_manager.update()
@@ -631,7 +636,7 @@ class PlanningScene:
         """Names of the environment objects (fixtures and boxes), in insertion order."""
         return list(self._env_objects)
 
-    def add_box(self, name: str, size: Sequence[float], pose: np.ndarray) -> None:
+    def add_box(self, name: str, size: ArrayLike, pose: np.ndarray) -> None:
         """Add (or replace) an obstacle box of full extents `size` (3,) at `pose` (4, 4) in the world
         frame; fixtures cannot be replaced this way (remove them first)."""
         if not isinstance(name, str) or not name:
@@ -645,7 +650,7 @@ class PlanningScene:
         self._add_env(name, [("box", sz, T)])
         self._boxes[name] = (np.array(sz, dtype=float), T.copy())
 
-    def add_box_bounds(self, name: str, lo: Sequence[float], hi: Sequence[float]) -> None:
+    def add_box_bounds(self, name: str, lo: ArrayLike, hi: ArrayLike) -> None:
         """Add (or replace) an axis-aligned obstacle box between corners lo (3,) < hi (3,), world frame."""
         a, b = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
         if a.shape != (3,) or b.shape != (3,) or not (np.isfinite(a).all() and np.isfinite(b).all()):
@@ -656,7 +661,7 @@ class PlanningScene:
         T[:3, 3] = 0.5 * (a + b)
         self.add_box(name, b - a, T)
 
-    def add_unknown_fixtures(self, settings: "Settings") -> None:
+    def add_unknown_fixtures(self, settings: Settings) -> None:
         """Add the fixtures marked `known: false` as a perfect detector would report them: their box
         shapes at their true poses (for planner tests and benchmarks that leave perception out)."""
         for f in settings.world.fixtures:
@@ -664,7 +669,9 @@ class PlanningScene:
                 continue
             for shape in read_fixture_shapes(settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy)):
                 if shape.kind != "box":
-                    raise InvalidRequestError(f"fixture {f.name!r}: only box shapes can stand in for a perceived obstacle")
+                    raise InvalidRequestError(
+                        f"fixture {f.name!r}: only box shapes can stand in for a perceived obstacle"
+                    )
                 self.add_box(f.name, shape.size, shape.pose)
 
     def remove(self, name: str) -> None:
@@ -706,7 +713,7 @@ class PlanningScene:
         """Name of the held object, or None."""
         return None if self._attached is None else self._attached[0]
 
-    def attach_box(self, name: str, size: Sequence[float], T_tcp_object: np.ndarray) -> None:
+    def attach_box(self, name: str, size: ArrayLike, T_tcp_object: np.ndarray) -> None:
         """Hold a box of full extents `size` (3,) at `T_tcp_object` (4, 4, object in the tcp frame): it moves
         with the tcp and is checked against the environment and the arm, not the gripper holding it."""
         if self._attached is not None:
@@ -752,7 +759,7 @@ def _check_padding(padding_m: float) -> float:
     return p
 
 
-def _check_size(size: Sequence[float]) -> tuple[float, float, float]:
+def _check_size(size: ArrayLike) -> tuple[float, float, float]:
     sz = np.asarray(size, dtype=float)
     if sz.shape != (3,) or not np.isfinite(sz).all() or np.any(sz <= 0):
         raise InvalidRequestError(f"box size must be 3 positive numbers, got {size!r}")
@@ -764,8 +771,10 @@ def _check_pose(pose: np.ndarray) -> np.ndarray:
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise InvalidRequestError(f"pose must be a finite (4, 4) transform, got shape {T.shape}")
     R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1.0) > 1e-6 or not np.allclose(
-        T[3], [0, 0, 0, 1]
+    if (
+        not np.allclose(R.T @ R, np.eye(3), atol=1e-6)
+        or abs(np.linalg.det(R) - 1.0) > 1e-6
+        or not np.allclose(T[3], [0, 0, 0, 1])
     ):
         raise InvalidRequestError("pose must be rigid: orthonormal rotation with det +1 and last row 0 0 0 1")
     return T

@@ -67,7 +67,9 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("goal_error_m", "m", "TCP position error after execution and settling"),
     MetricDef("goal_error_rad", "rad", "max joint error to the planned final posture after settling"),
     MetricDef("solves", "", "solver calls of a receding-horizon planner", ""),
-    MetricDef("fallback_steps", "", "receding-horizon steps that followed an earlier plan or guess because a solve failed"),
+    MetricDef(
+        "fallback_steps", "", "receding-horizon steps that followed an earlier plan or guess because a solve failed"
+    ),
     MetricDef("task_success_rate", "", "objects placed / objects (task runs)", "higher"),
     MetricDef("cycle_time_s", "s", "mean simulated time per placed object (task runs)"),
     MetricDef("sim_time_s", "s", "simulated time of the whole task run"),
@@ -93,11 +95,11 @@ def finite_or_none(x: Any) -> float | None:
 
 
 def empty_metrics() -> dict[str, Any]:
-    return {k: None for k in METRIC_KEYS}
+    return dict.fromkeys(METRIC_KEYS)
 
 
 def empty_timing() -> dict[str, Any]:
-    return {k: None for k in TIMING_KEYS}
+    return dict.fromkeys(TIMING_KEYS)
 
 
 def _fine(traj: Trajectory, dt: float) -> Trajectory:

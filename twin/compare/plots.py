@@ -26,10 +26,10 @@ BOX_PLOTS: tuple[tuple[str, str, str, bool], ...] = (
 
 def _pyplot() -> Any:
     try:
-        import matplotlib
+        import matplotlib as mpl
     except ImportError as e:
         raise DependencyMissing("plots need matplotlib; install it with `pip install 'twin[plots]'`") from e
-    matplotlib.use("Agg", force=True)
+    mpl.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
     return plt
@@ -59,7 +59,7 @@ def write_plots(
             data = [[v for r in rows if r["planner"] == p and (v := _value(r, key)) is not None] for p in order]
             fig, ax = plt.subplots(figsize=(width, 4.5))
             if any(data):
-                ax.boxplot([d if d else [float("nan")] for d in data], showfliers=True)
+                ax.boxplot([d or [float("nan")] for d in data], showfliers=True)
                 ax.set_xticks(range(1, len(order) + 1), order, rotation=20, ha="right")
                 if log_scale and all(v > 0 for d in data for v in d):
                     ax.set_yscale("log")

@@ -99,10 +99,14 @@ def _value(row: dict[str, Any], key: str) -> float | None:
 
 def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> SummaryRow:
     stats = {d.key: Stat.of([v for r in rows if (v := _value(r, d.key)) is not None]) for d in _DEFS}
-    with_pair = [(v, r["clearance_pair"]) for r in rows if (v := _value(r, "min_clearance_m")) is not None and r.get("clearance_pair")]
+    with_pair = [
+        (v, r["clearance_pair"])
+        for r in rows
+        if (v := _value(r, "min_clearance_m")) is not None and r.get("clearance_pair")
+    ]
     closest = min(with_pair, key=lambda vp: vp[0]) if with_pair else (None, None)
     counts = Counter(p for _, p in with_pair)
-    common, n_common = (counts.most_common(1)[0] if counts else (None, 0))
+    common, n_common = counts.most_common(1)[0] if counts else (None, 0)
     known = [r["straight_free"] for r in rows if r.get("straight_free") is not None]
     return SummaryRow(
         planner=planner,
@@ -165,15 +169,29 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
     try:
         with open(csv_path, "w", newline="", encoding="utf-8") as f:
             w = csv.writer(f)
-            w.writerow(["planner", "scenario", "runs", "successes", "success_rate", "errors"]
-                       + [f"{k}_{s}" for k in keys for s in ("median", "p95")]
-                       + ["closest_pair", "common_closest_pair", "straight_free_rate"])
+            w.writerow(
+                ["planner", "scenario", "runs", "successes", "success_rate", "errors"]
+                + [f"{k}_{s}" for k in keys for s in ("median", "p95")]
+                + ["closest_pair", "common_closest_pair", "straight_free_rate"]
+            )
             for r in summary.overall + summary.by_scenario:
                 rate = "" if r.success_rate is None else f"{r.success_rate:.6g}"
                 stats = ["" if v is None else repr(v) for k in keys for v in (r.stats[k].median, r.stats[k].p95)]
                 free = "" if r.straight_free_rate is None else f"{r.straight_free_rate:.6g}"
-                w.writerow([r.planner, r.scenario, r.runs, r.successes, rate, r.errors, *stats,
-                            r.closest_pair or "", r.common_pair or "", free])
+                w.writerow(
+                    [
+                        r.planner,
+                        r.scenario,
+                        r.runs,
+                        r.successes,
+                        rate,
+                        r.errors,
+                        *stats,
+                        r.closest_pair or "",
+                        r.common_pair or "",
+                        free,
+                    ]
+                )
         md_path.write_text(_markdown(summary), encoding="utf-8")
     except OSError as e:
         raise ConfigError(f"cannot write the summary in {out}: {e.strerror}") from None
@@ -198,7 +216,10 @@ def _markdown(summary: Summary) -> str:
         lines.append(f"| {k} | {d.unit} | " + " | ".join(cells) + " |")
     if any(r.closest_pair for r in summary.overall):
         lines += ["", "## Closest approach to the cell", ""]
-        lines += ["| planner | min clearance (m) | closest pair there | closest pair most often |", "|---|---:|---|---|"]
+        lines += [
+            "| planner | min clearance (m) | closest pair there | closest pair most often |",
+            "|---|---:|---|---|",
+        ]
         for r in summary.overall:
             st = r.stats["min_clearance_m"]
             low = _fmt(r.min_clearance_m, "m")

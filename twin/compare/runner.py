@@ -172,12 +172,25 @@ def _draw_first_queries(spec: CompareSpec, source: str) -> None:
         if not isinstance(sc, QueryScenario) or sc.random is None:
             continue
         seed = spec.seeds_for(sc)[0]
-        task = RunTask(run_id="", planner_id="", planner={}, scenario=sc.name, case="", kind="query", seed=seed,
-                       config=sc.scene, overrides=tuple(sc.overrides), query_index=0)
+        task = RunTask(
+            run_id="",
+            planner_id="",
+            planner={},
+            scenario=sc.name,
+            case="",
+            kind="query",
+            seed=seed,
+            config=sc.scene,
+            overrides=tuple(sc.overrides),
+            query_index=0,
+        )
         cell = cell_for(sc.scene, tuple(sc.overrides), sc.unknown_fixtures)
         try:
             sample_query(
-                sc.random.model_dump(), np.random.default_rng(task.random_seed()), scene=cell.scene, kin=cell.kin,
+                sc.random.model_dump(),
+                np.random.default_rng(task.random_seed()),
+                scene=cell.scene,
+                kin=cell.kin,
                 home=np.asarray(cell.settings.robot.home, dtype=float),
                 resolution_rad=cell.settings.collision.check_resolution_rad,
             )
@@ -349,13 +362,20 @@ def _run_local(
                         w.process.join(5)
                         code = w.process.exitcode
                         log.warning("run %s: its worker process died (exit code %s)", task.run_id, code)
-                        row = error_row(task, f"WorkerDied: the worker process died running this (exit code {code})",
-                                        wall_time_s=time.monotonic() - w.started)
+                        row = error_row(
+                            task,
+                            f"WorkerDied: the worker process died running this (exit code {code})",
+                            wall_time_s=time.monotonic() - w.started,
+                        )
                         w = replace(w)
                 elif time.monotonic() - w.started >= task.timeout_s:
                     log.warning("run %s: no result after %.0f s; stopping it", task.run_id, task.timeout_s)
-                    row = error_row(task, f"RunTimeout: no result after {task.timeout_s:g} s (the run was stopped; "
-                                          "a planner that ignores its time limit?)", wall_time_s=task.timeout_s)
+                    row = error_row(
+                        task,
+                        f"RunTimeout: no result after {task.timeout_s:g} s (the run was stopped; "
+                        "a planner that ignores its time limit?)",
+                        wall_time_s=task.timeout_s,
+                    )
                     w = replace(w)
                 else:
                     continue
@@ -364,7 +384,7 @@ def _run_local(
     finally:
         for w in pool:
             if w.task is None and w.process.is_alive():
-                try:
+                try:  # noqa: SIM105 - not contextlib.suppress: a generator's finally may run at interpreter shutdown
                     w.conn.send(None)
                 except OSError:
                     pass
@@ -498,7 +518,9 @@ def run_comparison(
     if workers is not None and workers < 0:
         raise ConfigError(f"workers must be >= 0, got {workers}")
     if force and not resume:
-        raise ConfigError("--force goes with --resume (it accepts a changed config); to start over, choose another --out")
+        raise ConfigError(
+            "--force goes with --resume (it accepts a changed config); to start over, choose another --out"
+        )
     check_spec(spec)
     out = Path(out_dir) if out_dir is not None else Path("out") / spec.name
     results = out / RESULTS_FILE
@@ -543,8 +565,16 @@ def run_comparison(
         log.info("%d runs skipped, e.g. %s", len(skipped), skipped[0][1])
     n_workers = _default_workers() if workers is None else workers
     n_workers = min(n_workers, len(todo)) if todo else 0
-    log.info("compare %s: %d runs, %d finished before (%d errors to rerun), %d to run on %s with %d workers",
-             spec.name, len(runs), len(finished), retried, len(todo), backend, n_workers)
+    log.info(
+        "compare %s: %d runs, %d finished before (%d errors to rerun), %d to run on %s with %d workers",
+        spec.name,
+        len(runs),
+        len(finished),
+        retried,
+        len(todo),
+        backend,
+        n_workers,
+    )
 
     new_rows: list[dict[str, Any]] = []
     if todo:
@@ -583,6 +613,13 @@ def run_comparison(
         except DependencyMissing as e:
             log.warning("no plots: %s", e)
     return CompareResult(
-        out_dir=out, rows=rows, ran=len(new_rows), resumed=len(finished), skipped=skipped, summary=summary,
-        files=files, wall_time_s=time.perf_counter() - t_start, retried=retried,
+        out_dir=out,
+        rows=rows,
+        ran=len(new_rows),
+        resumed=len(finished),
+        skipped=skipped,
+        summary=summary,
+        files=files,
+        wall_time_s=time.perf_counter() - t_start,
+        retried=retried,
     )

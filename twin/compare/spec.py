@@ -412,25 +412,45 @@ def expand_runs(spec: CompareSpec, defs: dict[str, Any] | None = None) -> list[R
                 case = f"{sc.name}#{i}" if query_case else sc.name
                 case_def = _case_definition(defs["scenarios"][sc.name], i if query_case else None)
                 for p in spec.planners:
-                    rid = run_id(p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed})
+                    rid = run_id(
+                        p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed}
+                    )
                     common: dict[str, Any] = {
-                        "run_id": rid, "planner_id": p.id, "planner": p.block().model_dump(),
-                        "scenario": sc.name, "case": case, "seed": seed, "overrides": tuple(sc.overrides),
+                        "run_id": rid,
+                        "planner_id": p.id,
+                        "planner": p.block().model_dump(),
+                        "scenario": sc.name,
+                        "case": case,
+                        "seed": seed,
+                        "overrides": tuple(sc.overrides),
                     }
                     if isinstance(sc, QueryScenario):
                         limit = sc.time_limit_s or spec.time_limit_s
-                        out.append(RunTask(
-                            kind="query", config=sc.scene, query_index=i,
-                            query=sc.queries[i].model_dump() if sc.queries else None,
-                            random=sc.random.model_dump() if sc.random is not None else None,
-                            time_limit_s=limit, execute=spec.execute,
-                            settle_s=spec.settle_s, jerk_dt_s=spec.jerk_dt_s,
-                            unknown_fixtures=sc.unknown_fixtures,
-                            timeout_s=spec.run_timeout_s or default_run_timeout("query", limit), **common,
-                        ))
+                        out.append(
+                            RunTask(
+                                kind="query",
+                                config=sc.scene,
+                                query_index=i,
+                                query=sc.queries[i].model_dump() if sc.queries else None,
+                                random=sc.random.model_dump() if sc.random is not None else None,
+                                time_limit_s=limit,
+                                execute=spec.execute,
+                                settle_s=spec.settle_s,
+                                jerk_dt_s=spec.jerk_dt_s,
+                                unknown_fixtures=sc.unknown_fixtures,
+                                timeout_s=spec.run_timeout_s or default_run_timeout("query", limit),
+                                **common,
+                            )
+                        )
                     else:
-                        out.append(RunTask(kind="task", config=sc.task,
-                                           timeout_s=spec.run_timeout_s or default_run_timeout("task", 0.0), **common))
+                        out.append(
+                            RunTask(
+                                kind="task",
+                                config=sc.task,
+                                timeout_s=spec.run_timeout_s or default_run_timeout("task", 0.0),
+                                **common,
+                            )
+                        )
     return out
 
 

@@ -38,7 +38,16 @@ if TYPE_CHECKING:
     from twin.types import MotionRequest
     from twin.world import World
 
-__all__ = ["TASKS_UNAVAILABLE", "cell_for", "error_row", "execute_run", "quiet_imports", "sample_query", "straight_free", "worker_init"]
+__all__ = [
+    "TASKS_UNAVAILABLE",
+    "cell_for",
+    "error_row",
+    "execute_run",
+    "quiet_imports",
+    "sample_query",
+    "straight_free",
+    "worker_init",
+]
 
 log = logging.getLogger("twin")
 
@@ -206,7 +215,12 @@ def sample_query(
             f"motion; move the regions (blocked: start and goal on either side of an obstacle) or use straight: any"
         )
     out: dict[str, Any] = {
-        "start": start[0].tolist(), "goal": None, "goal_pose": None, "frame": "tcp", "orientation_free": False, "position_tolerance_m": None,
+        "start": start[0].tolist(),
+        "goal": None,
+        "goal_pose": None,
+        "frame": "tcp",
+        "orientation_free": False,
+        "position_tolerance_m": None,
     }
     if random["goal"] == "joint":
         out["goal"] = goal[0].tolist()
@@ -247,14 +261,19 @@ def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> Motion
         pose = Pose.from_xyz_rpy((x, y, z), (r, p, yw))
         if query.get("orientation_free"):
             tol = query.get("position_tolerance_m") or 0.03
-            goal = PoseGoal(pose, frame=query.get("frame", "tcp"), position_tolerance_m=tol, orientation_tolerance_rad=None)
+            goal = PoseGoal(
+                pose, frame=query.get("frame", "tcp"), position_tolerance_m=tol, orientation_tolerance_rad=None
+            )
         elif query.get("position_tolerance_m"):
             goal = PoseGoal(pose, frame=query.get("frame", "tcp"), position_tolerance_m=query["position_tolerance_m"])
         else:
             goal = PoseGoal(pose, frame=query.get("frame", "tcp"))
     return MotionRequest(
-        start=query["start"], goal=goal, limits=limits_from_settings(settings),
-        time_limit_s=task.time_limit_s, seed=task.seed,
+        start=query["start"],
+        goal=goal,
+        limits=limits_from_settings(settings),
+        time_limit_s=task.time_limit_s,
+        seed=task.seed,
     )
 
 
@@ -271,7 +290,11 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
         rng = np.random.default_rng(task.random_seed())
         home = np.asarray(settings.robot.home, dtype=float)
         query = sample_query(
-            task.random, rng, scene=cell.scene, kin=cell.kin, home=home,
+            task.random,
+            rng,
+            scene=cell.scene,
+            kin=cell.kin,
+            home=home,
             resolution_rad=settings.collision.check_resolution_rad,
         )
     row["query"] = query

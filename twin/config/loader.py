@@ -90,7 +90,9 @@ def _check_tree(data: Any, source: str) -> None:
         node, path = stack.pop()
         nodes += 1
         if nodes > _MAX_NODES:
-            raise ConfigError(f"{source}: the config has more than {_MAX_NODES} values (YAML aliases count each time they are used)")
+            raise ConfigError(
+                f"{source}: the config has more than {_MAX_NODES} values (YAML aliases count each time they are used)"
+            )
         if len(path) > _MAX_DEPTH:
             raise ConfigError(f"{source}: {_dotted(path[:_MAX_DEPTH])}...: nested deeper than {_MAX_DEPTH} levels")
         if isinstance(node, bool):
@@ -98,7 +100,10 @@ def _check_tree(data: Any, source: str) -> None:
         if isinstance(node, float) and not math.isfinite(node):
             raise ConfigError(f"{source}: {_dotted(path) or '(top level)'}: must be a finite number, got {node}")
         if isinstance(node, int) and abs(node) > _MAX_INT:
-            raise ConfigError(f"{source}: {_dotted(path) or '(top level)'}: integer {short_repr(node, 30)} is too large (at most 2**63-1)")
+            raise ConfigError(
+                f"{source}: {_dotted(path) or '(top level)'}: "
+                f"integer {short_repr(node, 30)} is too large (at most 2**63-1)"
+            )
         if isinstance(node, dict):
             for k in node:
                 if not isinstance(k, str):  # every mapping of a config is keyed by names (YAML allows `1:`, `null:`)
@@ -121,7 +126,9 @@ def _yaml_error(path: Path, e: yaml.YAMLError, text: str) -> ConfigError:
     if isinstance(e, yaml.reader.ReaderError):  # a control character; no mark, a position in the text
         pos = int(e.position)
         line, col = text.count("\n", 0, pos) + 1, pos - (text.rfind("\n", 0, pos) + 1) + 1
-        problem = f"unacceptable character #x{e.character:04x} ({e.reason})" if isinstance(e.character, int) else e.reason
+        problem = (
+            f"unacceptable character #x{e.character:04x} ({e.reason})" if isinstance(e.character, int) else e.reason
+        )
     context = getattr(e, "context", None)
     what = f"{problem} ({context})" if problem and context else problem or context or e
     where = f" at line {line}, column {col}" if line is not None else ""
@@ -139,7 +146,9 @@ def _read_text(path: Path) -> str:
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); save it as UTF-8") from None
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); save it as UTF-8"
+        ) from None
 
 
 def _is_config_name(ref: str) -> bool:
@@ -174,10 +183,13 @@ def find_config(ref: str | Path, *, relative_to: str | Path | None = None) -> Pa
         stem = text[: -len(Path(text).suffix)] if Path(text).suffix else text
         close = difflib.get_close_matches(stem, names, n=1, cutoff=0.6)
         hint = f" Did you mean {close[0]!r}?" if close else ""
-        raise ConfigError(one_line(
-            f"config file not found: {short_repr(text, 100)} is neither a file (looked at {where}) nor the name of a "
-            f"config twin ships.{hint} Shipped configs: {', '.join(names) or '(none)'}", 600
-        ))
+        raise ConfigError(
+            one_line(
+                f"config file not found: {short_repr(text, 100)} is neither a file (looked at {where}) "
+                f"nor the name of a config twin ships.{hint} Shipped configs: {', '.join(names) or '(none)'}",
+                600,
+            )
+        )
     raise ConfigError(one_line(f"config file not found: {where}", 600))
 
 
@@ -251,7 +263,9 @@ def apply_override(data: dict[str, Any], override: str) -> None:
         if nxt is None:
             nxt = node[p] = {}
         if not isinstance(nxt, dict):
-            raise ConfigError(f"override {short_repr(override)}: {'.'.join(parts[: i + 1])!r} is a value, not a section")
+            raise ConfigError(
+                f"override {short_repr(override)}: {'.'.join(parts[: i + 1])!r} is a value, not a section"
+            )
         node = nxt
     node[parts[-1]] = value
 
@@ -271,8 +285,12 @@ def _format_validation(source: str, err: ValidationError) -> str:
 
 # cv2.aruco's predefined dictionaries that are not named DICT_<n>X<n>_<markers>, and their marker counts
 _ARUCO_SIZES = {
-    "DICT_ARUCO_ORIGINAL": 1024, "DICT_APRILTAG_16H5": 30, "DICT_APRILTAG_25H9": 35, "DICT_APRILTAG_36H10": 2320,
-    "DICT_APRILTAG_36H11": 587, "DICT_ARUCO_MIP_36H12": 250,
+    "DICT_ARUCO_ORIGINAL": 1024,
+    "DICT_APRILTAG_16H5": 30,
+    "DICT_APRILTAG_25H9": 35,
+    "DICT_APRILTAG_36H10": 2320,
+    "DICT_APRILTAG_36H11": 587,
+    "DICT_ARUCO_MIP_36H12": 250,
 }
 
 
@@ -312,7 +330,9 @@ def settings_from_dict(
 def _check_files(settings: Settings, source: str) -> None:
     """Every URDF the config names must be a regular file: a directory, a device (/dev/zero never ends)
     or a missing file would otherwise fail deep inside the scene or the world, or not at all."""
-    named = [("robot.urdf", settings.robot.urdf)] + [(f"world.fixtures.{i}.urdf", f.urdf) for i, f in enumerate(settings.world.fixtures)]
+    named = [("robot.urdf", settings.robot.urdf)] + [
+        (f"world.fixtures.{i}.urdf", f.urdf) for i, f in enumerate(settings.world.fixtures)
+    ]
     for where, name in named:
         try:
             resolved = settings.resolve(name)
@@ -321,7 +341,9 @@ def _check_files(settings: Settings, source: str) -> None:
             raise ConfigError(f"{source}: {where}: unusable path {short_repr(name)} ({one_line(e)})") from None
         if not ok:
             what = "is not a file" if resolved.exists() else "not found"
-            raise ConfigError(f"{source}: {where}: {short_repr(name)} {what} (resolved to {short_repr(str(resolved), 200)})")
+            raise ConfigError(
+                f"{source}: {where}: {short_repr(name)} {what} (resolved to {short_repr(str(resolved), 200)})"
+            )
 
 
 def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:

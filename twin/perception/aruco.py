@@ -31,7 +31,7 @@ from twin.camera import Intrinsics, RGBDFrame
 from twin.config import ArucoSettings, Settings
 from twin.errors import TwinError
 
-__all__ = ["MarkerNotFound", "MarkerPose", "Calibration", "detect_marker", "calibrate", "transform_error"]
+__all__ = ["Calibration", "MarkerNotFound", "MarkerPose", "calibrate", "detect_marker", "transform_error"]
 
 log = logging.getLogger("twin")
 
@@ -196,7 +196,11 @@ def _plane_constrained_pose(
 
 
 def calibrate(
-    frame: RGBDFrame, settings: Settings, *, method: Literal["pnp+plane", "pnp"] | None = None, refine: bool | None = None
+    frame: RGBDFrame,
+    settings: Settings,
+    *,
+    method: Literal["pnp+plane", "pnp"] | None = None,
+    refine: bool | None = None,
 ) -> Calibration:
     """T_base_camera from the base marker: T_base_marker (cell layout) @ inv(T_camera_marker).
 

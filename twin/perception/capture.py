@@ -26,7 +26,7 @@ from twin.perception.noise import apply_sensor_noise
 if TYPE_CHECKING:
     from twin.world import World
 
-__all__ = ["Capture", "capture_frame", "wrist_camera_offset", "noise_rng"]
+__all__ = ["Capture", "capture_frame", "noise_rng", "wrist_camera_offset"]
 
 log = logging.getLogger("twin")
 
@@ -62,7 +62,7 @@ def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
 
 
 def capture_frame(
-    world: "World",
+    world: World,
     settings: Settings,
     *,
     pose: Literal["capture", "calibration"] = "capture",

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["color_distance", "classify_color", "palette"]
+__all__ = ["classify_color", "color_distance", "palette"]
 
 _BRIGHTNESS_WEIGHT = 0.5
 _FLOOR = 0.02  # keeps the log ratio finite for black

@@ -20,7 +20,7 @@ from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
 if TYPE_CHECKING:
     from twin.config import RobocupPerceptionSettings
 
-__all__ = ["Detection", "Detector", "needs_ground_truth", "SceneCloud", "scene_cloud", "CLASSES", "detection_label"]
+__all__ = ["CLASSES", "Detection", "Detector", "SceneCloud", "detection_label", "needs_ground_truth", "scene_cloud"]
 
 CLASSES = ("bottle", "can", "spam", "marker", "cube")
 """Object classes; cubes are further told apart by colour (cube_red, cube_blue, ...): 8 detection classes."""
@@ -61,7 +61,7 @@ class Detector(Protocol):
     """
 
     def detect(
-        self, frame: RGBDFrame, T_base_camera: np.ndarray, *, cloud: "SceneCloud | None" = None, ground_truth: Any = None
+        self, frame: RGBDFrame, T_base_camera: np.ndarray, *, cloud: SceneCloud | None = None, ground_truth: Any = None
     ) -> list[Detection]:
         """Detections in `frame`; `T_base_camera` (4, 4) is the estimated camera pose; `cloud` the
         frame-wide base-frame cloud when the caller has it already (else the detector builds it)."""
@@ -95,7 +95,9 @@ class SceneCloud:
         return idx[idx >= 0]
 
 
-def scene_cloud(frame: RGBDFrame, T_base_camera: np.ndarray, params: "RobocupPerceptionSettings", *, seed: int = 0) -> SceneCloud:
+def scene_cloud(
+    frame: RGBDFrame, T_base_camera: np.ndarray, params: RobocupPerceptionSettings, *, seed: int = 0
+) -> SceneCloud:
     """Back-project the frame within the depth limits, map it to the base frame, fit the table plane.
 
     The plane is fitted by RANSAC on every 4th point (threshold: the table removal threshold), then
@@ -109,7 +111,7 @@ def scene_cloud(frame: RGBDFrame, T_base_camera: np.ndarray, params: "RobocupPer
     ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
     pts, rgb, pixels = pts[ok], rgb[ok], pixels[ok]
     base = transform_points(T_base_camera, pts)
-    sub = base[:: 4]
+    sub = base[::4]
     t1 = time.perf_counter()
     plane = fit_plane_ransac(sub, params.table_threshold_m / 2, iterations=200, rng=np.random.default_rng(seed))
     plane = plane.oriented(np.array([0.0, 0.0, 10.0]))  # normal up: towards a point high above the table

@@ -40,16 +40,16 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MATCH_GATE_M",
-    "score",
-    "orientation_truth",
-    "ideal_grasp_yaw",
-    "yaw_error_deg",
-    "match",
-    "true_obstacle_box",
     "CalibrationReport",
     "PerceptionReport",
+    "ideal_grasp_yaw",
+    "match",
+    "orientation_truth",
     "run_calibration",
     "run_perception",
+    "score",
+    "true_obstacle_box",
+    "yaw_error_deg",
 ]
 
 log = logging.getLogger("twin")
@@ -64,14 +64,14 @@ def score(dp_xy_m: float | None, orientation_ok: bool) -> float:
     return 0.7 * max(0.0, 1.0 - dp_xy_m / 0.20) * 100.0 + 0.3 * (100.0 if orientation_ok else 0.0)
 
 
-def orientation_truth(obj: "ObjectState") -> str:
+def orientation_truth(obj: ObjectState) -> str:
     """'vertical' or 'horizontal' (the object's z axis nearer horizontal); cubes are always vertical."""
     if obj.cls in ("cube", "warehouse_cube"):
         return "vertical"
     return "horizontal" if obj.lying else "vertical"
 
 
-def ideal_grasp_yaw(obj: "ObjectState") -> tuple[float, float] | None:
+def ideal_grasp_yaw(obj: ObjectState) -> tuple[float, float] | None:
     """(yaw, symmetry period) of the best top-down grasp for the true pose; None when any yaw will do."""
     R = quat_to_matrix(obj.orientation_xyzw)
     if obj.cls in CYLINDERS:
@@ -88,7 +88,7 @@ def ideal_grasp_yaw(obj: "ObjectState") -> tuple[float, float] | None:
     return math.atan2(R[1, k], R[0, k]), math.pi
 
 
-def yaw_error_deg(yaw_est: float | None, obj: "ObjectState") -> float | None:
+def yaw_error_deg(yaw_est: float | None, obj: ObjectState) -> float | None:
     """|yaw_est - ideal| modulo the symmetry period, degrees; None when undefined."""
     ideal = ideal_grasp_yaw(obj)
     if ideal is None or yaw_est is None:
@@ -104,7 +104,7 @@ def match(est_xy: np.ndarray, true_xy: np.ndarray, gate_m: float = MATCH_GATE_M)
         return {}
     D = np.linalg.norm(true_xy[:, None, :2] - est_xy[None, :, :2], axis=2)
     rows, cols = linear_sum_assignment(np.where(D <= gate_m, D, 1e6))
-    return {int(r): int(c) for r, c in zip(rows, cols) if D[r, c] <= gate_m}
+    return {int(r): int(c) for r, c in zip(rows, cols, strict=True) if D[r, c] <= gate_m}
 
 
 def true_obstacle_box(settings: Settings) -> BoxBounds | None:
@@ -126,7 +126,7 @@ def _box_dict(b: BoxBounds | None) -> dict[str, float] | None:
     return {k: float(getattr(b, k)) for k in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")}
 
 
-def _true_camera(world: "World", settings: Settings) -> np.ndarray:
+def _true_camera(world: World, settings: Settings) -> np.ndarray:
     if settings.camera.mount == "wrist":
         return world.link_matrix("tool0") @ wrist_camera_offset(settings)
     return camera_pose(settings.camera)
@@ -159,11 +159,13 @@ class CalibrationReport:
         }
 
 
-def _calibrate_in(world: "World", settings: Settings, capture: Capture) -> CalibrationReport:
+def _calibrate_in(world: World, settings: Settings, capture: Capture) -> CalibrationReport:
     T_true = _true_camera(world, settings)
     cal = calibrate(capture.frame, settings)
     dt, dr = transform_error(cal.T_base_camera, T_true)
-    return CalibrationReport(dt, dr, cal.method, cal.T_base_camera, T_true, cal.marker.reprojection_px, cal.marker.n_points, cal, capture.q)
+    return CalibrationReport(
+        dt, dr, cal.method, cal.T_base_camera, T_true, cal.marker.reprojection_px, cal.marker.n_points, cal, capture.q
+    )
 
 
 def run_calibration(settings: Settings, *, seed: int | None = None, renderer: str = "auto") -> CalibrationReport:
@@ -216,7 +218,7 @@ class PerceptionReport:
         }
 
 
-def _object_row(obj: "ObjectState", label_true: str, est: dict[str, Any] | None) -> dict[str, Any]:
+def _object_row(obj: ObjectState, label_true: str, est: dict[str, Any] | None) -> dict[str, Any]:
     o_true = orientation_truth(obj)
     row: dict[str, Any] = {
         "name": obj.name,
@@ -295,8 +297,14 @@ def run_perception(
             res = perceive_warehouse(cap.frame, T_base_camera, settings.perception.warehouse, seed=seed)
             timings.update(res.timings_s)
             estimates = [
-                {"class": "warehouse_cube", "color": c.color_label, "orientation": "vertical", "position": c.centroid.tolist(),
-                 "yaw": None, "points": c.n_points}
+                {
+                    "class": "warehouse_cube",
+                    "color": c.color_label,
+                    "orientation": "vertical",
+                    "position": c.centroid.tolist(),
+                    "yaw": None,
+                    "points": c.n_points,
+                }
                 for c in res.cubes
             ]
             box_true = true_obstacle_box(settings)
@@ -304,8 +312,11 @@ def run_perception(
             if res.obstacle is not None and box_true is not None:
                 face_err = float(np.max(np.abs(np.r_[res.obstacle.lo - box_true.lo, res.obstacle.hi - box_true.hi])))
             obstacle = {
-                "box_est": _box_dict(res.obstacle), "box_extended": _box_dict(res.obstacle_extended),
-                "box_true": _box_dict(box_true), "max_face_error_m": face_err, "points": res.obstacle_points,
+                "box_est": _box_dict(res.obstacle),
+                "box_extended": _box_dict(res.obstacle_extended),
+                "box_true": _box_dict(box_true),
+                "max_face_error_m": face_err,
+                "points": res.obstacle_points,
             }
             objs = [o for o in truth if o.cls == "warehouse_cube"]
         else:
@@ -313,18 +324,39 @@ def run_perception(
             res_r = perceive_robocup(cap.frame, T_base_camera, settings, det, ground_truth=truth, seed=seed)
             timings.update(res_r.timings_s)
             estimates = [
-                {"class": e.label, "color": e.color, "orientation": e.orientation, "orientation_pca": e.orientation_pca,
-                 "position": e.position.tolist(), "yaw": e.yaw, "grasp": e.grasp.tolist(), "source": e.source,
-                 "icp_rmse": e.icp_rmse, "points": e.n_points, "confidence": e.confidence}
+                {
+                    "class": e.label,
+                    "color": e.color,
+                    "orientation": e.orientation,
+                    "orientation_pca": e.orientation_pca,
+                    "position": e.position.tolist(),
+                    "yaw": e.yaw,
+                    "grasp": e.grasp.tolist(),
+                    "source": e.source,
+                    "icp_rmse": e.icp_rmse,
+                    "points": e.n_points,
+                    "confidence": e.confidence,
+                }
                 for e in res_r.objects
             ]
             objs = list(truth)
-        m = match(np.array([e["position"] for e in estimates]).reshape(-1, 3), np.array([o.position for o in objs]).reshape(-1, 3))
+        m = match(
+            np.array([e["position"] for e in estimates]).reshape(-1, 3),
+            np.array([o.position for o in objs]).reshape(-1, 3),
+        )
         for i, o in enumerate(objs):
             label = "warehouse_cube" if o.cls == "warehouse_cube" else detection_label(o.cls, o.color)
             rows.append(_object_row(o, label, estimates[m[i]] if i in m else None))
         fp = len(estimates) - len(m)
     return PerceptionReport(
-        settings.name, seed, pipeline, (detector or settings.perception.detector.name) if det is not None else None, rows, fp,
-        cal_report.to_dict() if cal_report else None, obstacle, timings, estimates,
+        settings.name,
+        seed,
+        pipeline,
+        (detector or settings.perception.detector.name) if det is not None else None,
+        rows,
+        fp,
+        cal_report.to_dict() if cal_report else None,
+        obstacle,
+        timings,
+        estimates,
     )

@@ -13,16 +13,16 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = [
-    "transform_points",
+    "IcpResult",
+    "Pca",
     "Plane",
     "fit_plane",
     "fit_plane_ransac",
-    "Pca",
-    "pca",
     "kabsch",
-    "IcpResult",
-    "trimmed_icp",
+    "pca",
     "rot_z",
+    "transform_points",
+    "trimmed_icp",
 ]
 
 
@@ -49,7 +49,7 @@ class Plane:
         """Signed distance (m) of (n, 3) points, positive on the normal's side."""
         return points @ self.normal - self.offset
 
-    def oriented(self, towards: np.ndarray) -> "Plane":
+    def oriented(self, towards: np.ndarray) -> Plane:
         """The same plane with its normal pointing to the side of point `towards`."""
         if float(np.dot(self.normal, towards) - self.offset) >= 0:
             return self
@@ -65,7 +65,11 @@ def fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def fit_plane_ransac(
-    points: np.ndarray, threshold_m: float, *, iterations: int = 300, rng: np.random.Generator | None = None,
+    points: np.ndarray,
+    threshold_m: float,
+    *,
+    iterations: int = 300,
+    rng: np.random.Generator | None = None,
     refine: bool = True,
 ) -> Plane:
     """RANSAC plane (3-point hypotheses), then a least-squares refit on the inliers.
@@ -153,7 +157,7 @@ def trimmed_icp(
     T = np.array(T_init, dtype=float)
     n_keep = max(3, int(round(inlier_ratio * len(source))))
     rmse, it, converged = float("inf"), 0, False
-    for it in range(1, max_iterations + 1):
+    for it in range(1, max_iterations + 1):  # noqa: B007 - `it` is read after the loop: the iteration count
         moved = transform_points(T, source)
         dist, nn = tree.query(moved)
         keep = np.argpartition(dist, n_keep - 1)[:n_keep] if n_keep < len(dist) else np.arange(len(dist))

@@ -14,7 +14,7 @@ import numpy as np
 from twin.camera import RGBDFrame
 from twin.config import DepthNoiseSettings
 
-__all__ = ["depth_noise_rms", "apply_sensor_noise"]
+__all__ = ["apply_sensor_noise", "depth_noise_rms"]
 
 
 def depth_noise_rms(z_m: np.ndarray | float, noise: DepthNoiseSettings) -> np.ndarray:

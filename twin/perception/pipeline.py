@@ -31,7 +31,9 @@ def make_detector(settings: Settings, *, name: str | None = None, params: dict[s
     return reg.detector(name or block.name, block.params if params is None and name is None else params, ctx)
 
 
-def camera_extrinsics(settings: Settings, capture: Capture, T_base_camera_aruco: np.ndarray | None, q_aruco: np.ndarray | None = None) -> np.ndarray:
+def camera_extrinsics(
+    settings: Settings, capture: Capture, T_base_camera_aruco: np.ndarray | None, q_aruco: np.ndarray | None = None
+) -> np.ndarray:
     """The camera pose perception uses for `capture`, per `perception.extrinsics`.
 
     fixed + auto/aruco: the ArUco estimate. wrist + auto/kinematics: forward kinematics of the measured
@@ -55,6 +57,8 @@ def camera_extrinsics(settings: Settings, capture: Capture, T_base_camera_aruco:
         raise ConfigError("a wrist camera calibrated by ArUco needs the joint angles of the calibration view")
     kin = UR5e()
     T_tool0_camera = np.linalg.inv(kin.fk(q_aruco, "flange")) @ T_base_camera_aruco
-    log.debug("hand-eye from ArUco differs from the configured offset by %.4f m",
-              float(np.linalg.norm(T_tool0_camera[:3, 3] - wrist_camera_offset(settings)[:3, 3])))
+    log.debug(
+        "hand-eye from ArUco differs from the configured offset by %.4f m",
+        float(np.linalg.norm(T_tool0_camera[:3, 3] - wrist_camera_offset(settings)[:3, 3])),
+    )
     return kin.fk(capture.q, "flange") @ T_tool0_camera

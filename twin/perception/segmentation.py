@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from twin.perception.geometry import Plane
 
-__all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "plane_to_frame", "open3d"]
+__all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "open3d", "plane_to_frame"]
 
 
 def open3d() -> Any:
@@ -29,7 +29,9 @@ def open3d() -> Any:
     except ImportError as e:
         from twin.errors import DependencyMissing
 
-        raise DependencyMissing("perception needs open3d, which is not installed. Install it with `pip install 'twin[perception]'`.") from e
+        raise DependencyMissing(
+            "perception needs open3d, which is not installed. Install it with `pip install 'twin[perception]'`."
+        ) from e
     return o3d
 
 

@@ -27,7 +27,7 @@ __all__ = ["make_task", "run_task"]
 log = logging.getLogger("twin")
 
 
-def make_task(settings: Settings, context: "PluginContext | None" = None) -> Any:
+def make_task(settings: Settings, context: PluginContext | None = None) -> Any:
     """The task plugin named by `settings.task.kind`, built with its validated `task.params`; an unknown
     name raises UnknownNameError listing the registered tasks."""
     from twin.planning import make_context

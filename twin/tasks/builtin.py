@@ -11,7 +11,7 @@ if TYPE_CHECKING:
 
 
 @hookimpl
-def twin_register_tasks(registry: "Registry") -> None:
+def twin_register_tasks(registry: Registry) -> None:
     registry.add_task(
         "robocup",
         "twin.tasks.robocup:RobocupTask",

@@ -23,13 +23,13 @@ from twin.planning import CheckedPlanner, describe_goal_kinds, limits_from_setti
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 
 __all__ = [
+    "STAGES",
+    "STAGE_GROUPS",
     "Cell",
     "GraspCheck",
     "GripStatus",
     "GripperReading",
     "StageFailed",
-    "STAGES",
-    "STAGE_GROUPS",
     "stage_block",
     "stage_planners",
     "top_down",
@@ -91,8 +91,9 @@ def stage_planners(settings: Settings, planner_override: str | None = None) -> d
         if missing:
             stages = ", ".join(s for s, (g, k) in STAGES.items() if g == group and k in missing)
             raise ConfigError(
-                f"planners.{group}: {block.name} cannot reach {describe_goal_kinds(missing)}, which stages {stages} ask for; "
-                f"it serves {describe_goal_kinds(planner.goal_kinds)}. Choose another planner for {group} (`twin planners`)"
+                f"planners.{group}: {block.name} cannot reach {describe_goal_kinds(missing)}, "
+                f"which stages {stages} ask for; it serves {describe_goal_kinds(planner.goal_kinds)}. "
+                f"Choose another planner for {group} (`twin planners`)"
             )
         out[group] = planner
     return out
@@ -153,7 +154,9 @@ class Cell:
         self.kin = self.context.kinematics
         self.scene = PlanningScene.from_settings(self.settings)
         self.limits = limits_from_settings(self.settings)
-        self.held_body: int | None = None  # the simulated safety monitor's (judge.body_between_fingers); no task decides with it
+        self.held_body: int | None = (
+            None  # the simulated safety monitor's (judge.body_between_fingers); no task decides with it
+        )
         self.grasp: GraspCheck | None = None  # the current grasp as sensed when it closed (None: not holding)
         self.current = ""  # what the task works on, shown beside the stage in progress displays
 
@@ -172,11 +175,20 @@ class Cell:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
         name = self.block(group).name
-        request = MotionRequest(self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed)
+        request = MotionRequest(
+            self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
+        )
         ignore = (self.held_body,) if self.held_body is not None else ()
         result, record = plan_and_execute(
-            self.world, self.planner(group), request, self.scene, self.context, stage=stage, planner_name=name,
-            ignore_bodies=ignore, fingers_may_touch_objects=stage in _GRASPING_STAGES,
+            self.world,
+            self.planner(group),
+            request,
+            self.scene,
+            self.context,
+            stage=stage,
+            planner_name=name,
+            ignore_bodies=ignore,
+            fingers_may_touch_objects=stage in _GRASPING_STAGES,
         )
         self.records.append(record)
         if result.status is not Status.SUCCESS:
@@ -188,7 +200,9 @@ class Cell:
         orientation free and `task.transfer_tolerance_m` on the position."""
         pose = Pose.from_matrix(T_tcp)
         if STAGES[stage][1] == "position":
-            goal = PoseGoal(pose, position_tolerance_m=self.settings.task.transfer_tolerance_m, orientation_tolerance_rad=None)
+            goal = PoseGoal(
+                pose, position_tolerance_m=self.settings.task.transfer_tolerance_m, orientation_tolerance_rad=None
+            )
         else:
             goal = PoseGoal(pose)
         return self.move(stage, goal, **kw)
@@ -222,7 +236,11 @@ class Cell:
         return GripperReading(self.world.gripper_opening(), self.world.gripper_settled(), self.world.gripper_effort())
 
     def close_gripper(
-        self, expect_width_m: tuple[float, float] | None = None, *, force_n: float | None = None, speed_m_s: float | None = None
+        self,
+        expect_width_m: tuple[float, float] | None = None,
+        *,
+        force_n: float | None = None,
+        speed_m_s: float | None = None,
     ) -> GraspCheck:
         """Close force-limited, settle, and judge the grasp by the finger position alone, as the 2F-85's
         "object detected" status does: holding when the fingers stopped clearly above fully closed
@@ -236,19 +254,27 @@ class Cell:
         self.world.close_gripper(force_n=force_n, speed_m_s=speed_m_s)
         self.settle(self.settings.task.settle_s)
         r = self.read_gripper(speed_m_s=speed_m_s)
-        self.scene.set_gripper_opening(float(np.clip(r.opening_m, 0.0, self.scene.max_opening_m)))  # closed pads read a hair below 0
+        self.scene.set_gripper_opening(
+            float(np.clip(r.opening_m, 0.0, self.scene.max_opening_m))
+        )  # closed pads read a hair below 0
         self.held_body = body_between_fingers(self.world)  # feeds the simulated contact monitor only
         self.grasp = None
         mm = 1000.0 * r.opening_m
         if r.opening_m <= g.object_min_opening_m:
-            check = GraspCheck(GripStatus.NOTHING, r.opening_m, f"nothing between the fingers after closing (they closed to {mm:.1f} mm)", expect_width_m)
+            check = GraspCheck(
+                GripStatus.NOTHING,
+                r.opening_m,
+                f"nothing between the fingers after closing (they closed to {mm:.1f} mm)",
+                expect_width_m,
+            )
         elif expect_width_m is not None and not (
             expect_width_m[0] - g.width_under_tolerance_m <= r.opening_m <= expect_width_m[1] + g.width_over_tolerance_m
         ):
             lo, hi = (1000.0 * w for w in expect_width_m)
             want = f"{lo:.0f} mm" if abs(hi - lo) < 0.5 else f"{lo:.0f}-{hi:.0f} mm"
             check = GraspCheck(
-                GripStatus.WRONG_WIDTH, r.opening_m,
+                GripStatus.WRONG_WIDTH,
+                r.opening_m,
                 f"the fingers stopped at {mm:.1f} mm, but the object should be {want} across "
                 f"(-{1000 * g.width_under_tolerance_m:.0f}/+{1000 * g.width_over_tolerance_m:.0f} mm)",
                 expect_width_m,
@@ -275,8 +301,10 @@ class Cell:
             floor = min(floor, self.grasp.expect_width_m[0] - g.width_under_tolerance_m)
         if r.opening_m < floor:
             return GraspCheck(
-                GripStatus.LOST, r.opening_m,
-                f"the fingers closed from {1000 * self.grasp.opening_m:.1f} mm at the grasp to {1000 * r.opening_m:.1f} mm",
+                GripStatus.LOST,
+                r.opening_m,
+                f"the fingers closed from {1000 * self.grasp.opening_m:.1f} mm at the grasp to "
+                f"{1000 * r.opening_m:.1f} mm",
                 self.grasp.expect_width_m,
             )
         return GraspCheck(GripStatus.HOLDING, r.opening_m, "", self.grasp.expect_width_m)
@@ -311,7 +339,16 @@ class Cell:
         steps a receding-horizon planner followed without a solve (`fallback_steps`), and motions stopped
         by an unexpected contact."""
         out: dict[str, Any] = {}
-        keys = ("motions", "succeeded", "planning_time_s", "motion_time_s", "solves", "fallback_steps", "unexpected_contacts", "collisions")
+        keys = (
+            "motions",
+            "succeeded",
+            "planning_time_s",
+            "motion_time_s",
+            "solves",
+            "fallback_steps",
+            "unexpected_contacts",
+            "collisions",
+        )
         for r in self.records:
             m = out.setdefault(r.planner, dict.fromkeys(keys, 0))
             m["motions"] += 1

@@ -140,7 +140,9 @@ def zone_verdict(
     lo, _ = object_bounds(state)
     above = float(lo[2] - zone[2])
     if above > TABLE_REST_TOL_M:
-        return Verdict(False, f"it does not rest on the table (its bottom is {1000 * above:.0f} mm above it, on something)")
+        return Verdict(
+            False, f"it does not rest on the table (its bottom is {1000 * above:.0f} mm above it, on something)"
+        )
     d = float(np.linalg.norm(np.asarray(state.position[:2]) - np.asarray(zone[:2], dtype=float)))
     if d > radius_m:
         return Verdict(False, f"it rests {100 * d:.1f} cm from its drop zone's centre (radius {100 * radius_m:.0f} cm)")
@@ -211,7 +213,11 @@ class RobocupReferee:
             bin_name = bin_for(o0.cls, o0.color, self.settings)
             mine = [t for t in targets if oid in t.true_ids]
             bin_ = self.bins.get(bin_name)
-            verdict = judge_in_bin(self.world, oid, bin_) if bin_ is not None else Verdict(False, f"there is no fixture {bin_name!r}")
+            verdict = (
+                judge_in_bin(self.world, oid, bin_)
+                if bin_ is not None
+                else Verdict(False, f"there is no fixture {bin_name!r}")
+            )
             if verdict.placed:
                 err = None
             elif not mine:
@@ -221,11 +227,18 @@ class RobocupReferee:
             elif mine[-1].done:
                 err = f"place: released, but {verdict.reason}{self._elsewhere(oid, bin_name)}"
             else:
-                err = "task: attempted, but neither placed nor failed" + (f" (the run stopped: {stopped})" if stopped else "")
+                err = "task: attempted, but neither placed nor failed" + (
+                    f" (the run stopped: {stopped})" if stopped else ""
+                )
             first = mine[0].first_estimate if mine else None
             out.append(
                 ObjectOutcome(
-                    id=o0.name, cls=o0.cls, color=o0.color, target_bin=bin_name, placed=verdict.placed, error=err,
+                    id=o0.name,
+                    cls=o0.cls,
+                    color=o0.color,
+                    target_bin=bin_name,
+                    placed=verdict.placed,
+                    error=err,
                     cycle_time_s=sum(t.cycle_time_s for t in mine),
                     pose_error_m=float(np.linalg.norm(first[:2] - o0.position[:2])) if first is not None else None,
                 )
@@ -270,7 +283,11 @@ class WarehouseReferee:
         out = []
         for oid, o0 in self.truth.items():
             zone = task.drop_zones.get(o0.color or "")
-            verdict = judge_in_zone(self.world, oid, zone, task.drop_radius_m) if zone is not None else Verdict(False, "no drop zone")
+            verdict = (
+                judge_in_zone(self.world, oid, zone, task.drop_radius_m)
+                if zone is not None
+                else Verdict(False, "no drop zone")
+            )
             att = by_true.get(oid)
             if verdict.placed:
                 err = None
@@ -282,7 +299,12 @@ class WarehouseReferee:
                 err = f"place: released, but {verdict.reason}"
             out.append(
                 ObjectOutcome(
-                    id=o0.name, cls=o0.cls, color=o0.color, target_bin=f"drop_{o0.color}", placed=verdict.placed, error=err,
+                    id=o0.name,
+                    cls=o0.cls,
+                    color=o0.color,
+                    target_bin=f"drop_{o0.color}",
+                    placed=verdict.placed,
+                    error=err,
                     cycle_time_s=att.cycle_time_s if att else 0.0,
                     pose_error_m=float(np.linalg.norm(att.cube.centroid[:2] - o0.position[:2])) if att else None,
                 )
@@ -303,7 +325,9 @@ def oracle_ground_truth(world: World, detector: object) -> list[ObjectState] | N
     return world.objects() if needs_ground_truth(detector) else None
 
 
-def perceive_robocup_scene(world: World, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector) -> RobocupResult:
+def perceive_robocup_scene(
+    world: World, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector
+) -> RobocupResult:
     """The RoboCup perception of one frame (`twin.tasks.robocup.perception.perceive_robocup`), with the ORACLE
     hand-off: only a detector labelled as needing ground truth is given the simulator's objects."""
     from twin.tasks.robocup.perception import perceive_robocup

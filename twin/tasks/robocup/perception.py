@@ -264,10 +264,14 @@ def estimate_object(det: Detection, cloud: SceneCloud, params: RobocupPerception
         c0 = c_fp - n * (float(cloud.table.distance(c_fp[None])[0]) - top / 2.0)
         T0 = np.eye(4)
         T0[:3, :3], T0[:3, 3] = R0, c0
-        tmpl, tree = _template(det.cls, params.icp.template_points)
+        _, tree = _template(det.cls, params.icp.template_points)
         res = trimmed_icp(
-            obs, tree, np.linalg.inv(T0), max_iterations=params.icp.max_iterations,
-            tolerance=params.icp.tolerance, inlier_ratio=params.icp.inlier_ratio,
+            obs,
+            tree,
+            np.linalg.inv(T0),
+            max_iterations=params.icp.max_iterations,
+            tolerance=params.icp.tolerance,
+            inlier_ratio=params.icp.inlier_ratio,
         )
         rmse = res.rmse
         if res.rmse < params.icp.accept_rmse_m:
@@ -285,12 +289,27 @@ def estimate_object(det: Detection, cloud: SceneCloud, params: RobocupPerception
     w_grip = entry.w_grip_m if entry else 0.085
     grasp = np.array([position[0], position[1], z_grasp, yaw, math.pi, 0.0, w_grip])
     return ObjectEstimate(
-        det.cls, det.color, det.label, det.confidence, orient, orient_pca, np.asarray(position, dtype=float),
-        yaw, grasp, source, rmse, len(idx), top, f, timings,
+        det.cls,
+        det.color,
+        det.label,
+        det.confidence,
+        orient,
+        orient_pca,
+        np.asarray(position, dtype=float),
+        yaw,
+        grasp,
+        source,
+        rmse,
+        len(idx),
+        top,
+        f,
+        timings,
     )
 
 
-def estimate_objects(detections: list[Detection], cloud: SceneCloud, params: RobocupPerceptionSettings) -> list[ObjectEstimate]:
+def estimate_objects(
+    detections: list[Detection], cloud: SceneCloud, params: RobocupPerceptionSettings
+) -> list[ObjectEstimate]:
     """`estimate_object` for every detection, dropping the ones without enough points."""
     out = []
     for det in detections:

@@ -37,11 +37,16 @@ class GraspEntry(ConfigModel):
 
 def _default_grasp_table() -> dict[str, GraspEntry]:
     rows = {
-        "bottle_vertical": (0.150, 0.085), "bottle_horizontal": (0.034, 0.085),
-        "can_vertical": (0.070, 0.085), "can_horizontal": (0.033, 0.085),
-        "spam_vertical": (0.050, 0.085), "spam_horizontal": (0.035, 0.085),
-        "cube_vertical": (0.0375, 0.085), "cube_horizontal": (0.0375, 0.085),
-        "marker_vertical": (0.090, 0.040), "marker_horizontal": (0.016, 0.040),
+        "bottle_vertical": (0.150, 0.085),
+        "bottle_horizontal": (0.034, 0.085),
+        "can_vertical": (0.070, 0.085),
+        "can_horizontal": (0.033, 0.085),
+        "spam_vertical": (0.050, 0.085),
+        "spam_horizontal": (0.035, 0.085),
+        "cube_vertical": (0.0375, 0.085),
+        "cube_horizontal": (0.0375, 0.085),
+        "marker_vertical": (0.090, 0.040),
+        "marker_horizontal": (0.016, 0.040),
     }
     return {k: GraspEntry(z_grasp_m=z, w_grip_m=w) for k, (z, w) in rows.items()}
 
@@ -92,7 +97,13 @@ class RobocupTaskSettings(ConfigModel):
     # class (or class_colour, e.g. cube_red) -> the fixture name of its bin; the seed's log: spam -> green,
     # red cube -> blue. Unlisted classes go to `default_bin`.
     bins: dict[str, str] = Field(
-        default_factory=lambda: {"bottle": "bin_green", "can": "bin_green", "marker": "bin_green", "spam": "bin_green", "cube": "bin_blue"}
+        default_factory=lambda: {
+            "bottle": "bin_green",
+            "can": "bin_green",
+            "marker": "bin_green",
+            "spam": "bin_green",
+            "cube": "bin_blue",
+        }
     )
     default_bin: str = "bin_green"
     hover_m: float = Field(0.20, gt=0, le=0.5)  # pre-grasp hover above the grasp point
@@ -104,5 +115,9 @@ class RobocupTaskSettings(ConfigModel):
     # Per class, a gentler grip than gripper.force_n / speed_m_s, within the 2F-85's 20-235 N and 20-150 mm/s.
     # The 15 g marker, hit at 100 mm/s and squeezed at 100 N, squirts out of PyBullet's soft contacts (the
     # pads sink through it); closed at 20 mm/s with 20 N it is held at about 19 of its 21 mm.
-    grip_force_n: dict[str, Annotated[float, Field(ge=20.0, le=235.0)]] = Field(default_factory=lambda: {"marker": 20.0})
-    grip_speed_m_s: dict[str, Annotated[float, Field(ge=0.02, le=0.15)]] = Field(default_factory=lambda: {"marker": 0.02})
+    grip_force_n: dict[str, Annotated[float, Field(ge=20.0, le=235.0)]] = Field(
+        default_factory=lambda: {"marker": 20.0}
+    )
+    grip_speed_m_s: dict[str, Annotated[float, Field(ge=0.02, le=0.15)]] = Field(
+        default_factory=lambda: {"marker": 0.02}
+    )

@@ -36,7 +36,16 @@ from twin.urdf_model import RobotModel, read_fixture_shapes
 if TYPE_CHECKING:
     from twin.registry import PluginContext
 
-__all__ = ["RobocupTask", "BinGeometry", "bin_for", "bin_geometries", "feasible_cube_yaw", "grip_width", "read_bin_geometry", "run_robocup"]
+__all__ = [
+    "BinGeometry",
+    "RobocupTask",
+    "bin_for",
+    "bin_geometries",
+    "feasible_cube_yaw",
+    "grip_width",
+    "read_bin_geometry",
+    "run_robocup",
+]
 
 log = logging.getLogger("twin")
 
@@ -188,7 +197,7 @@ def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray
     T_inv = np.linalg.inv(poses["tcp"][0])
     out = []
     for name in model.link_names:
-        up = name
+        up: str | None = name
         while up is not None and up != "tool0":
             up = model.parent_link(up)
         if up is None:  # not on the gripper
@@ -279,7 +288,9 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     cell.move_pose("descent", top_down((x, y, z_grasp), yaw))
     # (4) close and settle: the finger position says whether the object is between the fingers
     w = grip_width(est, max_opening)
-    grasp = cell.close_gripper((w, w), force_n=task.grip_force_n.get(est.cls), speed_m_s=task.grip_speed_m_s.get(est.cls))
+    grasp = cell.close_gripper(
+        (w, w), force_n=task.grip_force_n.get(est.cls), speed_m_s=task.grip_speed_m_s.get(est.cls)
+    )
     if not grasp.holding:
         raise StageFailed("grasp", f"{grasp.reason} ({est.label}, {est.orientation})")
     # (5) ascent
@@ -315,7 +326,11 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     cell.release(release_w)
     opened = cell.read_gripper().opening_m
     if opened < release_w - _WALL_MARGIN_M:
-        raise StageFailed("place", f"the fingers opened only to {1000 * opened:.0f} of {1000 * release_w:.0f} mm: the object is stuck between them")
+        raise StageFailed(
+            "place",
+            f"the fingers opened only to {1000 * opened:.0f} of {1000 * release_w:.0f} mm: "
+            "the object is stuck between them",
+        )
     placed.append(footprint)
     cell.move_pose("ascent", top_down((xy[0], xy[1], rim_z + task.place_clearance_m + z_grasp), yaw))
 
@@ -396,7 +411,9 @@ def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
         cell.move_joints("capture", q)
 
 
-def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict[str, BinGeometry]) -> None:
+def _update_obstacles(
+    cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict[str, BinGeometry]
+) -> None:
     """Every other perceived object on the table becomes a box in the planning scene (the target is left
     out: the fingers close around it)."""
     for name in [n for n in cell.scene.boxes() if n.startswith("seen_")]:
@@ -409,12 +426,16 @@ def _update_obstacles(cell: Cell, estimates: tuple[ObjectEstimate, ...], target:
         # the grasp yaw closes across the short side (cubes: across a face, 45 deg off the seed's yaw)
         yaw = est.yaw - math.pi / 4 if est.cls == "cube" else est.yaw
         T = np.eye(4)
-        T[:3, :3] = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+        T[:3, :3] = np.array(
+            [[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]]
+        )
         T[:3, 3] = [est.position[0], est.position[1], ext[2] / 2 + 0.002]
         cell.scene.add_box(f"seen_{i}_{est.label}", np.array([short, long_, ext[2]]), T)
 
 
-def _choose(estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict[str, BinGeometry], retries: int) -> ObjectEstimate | None:
+def _choose(
+    estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict[str, BinGeometry], retries: int
+) -> ObjectEstimate | None:
     """The most confident estimate that is on the table (not in a bin) and not given up on."""
     best = None
     for est in estimates:
@@ -449,7 +470,7 @@ class RobocupTask:
     """The RoboCup ARM sorting task as a task plugin (name `robocup`). Its settings are the config's
     `task.robocup` and `perception.robocup` sections (models in `twin.tasks.robocup.settings`)."""
 
-    def __init__(self, params: None, context: "PluginContext") -> None:
+    def __init__(self, params: None, context: PluginContext) -> None:
         self.context = context
 
     def run(self, cell: Cell) -> list[ObjectOutcome]:

@@ -83,7 +83,9 @@ def perceive_warehouse(
     model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
     a, b, c, d = model
     n = np.array([a, b, c])
-    plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(np.zeros(3))
+    plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(
+        np.zeros(3)
+    )
     keep = np.ones(len(pts), dtype=bool)
     keep[np.asarray(inliers, dtype=np.int64)] = False
     pts, rgb = pts[keep], rgb[keep]
@@ -120,10 +122,14 @@ def perceive_warehouse(
         extent = cl.points.max(axis=0) - cl.points.min(axis=0)
         if cl.n_points < params.cube_min_points or float(extent.max()) > params.cube_max_extent_m:
             rejected += 1
-            log.debug("warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3))
+            log.debug(
+                "warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3)
+            )
             continue
         centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
-        cubes.append(LabeledCube(centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb))
+        cubes.append(
+            LabeledCube(centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb)
+        )
     timings["label"] = time.perf_counter() - t0
     extended = obstacle.extended_y(params.box_extension_y_m) if obstacle is not None else None
     log.debug("warehouse: %d cubes, obstacle %s (%d points), %d rejected", len(cubes), obstacle, obstacle_n, rejected)

@@ -85,7 +85,11 @@ def _square_grasp(cell: Cell, c: np.ndarray) -> tuple[GraspCheck, float]:
     # across two edges, d off the faces: opening = side * (cos d + sin d) = side * sqrt(2) * sin(d + 45 deg)
     d = float(np.arcsin(min(1.0, grasp.opening_m / (_CUBE_M * np.sqrt(2.0)))) - np.pi / 4)
     for turn in (d, -d):
-        log.info("warehouse: the fingers hold the cube by two edges (%.1f mm); turning %+.0f deg to grasp again", 1000 * grasp.opening_m, np.degrees(turn))
+        log.info(
+            "warehouse: the fingers hold the cube by two edges (%.1f mm); turning %+.0f deg to grasp again",
+            1000 * grasp.opening_m,
+            np.degrees(turn),
+        )
         cell.open_gripper()
         try:
             cell.move_pose("descent", top_down(c, _GRASP_YAW + turn))
@@ -119,13 +123,20 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         global_error = f"calibration: the ArUco marker was not found: {e}"
     attempts = [_Attempt(cube, referee.match(cube.centroid)) for cube in cubes]
     order = list(task.drop_zones)
-    attempts.sort(key=lambda a: (order.index(a.cube.color_label) if a.cube.color_label in order else len(order), float(a.cube.centroid[1])))
+    attempts.sort(
+        key=lambda a: (
+            order.index(a.cube.color_label) if a.cube.color_label in order else len(order),
+            float(a.cube.centroid[1]),
+        )
+    )
     for att in attempts:
         zone = task.drop_zones.get(att.cube.color_label)
         cell.current = f"{att.cube.color_label} cube"
         t0 = world.sim_time
         if zone is None:
-            att.error = f"sorting: no drop zone for colour {att.cube.color_label!r}; zones: {', '.join(task.drop_zones)}"
+            att.error = (
+                f"sorting: no drop zone for colour {att.cube.color_label!r}; zones: {', '.join(task.drop_zones)}"
+            )
             continue
         if world.sim_time > settings.task.max_sim_time_s:
             att.error = "time: the run time limit was reached before this cube"
@@ -152,7 +163,7 @@ class WarehouseTask:
     """The warehouse sorting task as a task plugin (name `warehouse`). Its settings are the config's
     `task.warehouse` and `perception.warehouse` sections (models in `twin.tasks.warehouse.settings`)."""
 
-    def __init__(self, params: None, context: "PluginContext") -> None:
+    def __init__(self, params: None, context: PluginContext) -> None:
         self.context = context
 
     def run(self, cell: Cell) -> list[ObjectOutcome]:
