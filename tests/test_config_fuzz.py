@@ -330,9 +330,13 @@ def mutated(draw: st.DrawFn) -> dict[str, Any]:
             ]
             if numeric:
                 _set(data, draw(st.sampled_from(numeric)), draw(st.sampled_from(EDGES)))
-        elif op == "plausible":
+        elif op == "plausible":  # a finite number scaled near its value (an earlier op may have left a nan)
             numeric = [
-                p for p in paths if isinstance(_get(data, p), (int, float)) and not isinstance(_get(data, p), bool)
+                p
+                for p in paths
+                if isinstance(_get(data, p), (int, float))
+                and not isinstance(_get(data, p), bool)
+                and math.isfinite(_get(data, p))
             ]
             if numeric:
                 path = draw(st.sampled_from(numeric))

@@ -20,10 +20,23 @@ pytest.importorskip("casadi")
 
 from twin.config import PROJECT_ROOT, PlannerBlock, load_config  # noqa: E402
 from twin.errors import ConfigError  # noqa: E402
-from twin.planning import RecedingHorizonPlanner, Segment, _checked, densify, make_context, make_planner, plan, plan_with  # noqa: E402
+from twin.planning import (  # noqa: E402
+    RecedingHorizonPlanner,
+    Segment,
+    _checked,
+    densify,
+    first_collision,
+    limits_from_settings,
+    make_context,
+    make_planner,
+    plan,
+    plan_with,
+)
 from twin.registry import Kind, default_registry  # noqa: E402
+from twin.testing import contract_queries, limit_violations  # noqa: E402
 from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory  # noqa: E402
-from twin_nmpc.model import TCP_FRAME, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres  # noqa: E402
+from twin_nmpc.model import TCP_FRAME, ProblemShape, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres  # noqa: E402
+from twin_nmpc.params import NMPCParams  # noqa: E402
 from twin_nmpc.planner import NMPCPlanner  # noqa: E402
 from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes  # noqa: E402
 from twin_nmpc.spheres import object_spheres  # noqa: E402
@@ -195,6 +208,8 @@ def _transfer_campaign(planner, scenes, settings, ctx):
             tcp_end = ctx.kinematics.fk(res.trajectory.q[-1])[:3, 3]
             assert np.linalg.norm(tcp_end - _goal_position(ts.request, ctx)) <= 0.03
             assert np.array_equal(res.trajectory.q[0], ts.request.start)
+            # from rest to rest within every limit of the request, declared and measured (twin check-planner)
+            assert limit_violations(res.trajectory, ts.request.limits) == {}, ts.index
         else:
             failures.append((ts.index, res.status.value, res.reason))
         # executed motion: on success the whole trajectory; FCL: spheres vs the perceived box, arm+cube vs table
@@ -294,8 +309,13 @@ def test_unreachable_goal_against_the_box_fails_after_at_most_40_solves_and_stay
     b = ts.perceived_box
     goal = [b.x_max + 0.01, _goal_position(ts.request, ctx)[1], 0.10]
     segs, res = _loop(nmpc, _pose_request(ts, goal), build_scene(settings, ts))
-    assert res.status is Status.NO_SOLUTION and "40 solves" in res.reason
-    assert res.info["nmpc_solves"] <= 40 and len(segs) <= 40
+    assert res.status is Status.NO_SOLUTION and "40 solves" in res.reason and "braked to a stop" in res.reason
+    solved = [s for s in segs if not s.info.get("braking")]
+    assert res.info["nmpc_solves"] <= 40 and len(solved) <= 40
+    # the arm was still moving after the 40th solve: it brakes to rest (no solve) before the status
+    assert segs[len(solved):] and all(s.info["braking"] and s.solve_time_s == 0.0 for s in segs[len(solved):])
+    last = segs[-1].trajectory
+    assert np.array_equal(last.q[-1], last.q[-2]) and np.allclose(last.qd[-1], 0.0)
     _assert_clear(segs, ts, nmpc, settings, ctx)
 
 
@@ -325,17 +345,23 @@ def test_failed_solves_follow_the_last_feasible_plan_then_stop_safely(ctx, scene
         return replace(real(self, *a, **k), converged=False, status="Infeasible_Problem_Detected")
 
     monkeypatch.setattr(NMPCProblem, "solve", failing)
-    q, followed = first.trajectory.q[-1], []
+    q, followed, braking = first.trajectory.q[-1], [], []
     for _ in range(10):
         out = planner.step(q)
         if isinstance(out, MotionResult):
             break
-        assert out.info["fallback"] and "Infeasible" in out.info["rejected"]
-        followed.append(out.trajectory.q[-1])
+        if out.info.get("braking"):
+            braking.append(out)
+        else:
+            assert not braking and out.info["fallback"] and "Infeasible" in out.info["rejected"]
+            followed.append(out.trajectory.q[-1])
         q = out.trajectory.q[-1]
     assert isinstance(out, MotionResult) and out.status is Status.NO_SOLUTION
     assert "no feasible plan is left" in out.reason
     assert np.allclose(followed, plan[2:])  # exactly the remaining knots of the last feasible plan
+    # the 6-step plan ends with the arm still moving: it brakes to rest within its bounds, then the status
+    assert len(braking) == 1 and not braking[0].fallback and "braked to a stop first" in out.reason
+    assert np.allclose(braking[0].trajectory.qd[-1], 0.0)
 
 
 def test_a_failed_cold_solve_follows_its_checked_guess(nmpc, scenes, settings, ctx, monkeypatch):
@@ -350,15 +376,19 @@ def test_a_failed_cold_solve_follows_its_checked_guess(nmpc, scenes, settings, c
     monkeypatch.setattr(NMPCProblem, "solve", failing)
     ts = scenes[5]
     segs, res = _loop(planner, ts.request, build_scene(settings, ts))
-    # every solve fails: the arm follows the checked guess, one horizon (30 steps) of it, and then stops
-    # with a typed failure, because no solved plan ever existed; every step it took was clear
-    assert len(segs) == 30 and all(s.fallback and s.info["fallback"] for s in segs)
+    # every solve fails: the arm follows the checked guess, one horizon (30 steps) of it, brakes to rest (the
+    # guess is cut after 30 steps, still moving) and then stops with a typed failure, because no solved plan
+    # ever existed; every step it took was clear
+    followed = [s for s in segs if not s.info.get("braking")]
+    assert len(followed) == 30 and all(s.fallback and s.info["fallback"] for s in followed)
+    assert segs[30:] and all(s.info["braking"] and not s.fallback for s in segs[30:])
     assert segs[0].info.get("following") == "initial guess"
     assert res.status is Status.NO_SOLUTION and "no feasible plan is left" in res.reason
     assert res.info["fallback_steps"] == 30  # counted by the checked loop, not by the planner
     _assert_clear(segs, ts, planner, settings, ctx)
     planned = planner.plan(ts.request, build_scene(settings, ts))  # the same through the one loop
-    assert planned.status is Status.NO_SOLUTION and planned.info["fallback_steps"] == 30 and planned.info["solves"] == 30
+    assert planned.status is Status.NO_SOLUTION and planned.info["fallback_steps"] == 30
+    assert planned.info["solves"] == len(segs)  # the checked loop counts every segment, braking too
 
 
 def _drive(planner, ts, scene, *, at_step: int, change) -> tuple[list[Segment], MotionResult]:
@@ -413,3 +443,107 @@ def test_no_box_goes_straight(nmpc, scenes, settings):
     scene.remove("obstacle")
     segs, res = _loop(planner, ts.request, scene)
     assert res.success and res.info["initial_guess"] == "straight"
+
+
+# ---- the planner contract (`twin check-planner nmpc`) ---------------------------------------------------
+def test_segments_declare_the_backward_differences_of_their_knots_from_the_measured_state(nmpc, scenes, settings):
+    """qd and qdd are the knots' backward differences; a segment's first sample carries the state the previous
+    one ended in (zero at the start), so what a segment declares is what its positions measure."""
+    ts = scenes[7]
+    segs, res = _loop(nmpc, ts.request, build_scene(settings, ts))
+    assert res.success
+    dt, qd_end, qdd_end = 0.08, np.zeros(6), np.zeros(6)
+    for s in segs:
+        tr = s.trajectory
+        assert np.array_equal(tr.qd[0], qd_end) and np.array_equal(tr.qdd[0], qdd_end)
+        assert np.allclose(tr.qd[1:], np.diff(tr.q, axis=0) / dt, rtol=0, atol=1e-12)
+        assert np.allclose(tr.qdd[1:], np.diff(tr.qd, axis=0) / dt, rtol=0, atol=1e-9)
+        qd_end, qdd_end = tr.qd[-1], tr.qdd[-1]
+    assert np.array_equal(qd_end, np.zeros(6))  # the last segment ends with a zero step: at rest
+    lim = ts.request.limits
+    assert np.all(np.abs(qdd_end) <= lim.max_joint_jerk * dt + 1e-9)  # so it may stand still from there
+
+
+def test_jerk_limited_is_declared_by_its_parameter(ctx):
+    from twin.planning import jerk_limited
+
+    assert jerk_limited(make_planner("nmpc", ctx)) is True
+    block = PlannerBlock(name="nmpc", params={"limit_jerk": False, "prebuild_boxes": []})
+    assert jerk_limited(make_planner(block, ctx)) is False
+
+
+def test_a_start_in_collision_is_refused_naming_the_pair(nmpc, scenes, settings, ctx):
+    ts = scenes[0]
+    scene = build_scene(settings, ts)
+    kin = ctx.kinematics
+    T = kin.fk(ts.request.start, "tcp")
+    T[2, 3] = -0.02  # the tool 2 cm inside the table
+    sols = kin.ik(T, "tcp")
+    q_in = sols[int(np.argmax(scene.in_collision_batch(sols)))]
+    assert scene.in_collision(q_in)
+    segs, res = _loop(nmpc, replace(ts.request, start=q_in), scene)
+    assert res.status is Status.INVALID_START and "with table" in res.reason and segs == []
+
+
+@pytest.fixture(scope="module")
+def robocup():
+    settings = load_config("robocup")
+    ctx = make_context(settings)
+    from twin.collision import PlanningScene
+
+    return settings, ctx, PlanningScene.from_settings(settings)
+
+
+def test_a_fixture_its_model_does_not_know_is_braked_for_and_never_entered(robocup):
+    """The model knows boxes and the table height, not the bins: its plan to a goal beside bin_green runs
+    the right finger into the bin (the first query of `twin check-planner nmpc`). The planner itself (not
+    only the checked loop) sees that coming, brakes to rest within its limits and ends with COLLISION naming
+    the pair; no segment it returns collides."""
+    settings, ctx, scene = robocup
+    kin = ctx.kinematics
+    planner = NMPCPlanner(None, ctx)  # the plugin itself, without CheckedPlanner's own check
+    qu = contract_queries(settings, scene, kin, 1, seed=0, blocked=False)[0]
+    T = kin.fk(qu.goal, "tcp")
+    goal = PoseGoal(Pose.from_matrix(T), position_tolerance_m=0.03, orientation_tolerance_rad=None)
+    req = MotionRequest(qu.start, goal, limits_from_settings(settings))
+    segs, res = _loop(planner, req, scene)
+    assert res.status is Status.COLLISION and "right_finger with bin_green" in res.reason
+    assert "braked to a stop" in res.reason
+    assert segs and segs[-1].info["braking"] and np.array_equal(segs[-1].trajectory.qd[-1], np.zeros(6))
+    res_rad, res_m = settings.collision.check_resolution_rad, settings.collision.check_resolution_m
+    for s in segs:
+        assert first_collision(s.trajectory, scene, kin, max_step_rad=res_rad, max_step_m=res_m) is None
+    assert limit_violations(_joined(segs), req.limits) == {}  # braking keeps the limits, to rest
+
+
+def _joined(segs: list[Segment]) -> Trajectory:
+    first = segs[0].trajectory
+    t, q, qd, qdd = [first.t], [first.q], [first.qd], [first.qdd]
+    for s in segs[1:]:
+        tr = s.trajectory
+        t.append(tr.t[1:] + t[-1][-1])
+        q.append(tr.q[1:])
+        qd.append(tr.qd[1:])
+        qdd.append(tr.qdd[1:])
+    return Trajectory(np.concatenate(t), np.concatenate(q), np.concatenate(qd), np.concatenate(qdd))
+
+
+def test_the_nlp_is_built_once_per_process_and_before_the_first_step(nmpc, ctx, scenes, settings, monkeypatch):
+    """NLPs are shared by planners with the same parameters, and the shape a run expects (`prebuild_boxes`;
+    by default one box per fixture perception reports: the warehouse wall) is built at construction: the
+    first (timed) step of a warehouse transfer builds nothing."""
+    from twin_nmpc import model
+
+    a, b = NMPCPlanner(NMPCParams(**SEED000), ctx), NMPCPlanner(NMPCParams(**SEED000), ctx)
+    one_box = ProblemShape(30, 1, 0, 2)
+    assert a.problem(one_box) is b.problem(one_box) is nmpc.inner.problem(one_box)
+    assert NMPCPlanner(NMPCParams(horizon=20), ctx).problem(ProblemShape(20, 1, 0, 2)) is not a.problem(one_box)
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("an NLP was built")
+
+    monkeypatch.setattr(model.NMPCProblem, "__init__", no_build)
+    c = NMPCPlanner(NMPCParams(**SEED000), ctx)
+    ts = scenes[0]
+    c.reset(ts.request, build_scene(settings, ts))
+    assert isinstance(c.step(ts.request.start), Segment)

@@ -112,6 +112,7 @@ def initial_guess(
     sph: np.ndarray,
     step: np.ndarray,
     dstep: np.ndarray | None = None,
+    jstep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, str]:
     """(N, 6) knots for a cold solve from `q0` (6,), and what kind of guess they are ("straight",
     "over_box", either + "+joint_fallback"): a straight Cartesian line that brings the point `track` (3,)
@@ -170,6 +171,8 @@ def initial_guess(
             d = np.abs(goal_candidates - q0) @ np.array([1.0, 1.0, 1.0, 1.0, 1.0, 0.1])
             path.append(goal_candidates[int(np.argmin(d))])
     f = P.guess_step_fraction
-    # half the acceleration: the inf-norm arc length bounds the fastest joint, others turn within a leg
-    a = None if dstep is None else 0.5 * f * float(np.min(dstep))
+    # half the acceleration: the inf-norm arc length bounds the fastest joint, others turn within a leg;
+    # the speed ramps switch between +a and -a at most, a change of 2 a: within the jerk bound too
+    bound = [float(np.min(b)) for b in (dstep, jstep) if b is not None]
+    a = 0.5 * f * min(bound) if bound else None
     return resample(np.array(path), f * float(step.min()), P.horizon, a, stops=corners), kind

@@ -9,11 +9,14 @@ Decision variables, stage-major so a solution (and its multipliers) can be shift
     x = [q_1, s_1, q_2, s_2, ..., q_N, s_N, s_down]
 q_j (6) joint angles, s_j (1) table-clearance slack of stage j, s_down (1) terminal facing-down slack.
 
-Constraints, stage-major as well (block j):
-    q_j - q_{j-1}                          in [-step, step]           (6, linear)
-    (q_j - q_{j-1}) - (q_{j-1} - q_{j-2})  in [-a dt^2, a dt^2]      (6, linear; q_{-1} from the last
-                                                                       executed step; a: the request's
-                                                                       acceleration limit, or none)
+Constraints, stage-major as well (block j), with the step d_j = q_j - q_{j-1}:
+    d_j                                    in [-step, step]           (6, linear)
+    d_j - d_{j-1}                          in [-a dt^2, a dt^2]      (6, linear; d_0 = the last executed
+                                                                       step; a: the request's acceleration
+                                                                       limit, or none)
+    d_j - 2 d_{j-1} + d_{j-2}              in [-J dt^3, J dt^3]      (6, linear; d_{-1} = the step before
+                                                                       it; J: the request's jerk limit,
+                                                                       or none)
     sphere-outside-box between consecutive check points a, b (q_{j-1}, `substeps - 1` points between,
     q_j; joint-linear), every box x every sphere:  d(a) + d(b) - |c(b) - c(a)| >= 2 r   (hard)
     z_sphere - r_sphere + s_j - z_table    >= clearance                (one per sphere, soft through s_j)
@@ -27,12 +30,18 @@ and a sphere passing over a box edge between two check points dipped 2 cm below 
 so if the centre travels an arc of about |c(b) - c(a)| between a and b, every point on it is at least
 (d(a) + d(b) - |c(b) - c(a)|) / 2 >= r from the box: the sphere stays out along the whole step, and the
 robot slows down or passes higher only where it is close to the box.
+
+Building an NLP (CasADi code generation for the sparse derivatives, ~1 s with one box) costs far more than
+a solve, so `cached_problem` keeps every NLP built in this process, keyed by everything that changes its
+structure or its constants (shape, spheres, kinematics, weights, soft-row bounds, IPOPT options): planner
+instances with the same parameters share them, and a planner builds the shapes it expects at construction.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -48,6 +57,7 @@ __all__ = [
     "Weights",
     "SolveOutput",
     "NMPCProblem",
+    "cached_problem",
     "TCP_FRAME",
     "fk_tcp_sx",
     "fk_frames_sx",
@@ -65,6 +75,7 @@ _EPS2 = 1e-10  # (10 um)^2 under the distance's square root (feasible distances 
 # has zero chords, where sqrt(x^2 + eps) has curvature 1/sqrt(eps): with (10 um)^2 that was 1e5, IPOPT
 # regularised heavily and cycled for ~100 iterations. 1 cm costs at most 5 mm of extra clearance there.
 _CHORD_EPS2 = 1e-4
+N_FIXED_PARAMS = 25  # q0, last step, the step before, goal, tracked point, table z (see NMPCProblem)
 
 
 def _exact(v: float) -> float:
@@ -179,8 +190,8 @@ class NMPCProblem:
 
     `robot_spheres` (n, 5): (frame, x, y, z, r) with frame a DH frame index (4, 5, 6) or TCP_FRAME; `dh` and
     `tcp_offset_m` the arm's kinematics (`UR5e.dh`, `UR5e.tcp_offset_m`).
-    Parameters of a solve (vector `p`): q0 (6), the last executed step q0 - q_{-1} (6), goal (3), tracked
-    point in the TCP frame (3), table z (1),
+    Parameters of a solve (vector `p`): q0 (6), the last executed step q0 - q_{-1} (6), the step before it
+    q_{-1} - q_{-2} (6), goal (3), tracked point in the TCP frame (3), table z (1),
     then per box centre (3) and half extents incl. margin (3), then per held-object sphere offset in the TCP
     frame (3) and radius (1).
     """
@@ -206,13 +217,14 @@ class NMPCProblem:
         self.n_spheres = nt + no
         self.block_x = 7
         self.nx = N * self.block_x + 1
-        self.n_params = 19 + 6 * nb + 4 * no
+        n0 = N_FIXED_PARAMS
+        self.n_params = n0 + 6 * nb + 4 * no
 
         x = ca.SX.sym("x", self.nx)
         p = ca.SX.sym("p", self.n_params)
-        q0, dq_prev, goal, track, table_z = p[0:6], p[6:12], p[12:15], p[15:18], p[18]
-        boxes = [(p[19 + 6 * b : 22 + 6 * b], p[22 + 6 * b : 25 + 6 * b]) for b in range(nb)]
-        o0 = 19 + 6 * nb
+        q0, dq_prev, dq_prev2, goal, track, table_z = p[0:6], p[6:12], p[12:18], p[18:21], p[21:24], p[24]
+        boxes = [(p[n0 + 6 * b : n0 + 3 + 6 * b], p[n0 + 3 + 6 * b : n0 + 6 + 6 * b]) for b in range(nb)]
+        o0 = n0 + 6 * nb
         obj = [(p[o0 + 4 * s : o0 + 4 * s + 3], p[o0 + 4 * s + 3]) for s in range(no)]
         spheres_local = [(int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres]
         spheres_local += [(TCP_FRAME, off, r) for off, r in obj]
@@ -245,8 +257,9 @@ class NMPCProblem:
             dq = qj - q_prev
             g.append(dq)
             g.append(dq - dq_prev)
-            lbg.append(np.full(12, -np.inf))  # step and step-change bounds are set per solve
-            ubg.append(np.full(12, np.inf))
+            g.append(dq - 2 * dq_prev + dq_prev2)
+            lbg.append(np.full(18, -np.inf))  # step, step-change and jerk bounds are set per solve
+            ubg.append(np.full(18, np.inf))
             seq = [prev_pts]
             for sub in range(1, ns_sub + 1):
                 qm = qj if sub == ns_sub else q_prev + (sub / ns_sub) * dq
@@ -269,7 +282,7 @@ class NMPCProblem:
             e = pj + ca.mtimes(Rj, track) - goal
             w = weights.position * (weights.terminal_factor if j == N - 1 else 1.0)
             J += w * ca.dot(e, e) + weights.step * ca.dot(dq, dq) + weights.table_slack * sj * sj
-            q_prev, dq_prev = qj, dq
+            q_prev, dq_prev, dq_prev2 = qj, dq, dq_prev
             R_last = Rj
         s_down = x[-1]
         g.append(-R_last[2, 2] + s_down)
@@ -283,6 +296,7 @@ class NMPCProblem:
         self.ubg = np.concatenate(ubg)
         self._stage_rows_dq = np.concatenate([np.arange(6) + j * self.block_g for j in range(N)])
         self._stage_rows_ddq = self._stage_rows_dq + 6
+        self._stage_rows_dddq = self._stage_rows_dq + 12
         nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
         quiet = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
         self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
@@ -321,12 +335,13 @@ class NMPCProblem:
         q_hi: np.ndarray,
         step: np.ndarray,
         step_change: np.ndarray | None = None,
+        jerk_change: np.ndarray | None = None,
         *,
         facing_down: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """lbx, ubx (joint limits, slacks >= 0) and lbg, ubg for a solve: per-joint bounds on the step and
-        on its change from one step to the next (acceleration x dt^2; None: unbounded); the terminal
-        facing-down row switched off when `facing_down` is False."""
+        """lbx, ubx (joint limits, slacks >= 0) and lbg, ubg for a solve: per-joint bounds on the step, on
+        its change from one step to the next (acceleration x dt^2) and on the change of that change (jerk x
+        dt^3) (None: unbounded); the terminal facing-down row switched off when `facing_down` is False."""
         N = self.shape.horizon
         lbx = np.zeros(self.nx)
         ubx = np.full(self.nx, np.inf)
@@ -340,6 +355,9 @@ class NMPCProblem:
         if step_change is not None:
             lbg[self._stage_rows_ddq] = np.tile(-step_change, N)
             ubg[self._stage_rows_ddq] = np.tile(step_change, N)
+        if jerk_change is not None:
+            lbg[self._stage_rows_dddq] = np.tile(-jerk_change, N)
+            ubg[self._stage_rows_dddq] = np.tile(jerk_change, N)
         if not facing_down:
             lbg[-1] = -np.inf
         return lbx, ubx, lbg, ubg
@@ -382,3 +400,60 @@ class NMPCProblem:
             solve_time_s=dt,
             warm=warm,
         )
+
+
+# ---- the process-wide cache of built NLPs -------------------------------------------------------------
+_CACHE: dict[tuple[Any, ...], NMPCProblem] = {}
+_CACHE_LOCK = threading.Lock()
+
+
+def _frozen(options: dict[str, Any]) -> tuple[tuple[str, Any], ...]:
+    return tuple(sorted(options.items()))
+
+
+def cached_problem(
+    shape: ProblemShape,
+    *,
+    robot_spheres: np.ndarray,
+    dh: "DHParameters",
+    tcp_offset_m: float,
+    weights: Weights,
+    table_clearance_m: float,
+    facing_down_cos: float,
+    cold_options: dict[str, Any],
+    warm_options: dict[str, Any],
+) -> NMPCProblem:
+    """The NLP for these arguments (`NMPCProblem`'s), built on first request in this process and shared after.
+
+    Two planners with the same parameters get the same NLP object: a solve changes nothing in it but
+    IPOPT's statistics, which `NMPCProblem.solve` reads right after its call (planners in one process
+    solve one at a time; the comparison runner uses processes). Building holds a lock, so one shape is
+    built once even when threads ask for it together."""
+    sph = np.asarray(robot_spheres, dtype=float).reshape(-1, 5)
+    key = (
+        shape,
+        sph.tobytes(),
+        tuple(tuple(float(v) for v in np.asarray(a, dtype=float)) for a in (dh.d, dh.a, dh.alpha)),
+        float(tcp_offset_m),
+        weights,
+        float(table_clearance_m),
+        float(facing_down_cos),
+        _frozen(cold_options),
+        _frozen(warm_options),
+    )
+    with _CACHE_LOCK:
+        prob = _CACHE.get(key)
+        if prob is None:
+            prob = NMPCProblem(
+                shape,
+                robot_spheres=sph,
+                dh=dh,
+                tcp_offset_m=tcp_offset_m,
+                weights=weights,
+                table_clearance_m=table_clearance_m,
+                facing_down_cos=facing_down_cos,
+                cold_options=cold_options,
+                warm_options=warm_options,
+            )
+            _CACHE[key] = prob
+    return prob

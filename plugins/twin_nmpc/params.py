@@ -50,6 +50,11 @@ class NMPCParams(BaseModel):
         description="bound the change of the step by the request's max_joint_acc * dt^2 (not in the seed, which"
         " jumps to full speed in one step; the simulated grasp shook the cube loose that way)",
     )
+    limit_jerk: bool = Field(
+        True,
+        description="bound the change of the step's change by the request's max_joint_jerk * dt^3 (not in the seed;"
+        " declared as the planner's `jerk_limited`)",
+    )
     goal_tolerance_m: float = Field(0.03, gt=0, description="stop when the TCP is this close to the goal (or the goal's tighter tolerance)")
     max_solves: int = Field(40, ge=1, description="give up after this many solves")
     tool_spheres: list[tuple[float, float, float, float]] = Field(
@@ -65,6 +70,12 @@ class NMPCParams(BaseModel):
     object_sphere_max_radius_m: float = Field(0.05, gt=0)
     max_object_spheres: int = Field(4, ge=1, le=16)
     box_margin_m: float = Field(0.01, ge=0, le=0.1, description="boxes are grown by this on every side")
+    prebuild_boxes: list[int] | None = Field(
+        None,
+        description="obstacle-box counts whose NLPs are built when the planner is constructed; None: as many boxes as"
+        " the config has fixtures that perception reports (`known: false`; warehouse: the wall). Another count is"
+        " built on first use, inside that (slower) step",
+    )
     constraint_substeps: int = Field(2, ge=1, le=8, description="box constraint points per step (1 = knots only)")
     table_z_m: float = Field(0.0, description="table top height")
     table_clearance_m: float = Field(0.0, ge=0, description="sphere bottoms above the table (soft)")
@@ -101,6 +112,8 @@ class NMPCParams(BaseModel):
     def _consistent(self) -> "NMPCParams":
         if self.execute_steps > self.horizon:
             raise ValueError(f"execute_steps ({self.execute_steps}) must not exceed horizon ({self.horizon})")
+        if self.prebuild_boxes is not None and any(n < 0 for n in self.prebuild_boxes):
+            raise ValueError(f"prebuild_boxes must be box counts >= 0, got {self.prebuild_boxes}")
         if self.object_sphere_min_radius_m > self.object_sphere_max_radius_m:
             raise ValueError("object_sphere_min_radius_m must not exceed object_sphere_max_radius_m")
         for s in self.tool_spheres:

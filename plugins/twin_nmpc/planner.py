@@ -7,12 +7,15 @@ between steps (hard), table clearance (soft, slack) and a terminal facing-down t
 TCP position error, terminal weight x10, a lighter joint-step penalty. Execute the first k steps (seed 000:
 k = 1; seed 001: k = 3), replan. Stop within 3 cm of the goal (SUCCESS) or after 40 solves (NO_SOLUTION).
 Beyond the seed (each can be switched off): the step may change by at most the request's joint
-acceleration limit x dt^2 per step, and two spheres guard the wrist links.
+acceleration limit x dt^2 per step and that change by at most its jerk limit x dt^3 (`jerk_limited`
+declares the latter), and two spheres guard the wrist links.
 
 Why these choices:
-* The NLP is built once per problem shape (number of boxes, number of held-object spheres) and kept;
-  each solve only changes parameters and is warm-started from the previous solution shifted by the
-  executed steps, primal and dual (see `twin_nmpc.model`).
+* Building an NLP costs ~1 s, a solve ~10 ms: NLPs are built once per process and problem shape (number of
+  boxes, number of held-object spheres) and shared by every planner instance with the same parameters
+  (`twin_nmpc.model.cached_problem`); the shapes a run expects (`prebuild_boxes`) are built when the
+  planner is constructed, not inside a timed step. Each solve only changes parameters and is
+  warm-started from the previous solution shifted by the executed steps, primal and dual.
 * The perceived box is extended over the whole workspace in y, so the only way is over it, and a straight
   initial guess through the box starts IPOPT where the box distance has zero gradient. The first solve is
   therefore seeded over the box: lift, transfer, lower, through IK waypoints (measured on the bench
@@ -22,17 +25,35 @@ Why these choices:
   never executed: the remaining steps of the last feasible plan are (after the same check; when the very
   first solve of a goal fails, its checked initial guess is that plan), else the planner stops with a
   typed failure and a reason. The solve after a failure starts cold, from a fresh guess.
+* The model knows the perceived boxes and the table height, not the cell's fixtures (bins) nor the arm's
+  own links: every segment is checked against the whole FCL scene it was given (at the configured
+  `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
+  knots, as far as the arm needs to stop, coarsely). When either collides the arm brakes, as a real
+  controller's protective stop does: a shortest stop within the step, acceleration and jerk bounds
+  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair; with no
+  free stop, COLLISION at once. A start in collision is refused with INVALID_START naming the pair. Every
+  other end while the arm moves (no plan left, 40 solves) brakes the same way before its status.
+* A segment's samples are the knots, dt apart, and their derivatives are the knots' backward differences:
+  qd_i = (q_i - q_{i-1}) / dt, qdd_i = (qd_i - qd_{i-1}) / dt, the first sample's from the steps that
+  brought the arm to the measured state (zero at rest). So a segment starts with the state the previous
+  one ended in, what it declares is exactly what its positions measure, and the NLP's step, step-change
+  and jerk rows are the velocity, acceleration and jerk limits of what it declares. Within the goal
+  tolerance a moving arm comes to rest as soon as its bounds allow (along its last plan or on the shortest
+  stop, whichever is shorter and still ends within the tolerance, as the seed stops as soon as it is
+  within it), and the last segment ends with a zero step: declared at rest.
 * NMPC tracks a position and stops within a tolerance of it (`goal_tolerance_m`, or the goal's own
   `position_tolerance_m` when that is tighter); it does not track an orientation (only a soft terminal
   facing-down term) and it does not reach joint goals. So it declares `goal_kinds = {"position"}`: a
   config that asks it for joint or oriented pose goals fails before anything runs, and `twin.planning`
   judges its end like every planner's, against the goal's tolerances.
 * Segments that follow an earlier plan or the initial guess after a failed solve are marked
-  `Segment.fallback`; the checked loop FCL-checks and counts them like any other segment.
+  `Segment.fallback`; the checked loop FCL-checks and counts them like any other segment. Braking
+  segments (no solve) have `info["braking"]` and a solve time of 0.
 
-The pieces: `twin_nmpc.params` (the parameter model, the default spheres), `twin_nmpc.model` (the NLP),
-`twin_nmpc.spheres` (the proxy spheres and the numpy check of a plan), `twin_nmpc.guess` (the cold solve's
-initial guess); this module holds the receding-horizon loop.
+The pieces: `twin_nmpc.params` (the parameter model, the default spheres), `twin_nmpc.model` (the NLP and
+its cache), `twin_nmpc.spheres` (the proxy spheres and the numpy check of a plan), `twin_nmpc.guess` (the
+cold solve's initial guess), `twin_nmpc.braking` (stops within the bounds); this module holds the
+receding-horizon loop.
 """
 
 from __future__ import annotations
@@ -53,9 +74,14 @@ from twin.plugin import (
     Status,
     Trajectory,
     as_q,
+    colliding_pair,
+    densify,
+    densify_path,
+    first_collision,
 )
+from twin_nmpc.braking import can_stop_now, stopping_steps
 from twin_nmpc.guess import guess_slack, initial_guess
-from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, Weights
+from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, Weights, cached_problem
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.spheres import (
     Box,
@@ -75,6 +101,10 @@ __all__ = ["NMPCPlanner"]
 
 log = logging.getLogger("twin")
 
+# the last plan beyond a segment is checked joint-linearly at this resolution (rad): a coarse early warning
+# (the segment itself is checked at the configured resolution), for the knots the arm needs to stop
+_LOOKAHEAD_RESOLUTION_RAD = 0.03
+
 
 class NMPCPlanner:
     """Receding-horizon NMPC over CasADi/IPOPT: `reset(request, scene)`, then `step(q)` until a MotionResult."""
@@ -86,19 +116,33 @@ class NMPCPlanner:
         self.params = params if params is not None else NMPCParams()
         self.context = context
         self.kin: "UR5e" = context.kinematics
+        col = context.settings.collision
+        self._resolution = {"max_step_rad": col.check_resolution_rad, "max_step_m": col.check_resolution_m}
         self._robot_sph = robot_spheres(self.params.tool_spheres, self.params.wrist_spheres)
         self._problems: dict[ProblemShape, NMPCProblem] = {}
         self._request: MotionRequest | None = None
         self._scene: "PlanningScene | None" = None
         self._start_goal()
+        P = self.params
+        expected = P.prebuild_boxes
+        if expected is None:  # perception reports one box per fixture the planners do not know
+            expected = [sum(not f.known for f in context.settings.world.fixtures)]
+        for nb in sorted(set(expected)):  # built here, not in the first (timed) step
+            self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps))
+
+    @property
+    def jerk_limited(self) -> bool:
+        """Declared (`twin.planning.jerk_limited`): the NLP bounds the change of the step's change by the
+        request's jerk limit x dt^3 unless `limit_jerk` is off."""
+        return bool(self.params.limit_jerk)
 
     # ---- the NLPs ---------------------------------------------------------------------------------
     def problem(self, shape: ProblemShape) -> NMPCProblem:
-        """The NLP for `shape`, built on first use and kept for the planner's lifetime."""
+        """The NLP for `shape`: from the process-wide cache (`cached_problem`), built there on first use."""
         prob = self._problems.get(shape)
         if prob is None:
             P = self.params
-            prob = NMPCProblem(
+            prob = cached_problem(
                 shape,
                 robot_spheres=self._robot_sph,
                 dh=self.kin.dh,
@@ -114,7 +158,7 @@ class NMPCPlanner:
 
     @property
     def build_time_s(self) -> float:
-        """Seconds spent building NLPs so far (once per problem shape, then reused)."""
+        """Seconds it took to build the NLPs this planner has used (each once per process, then shared)."""
         return sum(p.build_time_s for p in self._problems.values())
 
     def _ipopt_options(self, *, cold: bool) -> dict[str, Any]:
@@ -185,9 +229,9 @@ class NMPCPlanner:
         self._plan_idx = 0  # index of the knot the robot should be at now
         self._ws: tuple[ProblemShape, SolveOutput] | None = None  # last converged solve, for warm start
         self._ws_offset = 0
-        self._q_end: np.ndarray | None = None  # where the last segment ended, and its velocity
-        self._qd_end = np.zeros(6)
         self._dq_prev = np.zeros(6)  # the last executed step (knot to knot): the start is at rest
+        self._dq_prev2 = np.zeros(6)  # the step before it
+        self._started = False  # whether step() has seen the measured start
         self._guess_kind = ""  # what the last cold solve started from (twin_nmpc.guess)
         self._done: MotionResult | None = None
         self._pending: MotionResult | None = None
@@ -263,7 +307,7 @@ class NMPCPlanner:
 
     def step(self, q: np.ndarray) -> Segment | MotionResult:
         """The next k steps from measured joint state `q` (6,) rad, or the final MotionResult."""
-        if self._request is None:
+        if self._request is None or self._scene is None:
             raise PlanningError("NMPCPlanner.step() called before reset()")
         if self._done is not None:
             return self._done
@@ -272,43 +316,50 @@ class NMPCPlanner:
         if self._pending is not None:
             self._done = self._pending
             return self._done
+        if not self._started:
+            self._started = True
+            if self._scene.in_collision(q):
+                pair = colliding_pair(self._scene, q)
+                self._done = self._final(Status.INVALID_START, f"the start is in collision ({pair})", q)
+                return self._done
         err = float(np.linalg.norm(self._tracked(q) - self._target))
         boxes = self._boxes()
         obj = self._object_spheres()
         sph = with_object(self._robot_sph, obj)
-        step = np.minimum(P.max_step_rad, self._request.limits.max_joint_vel * P.dt)
-        dstep = self._request.limits.max_joint_acc * P.dt**2 if P.limit_acceleration else None
+        step, dstep, jstep = self._step_bounds()
         if err <= self._tolerance:
-            # within the tolerance the NMPC stops solving; an arm still moving faster than it can stop in one
-            # step first brakes along the last plan (which heads for the goal and comes to rest there)
-            if dstep is not None and np.any(np.abs(self._dq_prev) > dstep + 1e-9):
-                knots = self._braking_knots(q, sph, boxes, step, dstep)
+            # within the tolerance the NMPC stops solving; a moving arm first comes to rest within its limits
+            # (`_stop_at_goal`), and the status follows once it stands
+            if self._moving():
+                knots = self._stop_at_goal(q, sph, boxes)
                 if knots is not None:
-                    self._braking_steps += knots.shape[0] - 1
-                    return self._execute(knots, dstep, {"solve": self._solves, "braking": True, "fallback": False}, 0.0, err)
-                log.info("nmpc: at the goal but no plan to brake along; stopping from %.3f rad/step", float(np.abs(self._dq_prev).max()))
+                    return self._execute(knots, {"solve": self._solves, "braking": True, "fallback": False}, 0.0, err)
+                log.warning(
+                    "nmpc: at the goal but no way to come to rest within the limits; stopping from %.3f rad/step",
+                    float(np.abs(self._dq_prev).max()),
+                )
             self._done = self._final(Status.SUCCESS, f"TCP within {err:.4f} m of the goal after {self._solves} solves", q)
             return self._done
         if self._solves >= P.max_solves:
-            self._done = self._final(
-                Status.NO_SOLUTION, f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {self._tolerance} m)", q
-            )
-            return self._done
+            why = f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {self._tolerance} m)"
+            return self._end(Status.NO_SOLUTION, why, q)
 
         for name, lo, hi in boxes:
             if np.any(np.all((self._target >= lo) & (self._target <= hi))):
-                self._done = self._final(Status.INVALID_GOAL, f"the goal lies inside obstacle box {name!r}", q)
-                return self._done
+                return self._end(Status.INVALID_GOAL, f"the goal lies inside obstacle box {name!r}", q)
         clear = clearance(self.kin, q[None], sph, boxes, margin=0.0)
         if clear.size and clear.min() < 0.0:
             when = "at the start" if self._solves == 0 else f"at the state measured for solve {self._solves + 1}"
-            self._done = self._final(Status.INVALID_START, f"a proxy sphere is {-clear.min():.3f} m inside an obstacle box {when}", q)
-            return self._done
+            why = f"a proxy sphere is {-clear.min():.3f} m inside an obstacle box {when}"
+            return self._end(Status.INVALID_START, why, q)
 
         shape = ProblemShape(P.horizon, len(boxes), obj.shape[0], P.constraint_substeps)
+        if shape not in self._problems:
+            log.info("nmpc: building the NLP for %s inside a step (not prebuilt: `prebuild_boxes`)", shape)
         prob = self.problem(shape)
         p = self._parameters(q, boxes, obj)
-        bounds = prob.bounds(self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1], step, dstep, facing_down=P.facing_down)
+        lim = self.kin.joint_limits
+        bounds = prob.bounds(lim[:, 0], lim[:, 1], step, dstep, jstep, facing_down=P.facing_down)
         if self._ws is not None and self._ws[0] == shape:
             prev = self._ws[1]
             k = self._ws_offset
@@ -318,7 +369,7 @@ class NMPCPlanner:
             sol = prob.solve(x0, p, bounds, lam_x0=lam_x0, lam_g0=lam_g0)
         else:
             guess, self._guess_kind = initial_guess(
-                self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep
+                self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
             )
             x0 = prob.pack_x(guess, guess_slack(self.kin, guess, sph, P))
             sol = prob.solve(x0, p, bounds)
@@ -329,7 +380,7 @@ class NMPCPlanner:
         k = P.execute_steps
         problem = None if sol.converged else f"IPOPT: {sol.status}"
         if problem is None:
-            problem = self._violation(sol.q, sph, boxes, step, dstep)
+            problem = self._violation(sol.q, sph, boxes)
         if problem is None:
             self._plan, self._plan_idx = sol.q, 0
             self._ws, self._ws_offset = (shape, sol), 0
@@ -342,54 +393,139 @@ class NMPCPlanner:
                 # the first solve of a goal failed: its initial guess is itself a plan over the box, at
                 # reduced speed; it is followed (as the "last feasible plan") only if it passes the same check
                 path = np.vstack([q[None], guess])
-                if self._violation(path, sph, boxes, step, dstep) is None:
+                if self._violation(path, sph, boxes) is None:
                     self._plan, self._plan_idx = path, 0
                     entry["following"] = "initial guess"
             self._ws = None  # the next solve starts cold, from a fresh guess at the state reached
-            knots, fallback = self._fallback_knots(q, sph, boxes, step, dstep, k), True
+            knots, fallback = self._fallback_knots(q, sph, boxes, k), True
             if knots is None:
-                self._done = self._final(Status.NO_SOLUTION, f"solve {self._solves} failed ({problem}) and no feasible plan is left to follow", q)
-                return self._done
+                why = f"solve {self._solves} failed ({problem}) and no feasible plan is left to follow"
+                return self._end(Status.NO_SOLUTION, why, q)
             self._fallbacks += 1
         knots[0] = q
         entry["fallback"] = fallback
-        return self._execute(knots, dstep, dict(entry, cost=sol.cost), sol.solve_time_s, err)
+        return self._execute(knots, dict(entry, cost=sol.cost), sol.solve_time_s, err)
 
-    def _execute(self, knots: np.ndarray, dstep: np.ndarray | None, info: dict[str, Any], solve_time_s: float, err: float) -> Segment:
-        """Command `knots` (m+1, 6), knots[0] = the measured state: advance the plan and return the segment."""
-        self._dq_prev = knots[-1] - knots[-2]
-        self._plan_idx += knots.shape[0] - 1
-        self._ws_offset += knots.shape[0] - 1
-        traj = self._segment(knots, dstep)
+    # ---- executing, checked -------------------------------------------------------------------------
+    def _execute(
+        self, knots: np.ndarray, info: dict[str, Any], solve_time_s: float, err: float
+    ) -> Segment | MotionResult:
+        """Command `knots` (m+1, 6), knots[0] = the measured state, if they are free in the FCL scene and the
+        last plan is free for as far beyond them as the arm needs to stop; else brake (`_end`)."""
+        traj = self._segment(knots)
+        hit = self._collision(traj)
+        braking = bool(info.get("braking"))
+        if hit is None and not braking:
+            ahead = self._collision_ahead(knots)
+            if ahead is not None:
+                pair, n = ahead
+                why = f"the plan runs into a collision ({pair}) within {n} step{'' if n == 1 else 's'}"
+                return self._end(Status.COLLISION, why, knots[0], hit=True)
+        elif hit is not None:
+            kind = "braking segment" if braking else ("fallback segment" if info.get("fallback") else "segment")
+            return self._end(Status.COLLISION, f"the next {kind} would collide ({hit})", knots[0], hit=True)
+        self._commit(knots)
+        if braking:
+            self._braking_steps += knots.shape[0] - 1
         return Segment(traj, solve_time_s, dict(info, position_error_m=err), fallback=bool(info.get("fallback", False)))
 
+    def _commit(self, knots: np.ndarray) -> None:
+        """The arm is commanded along `knots`: advance the plan and the step history."""
+        m = knots.shape[0] - 1
+        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
+        self._dq_prev2, self._dq_prev = hist[-2].copy(), hist[-1].copy()
+        self._plan_idx += m
+        self._ws_offset += m
+
+    def _end(self, status: Status, reason: str, q: np.ndarray, *, hit: bool = False) -> Segment | MotionResult:
+        """End the goal with `status`: a moving arm first brakes to rest (a braking segment, if its stop is
+        free; the status follows at the next step), else the status now. `hit`: the reason is a collision
+        ahead (the braking segment is what avoids it)."""
+        if self._moving():
+            knots = self._brake_knots(q)
+            if knots is not None:
+                traj = self._segment(knots)
+                pair = self._collision(traj)
+                if pair is None:
+                    self._commit(knots)
+                    self._braking_steps += knots.shape[0] - 1
+                    what = "braked to a stop" if hit else "braked to a stop first"
+                    self._pending = self._final(status, f"{reason}; {what}", knots[-1])
+                    info = {"solve": self._solves, "braking": True, "fallback": False, "stopping": status.value}
+                    err = float(np.linalg.norm(self._tracked(q) - self._target))
+                    return Segment(traj, 0.0, dict(info, position_error_m=err))
+                reason += f"; no free way to brake ({pair}): stopped at once"
+            else:
+                reason += "; no stop within the limits: stopped at once"
+            log.warning("nmpc: %s", reason)
+        self._done = self._final(status, reason, q)
+        return self._done
+
+    def _collision(self, traj: Trajectory) -> str | None:
+        """The colliding pair of the first colliding sample of `traj` (FCL, whole scene, configured resolution)."""
+        assert self._scene is not None
+        hit = first_collision(traj, self._scene, self.kin, **self._resolution)
+        if hit is None:
+            return None
+        return colliding_pair(self._scene, densify(traj, self.kin, **self._resolution)[hit])
+
+    def _collision_ahead(self, knots: np.ndarray) -> tuple[str, int] | None:
+        """(pair, steps) when the last plan, after the segment `knots` that follows it, collides within the
+        steps the arm needs to stop from the segment's end (+2), checked joint-linearly and coarsely."""
+        if self._plan is None or knots.shape[0] < 2:
+            return None
+        start = self._plan_idx + knots.shape[0] - 1
+        _, dstep, _ = self._step_bounds()
+        a = float(np.min(dstep)) if dstep is not None else self.params.max_step_rad
+        n = math.ceil(float(np.abs(knots[-1] - knots[-2]).max()) / a) + 2
+        rest = self._plan[start + 1 : start + 1 + n]
+        if rest.shape[0] == 0:
+            return None
+        path = np.vstack([knots[-1:], rest])
+        qs = densify_path(path, _LOOKAHEAD_RESOLUTION_RAD)[1:]
+        assert self._scene is not None
+        i = self._scene.first_collision(qs)
+        if i is None:
+            return None
+        # densify_path puts ceil(|step| / resolution) points on each step: which step the hit is on
+        lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        per_step = np.maximum(1, np.ceil(lengths / _LOOKAHEAD_RESOLUTION_RAD - 1e-9))
+        return colliding_pair(self._scene, qs[i]), int(np.searchsorted(np.cumsum(per_step), i + 1)) + 1
+
     # ---- pieces of step() ---------------------------------------------------------------------------
+    def _step_bounds(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Per-joint bounds (6,) of a step (velocity x dt), of its change (acceleration x dt^2) and of the
+        change of that (jerk x dt^3); None where the parameters switch a bound off."""
+        assert self._request is not None
+        P, lim = self.params, self._request.limits
+        step = np.minimum(P.max_step_rad, lim.max_joint_vel * P.dt)
+        dstep = lim.max_joint_acc * P.dt**2 if P.limit_acceleration else None
+        jstep = lim.max_joint_jerk * P.dt**3 if P.limit_jerk else None
+        return step, dstep, jstep
+
+    def _moving(self) -> bool:
+        """Whether the last commanded step moved (a stop ends with a zero step: the arm is declared at rest)."""
+        return bool(np.any(self._dq_prev != 0.0))
+
     def _parameters(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray) -> np.ndarray:
         m = self.params.box_margin_m
-        parts = [q, self._dq_prev, self._target, self._track, [self.params.table_z_m]]
+        parts = [q, self._dq_prev, self._dq_prev2, self._target, self._track, [self.params.table_z_m]]
         for _, lo, hi in boxes:
             parts += [0.5 * (lo + hi), 0.5 * (hi - lo) + m]
         for s in obj:
             parts += [s[:3], [s[3]]]
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1) for a in parts])
 
-    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], step: np.ndarray, dstep: np.ndarray | None) -> str | None:
+    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
         """Why the knot path (m+1, 6) (knots[0] = the current state) breaks a hard constraint, or None."""
         P = self.params
+        step, dstep, jstep = self._step_bounds()
         return violation(
-            self.kin, knots, sph, boxes, step, dstep,
-            dq_prev=self._dq_prev, box_margin_m=P.box_margin_m, substeps=P.constraint_substeps,
+            self.kin, knots, sph, boxes, step, dstep, jstep,
+            dq_prev=self._dq_prev, dq_prev2=self._dq_prev2, box_margin_m=P.box_margin_m, substeps=P.constraint_substeps,
         )
 
-    def _fallback_knots(
-        self,
-        q: np.ndarray,
-        sph: np.ndarray,
-        boxes: list[Box],
-        step: np.ndarray,
-        dstep: np.ndarray | None,
-        k: int,
-    ) -> np.ndarray | None:
+    def _fallback_knots(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], k: int) -> np.ndarray | None:
         """Up to k remaining steps of the last feasible plan, from the measured state, if they still pass."""
         if self._plan is None:
             return None
@@ -397,48 +533,70 @@ class NMPCPlanner:
         if rest.shape[0] == 0:
             return None
         knots = np.vstack([q[None], rest])
-        why = self._violation(knots, sph, boxes, step, dstep)
+        why = self._violation(knots, sph, boxes)
         if why is not None:
             log.info("nmpc: the last feasible plan no longer passes (%s)", why)
             return None
         return knots
 
-    def _braking_knots(
-        self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], step: np.ndarray, dstep: np.ndarray
-    ) -> np.ndarray | None:
-        """The last plan's next knots up to the first step small enough to stop after (<= dstep per joint),
-        from the measured state, if they pass the constraint check; None without such a plan."""
+    def _stop_along_plan(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
+        """The last plan's next knots up to the first one the arm may stop at (`braking.can_stop_now`), then a
+        zero step, from the measured state, if they pass the constraint check; None without such a plan."""
+        _, dstep, jstep = self._step_bounds()
+        d2, d1 = self._dq_prev2, self._dq_prev
+        if can_stop_now(d2, d1, dstep, jstep):
+            return np.vstack([q[None], q[None]])
         if self._plan is None:
             return None
-        rest = self._plan[self._plan_idx + 1 :]
-        if rest.shape[0] == 0:
-            return None
-        steps = np.abs(np.diff(np.vstack([q[None], rest]), axis=0))
-        small = np.flatnonzero(np.all(steps <= dstep + 1e-9, axis=1))
-        if small.size == 0:
-            return None
-        knots = np.vstack([q[None], rest[: small[0] + 1]])
-        return knots if self._violation(knots, sph, boxes, step, dstep) is None else None
+        path = [q]
+        for nxt in self._plan[self._plan_idx + 1 :]:
+            d2, d1 = d1, nxt - path[-1]
+            path.append(nxt)
+            if can_stop_now(d2, d1, dstep, jstep):
+                knots = np.vstack([*path, path[-1]])
+                return knots if self._violation(knots, sph, boxes) is None else None
+        return None
 
-    def _segment(self, knots: np.ndarray, dstep: np.ndarray | None = None) -> Trajectory:
-        """The executed knots as a trajectory at dt: starts exactly at the measured state (zero velocity at the
-        first segment, the previous segment's end velocity after that); velocities are central differences
-        over the plan, zero at the end when that end is within the goal tolerance and slow enough to stop."""
+    def _stop_at_goal(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
+        """How a moving arm within the goal tolerance comes to rest: the shorter of the stop along the last plan
+        (`_stop_along_plan`) and the shortest stop (`_brake_knots`) among those that end within the tolerance
+        and pass the constraint check, as the seed stops as soon as it is within the tolerance; when neither
+        ends there, the shortest stop anyway (the loop then solves again from rest); None without any."""
+        along, brake = self._stop_along_plan(q, sph, boxes), self._brake_knots(q)
+        ok = [
+            k for k in (along, brake)
+            if k is not None
+            and np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance
+            and self._violation(k, sph, boxes) is None
+        ]
+        if ok:
+            return min(ok, key=len)
+        if brake is not None and self._violation(brake, sph, boxes) is None:
+            return brake
+        return along
+
+    def _brake_knots(self, q: np.ndarray) -> np.ndarray | None:
+        """The shortest stop from the measured state `q` and the last two steps (`braking.stopping_steps`),
+        ending in a zero step, within the joint limits; None when there is none."""
+        step, dstep, jstep = self._step_bounds()
+        steps = stopping_steps(self._dq_prev2, self._dq_prev, step, dstep, jstep)
+        if steps is None:
+            return None
+        knots = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
+        knots[-1] = knots[-2]  # the zero step, exactly
+        lim = self.kin.joint_limits
+        if np.any(knots < lim[:, 0]) or np.any(knots > lim[:, 1]):
+            return None
+        return knots
+
+    def _segment(self, knots: np.ndarray) -> Trajectory:
+        """The knots (m+1, 6) as a trajectory at dt, with the knots' backward differences as its derivatives:
+        qd_i = (q_i - q_{i-1}) / dt and qdd_i = (qd_i - qd_{i-1}) / dt, for the first sample from the last two
+        executed steps (the state the arm was brought to; zero at rest). Declared and measured agree exactly,
+        and a segment starts with the velocity and acceleration the previous one ended with."""
         dt = self.params.dt
-        m = knots.shape[0] - 1
-        t = dt * np.arange(m + 1)
-        nxt = self._plan[self._plan_idx + 1] if self._plan is not None and self._plan_idx + 1 < self._plan.shape[0] else knots[-1]
-        ext = np.vstack([knots, nxt[None]])
-        qd = np.zeros((m + 1, 6))
-        if self._q_end is not None:  # the commanded velocity carries over, even when tracking lags
-            qd[0] = self._qd_end
-        qd[1:] = (ext[2:] - ext[:-2]) / (2 * dt)
-        slow = dstep is None or bool(np.all(np.abs(knots[-1] - knots[-2]) <= dstep + 1e-9))
-        if slow and np.linalg.norm(self._tracked(knots[-1]) - self._target) <= self._tolerance:
-            qd[-1] = 0.0
-        qdd = np.zeros_like(qd)
-        if m >= 1:
-            qdd[:-1] = np.diff(qd, axis=0) / dt
-            qdd[-1] = qdd[-2]
-        self._q_end, self._qd_end = knots[-1].copy(), qd[-1].copy()
-        return Trajectory(t, knots, qd, qdd)
+        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
+        qd = hist[1:] / dt
+        qdd = np.diff(hist, axis=0) / dt**2
+        t = dt * np.arange(knots.shape[0])
+        return Trajectory(t, knots.copy(), qd, qdd)

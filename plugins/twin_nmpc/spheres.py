@@ -3,8 +3,9 @@
 The NLP (`twin_nmpc.model`) models the gripper, the wrist and a held box as spheres (frame, x, y, z, r):
 `robot_spheres` from the parameters, `object_spheres` covering the held box, `with_object` both together.
 Every plan is checked again here, independently of IPOPT's own view, before a step of it is executed
-(`violation`): joint steps and their change, joint limits, the spheres' pairwise box rows at the NLP's check
-points (`model.pair_clearance`), and the joint-linear path between knots densely against the boxes.
+(`violation`): joint steps, their change and the change of that (acceleration, jerk), joint limits, the
+spheres' pairwise box rows at the NLP's check points (`model.pair_clearance`), and the joint-linear path
+between knots densely against the boxes.
 
 A box is (name, lo (3,), hi (3,)) in the base frame, m, without the margin.
 """
@@ -115,22 +116,30 @@ def violation(
     boxes: list[Box],
     step: np.ndarray,
     dstep: np.ndarray | None,
+    jstep: np.ndarray | None = None,
     *,
     dq_prev: np.ndarray,
+    dq_prev2: np.ndarray | None = None,
     box_margin_m: float,
     substeps: int,
 ) -> str | None:
-    """Why the knot path (m+1, 6) (knots[0] = the current state, reached by the step `dq_prev`) breaks a hard
-    constraint, or None: a joint step beyond `step` (6,), a change of step beyond `dstep` (6,) (None: not
-    bounded), a knot outside the joint limits, a sphere closer than CHECK_TOL_M inside a box grown by
-    `box_margin_m` at `substeps` check points per step, or inside a box itself between knots."""
+    """Why the knot path (m+1, 6) (knots[0] = the current state, reached by the step `dq_prev` after the step
+    `dq_prev2`) breaks a hard constraint, or None: a joint step beyond `step` (6,), a change of step beyond
+    `dstep` (6,), a change of that change beyond `jstep` (6,) (None: not bounded), a knot outside the joint
+    limits, a sphere closer than CHECK_TOL_M inside a box grown by `box_margin_m` at `substeps` check points
+    per step, or inside a box itself between knots."""
     dq = np.diff(knots, axis=0)
     if np.any(np.abs(dq) > step + 1e-7):
         return f"a joint step of {np.abs(dq).max():.3f} rad exceeds {step.max():.3f} rad"
+    hist = np.vstack([np.zeros(6) if dq_prev2 is None else dq_prev2, dq_prev, dq])
     if dstep is not None:
-        ddq = np.abs(np.diff(np.vstack([dq_prev[None], dq]), axis=0))
+        ddq = np.abs(np.diff(hist[1:], axis=0))
         if np.any(ddq > dstep + 1e-7):
             return f"a joint step changes by {ddq.max():.4f} rad, more than {dstep.max():.4f} rad (acceleration)"
+    if jstep is not None:
+        dddq = np.abs(np.diff(hist, n=2, axis=0))
+        if np.any(dddq > jstep + 1e-7):
+            return f"a joint step's change changes by {dddq.max():.4f} rad, more than {jstep.max():.4f} rad (jerk)"
     lim = kin.joint_limits
     if np.any(knots < lim[:, 0] - 1e-9) or np.any(knots > lim[:, 1] + 1e-9):
         return "a knot leaves the joint limits"
