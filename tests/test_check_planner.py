@@ -253,42 +253,16 @@ def test_limits_are_judged_on_the_motion_not_only_on_what_it_declares():
 
 
 # ---- every built-in planner ---------------------------------------------------------------------------
-_TOPPRA_JERK = (
-    "TOPP-RA's constant-acceleration parametrizer does not limit jerk: the timed trajectory's acceleration jumps "
-    "(third differences of q ~4000 rad/s^3, differences of qdd ~6000, against max_joint_jerk 100)"
-)
-_SEEDED_AFTER_SETUP = (
-    "OMPL is re-seeded after SpaceInformation.setup(), which draws the random projection KPIECE uses from the "
-    "unseeded generator: the same request planned twice in one process gives different paths"
-)
 # Rules built-in planners break today, reported with the evidence (issue 17, part 5). Each must keep failing:
 # once fixed, its test fails and asks for its entry to be removed here.
-KNOWN_BREACHES: dict[str, dict[str, str]] = {
-    "toppra.movel": {"jerk": _TOPPRA_JERK},
-    "seed.slerp_movel": {"jerk": "its clamped cubic spline starts (and ends) with a nonzero acceleration: qdd jumps from rest to "
-                                 "~7 rad/s^2 at t = 0 (~7000 rad/s^3 over the first 1 ms sample)"},
-    **{f"ompl.{n}": {"jerk": _TOPPRA_JERK + " (toppra is the default retimer)"} for n in (
-        "rrtconnect", "rrt", "rrtstar", "informedrrtstar", "prm", "prmstar", "bitstar", "aorrtc", "fmt", "bfmt",
-    )},
-    **{f"ompl.{n}": {"jerk": _TOPPRA_JERK + " (toppra is the default retimer)", "determinism": _SEEDED_AFTER_SETUP}
-       for n in ("kpiece1", "bkpiece1", "lbkpiece1")},
-    "nmpc": {
-        "acceleration": "the declared qdd of a segment's first sample is 1.5x max_joint_acc (central-difference qd from rest)",
-        "jerk": "the steps' change is limited (acceleration) but not its rate: third differences of q reach 1.4-1.75x",
-        "invalid_start": "it never checks the start against the FCL scene: a start in the table gets a first segment",
-        "collision_free": "it sees the scene's boxes and the table height only, not fixtures: a segment runs into bin_green",
-    },
-}
+KNOWN_BREACHES: dict[str, dict[str, str]] = {}
 
 
-# Breaches that depend on the machine's speed: allowed, not required. The optimising OMPL planners search
-# for the whole wall-clock time limit, so how far they get (and so the path, or whether they find one in
-# time) depends on the CPU they get: on a loaded machine the same request and seed gave 1325 then 1480
-# trajectory samples (ompl.bitstar), 1296 then 1482 (ompl.prmstar), success then timeout (informedrrtstar).
-_WALL_CLOCK = "an anytime search bounded by wall-clock time: its result depends on the machine's speed and load"
-TIMING_DEPENDENT: dict[str, dict[str, str]] = {
-    f"ompl.{n}": {"determinism": _WALL_CLOCK} for n in ("rrtstar", "informedrrtstar", "prmstar", "bitstar", "aorrtc")
-}
+# Breaches that depend on the machine's speed: allowed, not required. None today: the optimising OMPL
+# planners, which searched for their whole wall-clock limit (the same request and seed gave 1325 then 1480
+# trajectory samples with ompl.bitstar on a loaded machine), end their search by a work budget that counts
+# state checks (`max_state_checks`, twin_ompl.budget), so a seeded run repeats on any machine.
+TIMING_DEPENDENT: dict[str, dict[str, str]] = {}
 
 
 def builtin_planners() -> list[str]:

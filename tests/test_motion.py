@@ -22,7 +22,7 @@ from twin_motion.retimers import RuckigRetimer, ToppraRetimer, ruckig_point_to_p
 
 from twin.config import PlannerBlock, settings_from_dict
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
-from twin.planning import densify_path, limits_from_settings, make_context, plan, plan_with
+from twin.planning import densify_path, jerk_limited, limits_from_settings, make_context, plan, plan_with
 from twin.registry import Kind, default_registry
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
 
@@ -298,6 +298,21 @@ def test_retimers_are_registered_and_validate_params(ctx: Any) -> None:
     assert isinstance(ctx.registry.retimer("ruckig", {"max_deviation_rad": 0.1}, ctx), RuckigRetimer)
     with pytest.raises(ConfigError, match="unknown parameter"):
         ctx.registry.retimer("toppra", {"gridpoints": 3}, ctx)
+
+
+def test_jerk_limits_are_declared(ctx: Any, limits: Limits) -> None:
+    """Jerk is a declared contract (`twin.plugin.jerk_limited`): TOPP-RA parameterises under velocity and
+    acceleration limits only, so it and the planners it times declare False, as does the seed's MoveL
+    (its clamped spline starts from rest with a nonzero acceleration); Ruckig and the quintic keep it."""
+    assert jerk_limited(ToppraRetimer()) is False and jerk_limited(RuckigRetimer()) is True
+    names = ("ruckig.movej", "seed.quintic_movej", "toppra.movel", "seed.slerp_movel")
+    declared = {name: jerk_limited(ctx.registry.planner(name, {}, ctx)) for name in names}
+    assert declared == dict(zip(names, (True, True, False, False), strict=True))
+    # what the declarations say: TOPP-RA's acceleration jumps from rest, Ruckig's starts at zero
+    P = np.array([HOME, HOME + 0.6])
+    toppra, ruck = ToppraRetimer().retime(P, limits), RuckigRetimer().retime(P, limits)
+    assert np.abs(toppra.qdd[1]).max() / (toppra.t[1] - toppra.t[0]) > 10 * limits.max_joint_jerk.max()
+    assert np.abs(ruck.qdd[1] - ruck.qdd[0]).max() / (ruck.t[1] - ruck.t[0]) <= limits.max_joint_jerk.max() * (1 + 1e-6)
 
 
 def test_single_waypoint_paths(limits: Limits) -> None:

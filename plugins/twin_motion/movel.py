@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from pydantic import Field
@@ -178,7 +178,13 @@ class _MoveLBase(MotionPlannerBase):
 
 # ---- toppra.movel ---------------------------------------------------------------------------------------
 class ToppraMoveL(_MoveLBase):
-    """Straight TCP line + SLERP, IK at refined waypoints, timed by TOPP-RA (joint and TCP speed limits)."""
+    """Straight TCP line + SLERP, IK at refined waypoints, timed by TOPP-RA (joint and TCP speed limits).
+
+    Not jerk-limited (declared): TOPP-RA parameterises under velocity and acceleration constraints only, so
+    the acceleration may jump (from rest at t = 0, and between its constant-acceleration grid intervals).
+    """
+
+    jerk_limited: ClassVar[bool] = False
 
     class Params(MotionPlannerBase.Params):
         step_m: float = Field(0.02, gt=0, le=0.1, description="initial waypoint spacing along the line")
@@ -336,7 +342,14 @@ class SeedSlerpMoveL(_MoveLBase):
     The waypoints are joined by a cubic spline in time with zero end velocities. By default the duration
     is stretched where needed so joint velocity, acceleration and jerk stay under the request's limits
     (`respect_limits: false` keeps the seed's timing even when it exceeds them).
+
+    Not jerk-limited (declared): the seed times its waypoints by duration alone, with no acceleration
+    profile (its report: continuity "waypoint-based"), and the clamped spline that reproduces it starts and
+    ends at rest with a nonzero acceleration, so qdd jumps at t = 0 and at the end however long T is. The
+    stretch above bounds the jerk inside the spline, not those two jumps; this is the baseline as it was.
     """
+
+    jerk_limited: ClassVar[bool] = False
 
     class Params(MotionPlannerBase.Params):
         step_m: float = Field(0.02, gt=0, description="Cartesian step between waypoints")

@@ -6,6 +6,10 @@ IK solution), OMPL shortcutting, then a retimer plugin (default `toppra`). Impor
 not import OMPL; a planner's module is imported when the planner is first created, and a missing OMPL
 raises DependencyMissing naming the `ompl` extra.
 
+The optimising planners (RRT*, Informed RRT*, PRM*, BIT*, AORRTC) improve their path until a work budget
+is spent (`max_state_checks`, `max_iterations`; `twin_ompl.budget`), not for the whole time limit, so a
+seeded run repeats on any machine; the time limit stays a hard cap.
+
 The straight-motion shortcut (`try_direct`) is off by default, so what a comparison measures is the named
 planner's search; a planner block can turn it on (`params: {try_direct: true}`) for task stages.
 
@@ -28,14 +32,29 @@ __all__ = ["PLANNERS", "twin_register_planners"]
 PLANNERS: dict[str, tuple[str, str]] = {
     "ompl.rrtconnect": ("twin_ompl.planner:RRTConnect", "OMPL RRT-Connect (bidirectional RRT); stops at the first path"),
     "ompl.rrt": ("twin_ompl.planner:RRT", "OMPL RRT with goal bias; stops at the first path"),
-    "ompl.rrtstar": ("twin_ompl.planner:RRTstar", "OMPL RRT* (asymptotically optimal path length); uses its whole time limit"),
-    "ompl.informedrrtstar": ("twin_ompl.planner:InformedRRTstar", "OMPL Informed RRT*; uses its whole time limit"),
+    "ompl.rrtstar": (
+        "twin_ompl.planner:RRTstar",
+        "OMPL RRT* (asymptotically optimal path length); optimises until its work budget is spent",
+    ),
+    "ompl.informedrrtstar": (
+        "twin_ompl.planner:InformedRRTstar",
+        "OMPL Informed RRT*; optimises until its work budget is spent",
+    ),
     "ompl.sorrtstar": ("twin_ompl.planner:SORRTstar", "OMPL Sorting RRT*; disabled: hangs in OMPL 2.0.1 (see twin planners)"),
     "ompl.prm": ("twin_ompl.planner:PRM", "OMPL PRM (roadmap); stops at the first path"),
-    "ompl.prmstar": ("twin_ompl.planner:PRMstar", "OMPL PRM* (asymptotically optimal roadmap); uses its whole time limit"),
+    "ompl.prmstar": (
+        "twin_ompl.planner:PRMstar",
+        "OMPL PRM* (asymptotically optimal roadmap); optimises until its work budget is spent",
+    ),
     "ompl.lazyprmstar": ("twin_ompl.planner:LazyPRMstar", "OMPL LazyPRM* (needs bindings that expose it; not in ompl 2.0.1)"),
-    "ompl.bitstar": ("twin_ompl.planner:BITstar", "OMPL BIT* (batch informed trees); uses its whole time limit"),
-    "ompl.aorrtc": ("twin_ompl.planner:AORRTC", "OMPL AORRTC (asymptotically optimal RRT-Connect); uses its whole time limit"),
+    "ompl.bitstar": (
+        "twin_ompl.planner:BITstar",
+        "OMPL BIT* (batch informed trees); optimises until its work budget is spent",
+    ),
+    "ompl.aorrtc": (
+        "twin_ompl.planner:AORRTC",
+        "OMPL AORRTC (asymptotically optimal RRT-Connect); optimises until its work budget is spent",
+    ),
     "ompl.kpiece1": ("twin_ompl.planner:KPIECE1", "OMPL KPIECE1 (projection-grid exploration); stops at the first path"),
     "ompl.bkpiece1": ("twin_ompl.planner:BKPIECE1", "OMPL bidirectional KPIECE1; stops at the first path"),
     "ompl.lbkpiece1": ("twin_ompl.planner:LBKPIECE1", "OMPL lazy bidirectional KPIECE1; stops at the first path"),

@@ -27,12 +27,17 @@ Time: the request's `time_limit_s` (or the smaller `time_limit_s` parameter) bou
 the final retiming and check: sampling stops early enough to leave up to a quarter of the limit for steps
 5-7, and past the sampling deadline every new validity query answers "invalid", so planners that test
 their termination condition only between long batches stop promptly too. The retimer is warmed up when
-the planner is built (TOPP-RA's first import costs ~1 s), not inside a request's limit.
+the planner is built (TOPP-RA's first import costs ~1 s), not inside a request's limit. Within that limit
+the optimising planners search until their work budget is spent (`max_state_checks`, `max_iterations`:
+state checks and iterations counted, `twin_ompl.budget`), so where they stop does not depend on the
+machine's speed; the others stop at their first path. PRM and PRM* grow their roadmap from here, in turns
+counted in state checks (OMPL's own loop times them by the clock and finds the path from a helper thread).
 
-Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) right before the planner and the
-path simplifier are created, so every random generator they own starts from the request's seed; the
-same request and scene give the same path. The seed is process-global: do not plan with OMPL from two
-threads at once (the FCL scene is not thread-safe either).
+Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) with the request's seed before the
+state space is built, so every random generator of the run starts from it (the space's random projection
+KPIECE uses, the planner's, the path simplifier's); the same request and scene give the same path, whatever
+was planned before in the process. The seed is process-global: do not plan with OMPL from two threads at
+once (the FCL scene is not thread-safe either).
 
 OMPL 2.0.1 specifics: planners are found by `getattr(ompl.geometric, name)`; LazyPRMstar and BiTRRT are
 not bound (`unavailable_reason()` says so without building a planner, and creating one raises
@@ -42,7 +47,8 @@ crashes with a goal set).
 
 The pieces: `twin_ompl.params` (one parameter model per planner), `twin_ompl.validity` (FCL state and
 motion checks, the inflated scene), `twin_ompl.problem` (step 4: bounds, OMPL space, start and goals, the
-seeded planner), `twin_ompl.postprocess` (steps 5-7); this module holds the planner class and its loop.
+seeded planner), `twin_ompl.budget` (how a search ends: work budgets, the roadmap search of PRM and
+PRM*), `twin_ompl.postprocess` (steps 5-7); this module holds the planner class and its loop.
 """
 
 from __future__ import annotations
@@ -50,6 +56,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -72,11 +79,13 @@ from twin.plugin import (
     Status,
     UR5e,
     colliding_pair,
+    jerk_limited,
     make_context,
 )
+from twin_ompl.budget import Budget, search_roadmap
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
 from twin_ompl.postprocess import add_time, path_length, simplify, timed_and_checked
-from twin_ompl.problem import repair_bounds, sampling_bounds, simple_setup, space_information, states
+from twin_ompl.problem import geometric_path, repair_bounds, sampling_bounds, simple_setup, space_information, states
 from twin_ompl.validity import CheckCounter, padded_scene
 
 if TYPE_CHECKING:
@@ -122,6 +131,7 @@ class _Attempt:
     reason: str = ""
     direct: bool = False
     goal_index: int | None = None
+    budget_spent: bool | None = None  # None: the search had no work budget
 
 
 class OmplPlanner(PathPlanner):
@@ -206,6 +216,12 @@ class OmplPlanner(PathPlanner):
         except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
             log.debug("%s: retimer warm-up failed: %r", self.name, e)
 
+    @property
+    def jerk_limited(self) -> bool:
+        """As jerk-limited as the retimer that actually times its paths: the config's, else the one
+        `params.retimer` names (the default, TOPP-RA, is not)."""
+        return jerk_limited(self._timer())  # the module-level twin.plugin.jerk_limited
+
     def _timer(self) -> Retimer:
         """The retimer that times paths: the config's (`self.retimer`), else the one `params.retimer` names."""
         if self.retimer is not None:
@@ -266,6 +282,8 @@ class OmplPlanner(PathPlanner):
         timings: dict[str, float] = {}
         att = self._attempt(start, goals, bounds, scene, request.seed, p.validity_resolution_rad, counter, deadline, limit, timings)
         info.update(direct=att.direct)
+        if att.budget_spent is not None:
+            info.update(budget_spent=att.budget_spent)
         if att.path is None:
             return MotionResult(att.status, att.reason, info=self._info(info, counter, timings))
         path = att.path
@@ -309,6 +327,7 @@ class OmplPlanner(PathPlanner):
             states_checked=counter.states,
             motions_checked=counter.motions,
             configs_checked=counter.configs,
+            iterations=counter.iterations,
             **{f"{k}_time_s": v for k, v in timings.items()},
         )
 
@@ -360,7 +379,7 @@ class OmplPlanner(PathPlanner):
         """One sampling run from `start` to the goal set at `resolution`; adds its timings to `timings`.
         A `repair` run (one short segment) keeps less time in reserve and stops at its first path."""
         p = self.params
-        si, mv = space_information(bounds, scene, resolution, counter)
+        si, mv = space_information(bounds, scene, resolution, counter, seed)
 
         if p.try_direct:
             t = time.perf_counter()
@@ -372,35 +391,72 @@ class OmplPlanner(PathPlanner):
 
         # decide before any OMPL planner exists: a planner destroyed without setup() can crash (AORRTC does)
         reserve = min(_REPAIR_RESERVE_S, 0.05 * limit) if repair else min(_POST_RESERVE_S, 0.25 * limit)
-        budget = deadline - time.perf_counter() - reserve
-        if budget <= 0.001:
+        budget_s = deadline - time.perf_counter() - reserve
+        if budget_s <= 0.001:
             return _Attempt(status=Status.TIMEOUT, reason=f"no time left to sample within {limit:.3g} s")
         if self.spec.single_goal:
             goals = goals[:1]  # see PlannerSpec.single_goal
-        ss = simple_setup(si, start, goals, self.spec.ompl_class, self._planner_setters, seed)
-        ptc = ob.timedPlannerTerminationCondition(budget)
-        if repair or getattr(p, "stop_at_first_solution", False):
-            ptc = ob.plannerOrTerminationCondition(ptc, ob.exactSolnPlannerTerminationCondition(ss.getProblemDefinition()))
-        log.debug("%s: sampling for up to %.3f s, %d goal(s), resolution %.4f rad", self.name, budget, goals.shape[0], resolution)
+        ss = simple_setup(si, start, goals, self.spec.ompl_class, self._planner_setters)
+        first_only = repair or bool(getattr(p, "stop_at_first_solution", False))
+        work = self._work_budget(counter, repair)
+        log.debug(
+            "%s: sampling for up to %.3f s (work budget: %s), %d goal(s), resolution %.4f rad",
+            self.name,
+            budget_s,
+            "none" if work is None else work.describe(),
+            goals.shape[0],
+            resolution,
+        )
         t = time.perf_counter()
-        counter.deadline = t + budget
+        counter.deadline = t + budget_s
+        roadmap: np.ndarray | None = None
+        status: Any = None
         try:
-            status = ss.solve(ptc)
+            with work if work is not None else nullcontext():
+                if self.spec.solution_thread:  # PRM, PRM*: grown from here (twin_ompl.budget)
+                    first_path = first_only or not self.spec.optimizing
+                    budget = work or Budget(counter, None, None)
+                    roadmap = search_roadmap(ss, si, budget, counter.deadline, first_path=first_path)
+                else:
+                    ptc = ob.timedPlannerTerminationCondition(budget_s)
+                    if first_only:
+                        exact = ob.exactSolnPlannerTerminationCondition(ss.getProblemDefinition())
+                        ptc = ob.plannerOrTerminationCondition(ptc, exact)
+                    if work is not None:
+                        ptc = ob.plannerOrTerminationCondition(ptc, work.condition())
+                    status = ss.solve(ptc)
+                    del ptc  # holds the budget's Python callable: let it go with the solve
         finally:
             counter.deadline = math.inf
         add_time(timings, "solve", t)
+        spent = None if work is None else work.spent
         if counter.error is not None:
-            return _Attempt(reason=f"the validity check raised {counter.error!r}")
-        if not ss.haveExactSolutionPath():
+            return _Attempt(reason=f"the validity check raised {counter.error!r}", budget_spent=spent)
+        found = roadmap is not None if self.spec.solution_thread else ss.haveExactSolutionPath()
+        if not found:
             elapsed = time.perf_counter() - t
-            what = status.asString() if hasattr(status, "asString") else str(status)
-            if elapsed >= budget * 0.95:
+            if status is None:
+                what = "no path through the roadmap"
+            else:
+                what = status.asString() if hasattr(status, "asString") else str(status)
+            checked = f"{counter.states} states, {counter.motions} motions checked"
+            if work is not None and spent:
+                return _Attempt(
+                    status=Status.NO_SOLUTION,
+                    reason=(
+                        f"{self.spec.ompl_class} found no path within its work budget of {work.describe()} "
+                        f"({what}; {checked})"
+                    ),
+                    budget_spent=spent,
+                )
+            if elapsed >= budget_s * 0.95:
                 return _Attempt(
                     status=Status.TIMEOUT,
-                    reason=f"{self.spec.ompl_class} found no path within {limit:.3g} s ({what}; {counter.states} states, {counter.motions} motions checked)",
+                    reason=f"{self.spec.ompl_class} found no path within {limit:.3g} s ({what}; {checked})",
+                    budget_spent=spent,
                 )
-            return _Attempt(status=Status.NO_SOLUTION, reason=f"{self.spec.ompl_class}: {what}")
-        path = ss.getSolutionPath()
+            return _Attempt(status=Status.NO_SOLUTION, reason=f"{self.spec.ompl_class}: {what}", budget_spent=spent)
+        path = geometric_path(si, roadmap) if roadmap is not None else ss.getSolutionPath()
         if p.simplify:
             t = time.perf_counter()
             simplify(si, path, p, deadline)  # bounded passes; no refusals here (OMPL would warn of "touching")
@@ -409,7 +465,17 @@ class OmplPlanner(PathPlanner):
         waypoints[0] = start  # OMPL copies states exactly; make the ends bit-identical anyway
         gi = int(np.argmin(np.abs(goals - waypoints[-1]).max(axis=1)))
         waypoints[-1] = goals[gi]
-        return _Attempt(waypoints, Status.SUCCESS, goal_index=gi)
+        return _Attempt(waypoints, Status.SUCCESS, goal_index=gi, budget_spent=spent)
+
+    def _work_budget(self, counter: CheckCounter, repair: bool) -> Budget | None:
+        """The work budget of this search (`max_state_checks`, `max_iterations`: optimising planners, also
+        when told to stop at their first path), or None: a repair and a planner that stops at its first
+        path end by that path or the time limit."""
+        checks = getattr(self.params, "max_state_checks", None)
+        iterations = getattr(self.params, "max_iterations", None)
+        if repair or (checks is None and iterations is None):
+            return None
+        return Budget(counter, checks, iterations)
 
 
 def _dist_version() -> str:

@@ -7,9 +7,12 @@ path. Sampling bounds (`joint_range`): 'compact' = [-pi, pi] per joint widened t
 goal, clipped to the limits (every IK branch keeps a representative within pi of the start in each joint,
 and the sampled volume is ~1/20 of the full +-2pi box); 'full' = the joint limits.
 
-Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) right before the planner is created,
-so every random generator the planner (and a path simplifier created after it) owns starts from the
-request's seed. The seed is process-global: do not plan with OMPL from two threads at once.
+Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) with the request's seed before the
+state space is built, so every random generator of the run starts from it: the one the state space draws
+in `SpaceInformation.setup()` (the random projection KPIECE1, BKPIECE1 and LBKPIECE1 grid the space by),
+the planner's, and the path simplifier's created after it. Seeded any later, the projection came from
+wherever earlier requests in the process had left the seed sequence, and the same request planned twice
+gave two paths. The seed is process-global: do not plan with OMPL from two threads at once.
 """
 
 from __future__ import annotations
@@ -28,7 +31,15 @@ from twin_ompl.validity import CheckCounter, SceneMotionValidator, state_validit
 if TYPE_CHECKING:
     from twin.plugin import PlanningScene, UR5e
 
-__all__ = ["repair_bounds", "sampling_bounds", "seed_ompl", "simple_setup", "space_information", "states"]
+__all__ = [
+    "geometric_path",
+    "repair_bounds",
+    "sampling_bounds",
+    "seed_ompl",
+    "simple_setup",
+    "space_information",
+    "states",
+]
 
 ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
@@ -60,10 +71,12 @@ def repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarra
 
 
 def space_information(
-    bounds: np.ndarray, scene: "PlanningScene", resolution_rad: float, counter: CheckCounter
+    bounds: np.ndarray, scene: "PlanningScene", resolution_rad: float, counter: CheckCounter, seed: int
 ) -> tuple[Any, SceneMotionValidator]:
     """OMPL SpaceInformation over RealVectorStateSpace(6) inside `bounds` (6, 2), with the scene's state
-    validity checker and batched motion validator (states `resolution_rad` apart), set up; and the validator."""
+    validity checker and batched motion validator (states `resolution_rad` apart), set up; and the validator.
+    OMPL is re-seeded with `seed` first: setting the space up draws its random default projection."""
+    seed_ompl(seed)
     space = ob.RealVectorStateSpace(6)
     rb = ob.RealVectorBounds(6)
     for j in range(6):
@@ -90,11 +103,11 @@ def seed_ompl(seed: int) -> None:
 
 
 def simple_setup(
-    si: Any, start: np.ndarray, goals: np.ndarray, ompl_class: str, setters: Sequence[tuple[str, Any]], seed: int
+    si: Any, start: np.ndarray, goals: np.ndarray, ompl_class: str, setters: Sequence[tuple[str, Any]]
 ) -> Any:
     """A set-up `og.SimpleSetup`: start state, goal (one state, or a goal set of the rows of `goals` (k, 6)),
-    and a new `og.<ompl_class>` planner with the (setter, value) pairs applied, created right after OMPL is
-    re-seeded with `seed`."""
+    and a new `og.<ompl_class>` planner with the (setter, value) pairs applied. Its random generators
+    continue the sequence `space_information` seeded."""
     ss = og.SimpleSetup(si)
     st = si.allocState()
     st[0:6] = start.tolist()
@@ -111,13 +124,22 @@ def simple_setup(
             g[0:6] = q.tolist()
             goal.addState(g)
     ss.setGoal(goal)
-    seed_ompl(seed)
     planner = getattr(og, ompl_class)(si)
     for setter, value in setters:
         getattr(planner, setter)(value)
     ss.setPlanner(planner)
     ss.setup()
     return ss
+
+
+def geometric_path(si: Any, waypoints: np.ndarray) -> Any:
+    """An `og.PathGeometric` through the rows of `waypoints` (m, 6)."""
+    out = []
+    for q in waypoints:
+        st = si.allocState()
+        st[0:6] = q.tolist()
+        out.append(st)
+    return og.PathGeometric(si, out)
 
 
 def states(path: Any) -> np.ndarray:

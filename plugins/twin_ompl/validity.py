@@ -39,11 +39,14 @@ __all__ = [
 
 class CheckCounter:
     """Counts of what the planner asked the scene (reported in MotionResult.info), the first error raised
-    inside a callback (OMPL would otherwise swallow it), and a deadline (perf_counter seconds) after which
-    every new state and motion is reported invalid: some planners (FMT*-like batch planners) check their termination
-    condition only between long batches of checks, and a refusal ends those batches at once."""
+    inside a callback (OMPL would otherwise swallow it), and two ends after which every new state and
+    motion is reported invalid (counted in `expired`): a deadline (perf_counter seconds) and a work limit
+    (`check_limit`, on `checks`). Some planners check their termination condition only between long
+    batches of checks (FMT*-like batch planners), or not at all inside a loop (AORRTC's connect loop in
+    OMPL 2.0.1 can advance forever); a refusal ends those at once. A refusal by work count comes at the
+    same point on every run, so a search it ends is repeatable (`twin_ompl.budget`)."""
 
-    __slots__ = ("states", "motions", "configs", "error", "deadline", "expired")
+    __slots__ = ("states", "motions", "configs", "error", "deadline", "check_limit", "iterations", "expired")
 
     def __init__(self) -> None:
         self.states = 0
@@ -51,7 +54,14 @@ class CheckCounter:
         self.configs = 0
         self.error: BaseException | None = None
         self.deadline = math.inf
+        self.check_limit = math.inf  # refuse once `checks` reaches this
+        self.iterations = 0  # times a work budget's termination condition was asked (twin_ompl.budget)
         self.expired = 0
+
+    @property
+    def checks(self) -> int:
+        """Configurations checked for collision: states asked about plus the states along checked motions."""
+        return self.states + self.configs
 
 
 _ORDER_CACHE: dict[int, np.ndarray] = {}
@@ -84,7 +94,7 @@ def state_validity_checker(scene: "PlanningScene", counter: CheckCounter) -> Any
     in_collision = scene.in_collision
 
     def is_valid(state: Any) -> bool:
-        if perf_counter() > counter.deadline:
+        if perf_counter() > counter.deadline or counter.states + counter.configs >= counter.check_limit:
             counter.expired += 1
             return False
         counter.states += 1
@@ -107,8 +117,9 @@ class SceneMotionValidator(ob.MotionValidator):
         self.counter = counter
 
     def checkMotion(self, s1: Any, s2: Any, *_: Any) -> bool:  # noqa: N802 - OMPL's name
-        if perf_counter() > self.counter.deadline:
-            self.counter.expired += 1
+        c = self.counter
+        if perf_counter() > c.deadline or c.states + c.configs >= c.check_limit:
+            c.expired += 1
             return False
         try:
             return self.motion_free(np.array(s1[0:6]), np.array(s2[0:6]))
