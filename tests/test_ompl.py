@@ -194,7 +194,7 @@ def test_work_budget_is_validated_and_ends_the_search(robocup: Cell) -> None:
         assert planner.params.max_state_checks == spec.max_state_checks and spec.max_state_checks >= 1000
         assert planner.params.max_iterations == spec.max_iterations == 100_000
     start, goal = _blocked_query(robocup, seed=21)
-    req = MotionRequest(start, goal, robocup.limits, time_limit_s=5.0, seed=1)
+    req = MotionRequest(start, goal, robocup.limits, time_limit_s=1.0, seed=1)
     # a tiny budget ends the search after that many state checks (plus the rest of the motion being
     # checked: at most ~400 states at 0.02 rad), long before the time limit, with the reason (no path:
     # so no shortcutting, whose checks would count too)
@@ -204,6 +204,10 @@ def test_work_budget_is_validated_and_ends_the_search(robocup: Cell) -> None:
         checks = res.info["states_checked"] + res.info["configs_checked"]
         assert res.info["budget_spent"] and 50 <= checks <= 50 + 400, (name, checks)
         assert res.status is Status.NO_SOLUTION and "work budget of 50 state checks" in res.reason, (name, res.reason)
+    # the budget is per second of the time limit: twice the limit, twice the work (still a count)
+    planner = ctx.registry.planner("ompl.rrtstar", {"max_state_checks": 50, "max_repairs": 0}, ctx)
+    res = plan_with(planner, MotionRequest(start, goal, robocup.limits, time_limit_s=2.0, seed=1), robocup.scene, robocup.ctx)
+    assert "work budget of 100 state checks" in res.reason, res.reason
     # iterations alone: RRT* asks its termination condition once per iteration
     iterations_only = {"max_state_checks": None, "max_iterations": 20, "max_repairs": 0}
     planner = ctx.registry.planner("ompl.rrtstar", iterations_only, ctx)

@@ -205,7 +205,8 @@ class PlannerSpec:
 # met its 0.75 s cap (RRT* 20k: 17-20k checks done). Iterations (termination-condition queries) come at
 # ~1-15k a second while a planner checks states; AORRTC, once its path is near its cost bound, can reject
 # samples without checking one, at 1.2-1.6 million iterations a second: 100k ends that after ~0.07 s and
-# never binds otherwise. Longer limits want larger budgets: set them per planner block.
+# never binds otherwise. The budgets are per second of the request's time limit (`_work_budget`): a 2 s limit
+# buys twice the work, still counted, so still deterministic; the share of the limit spent stays ~20 %.
 _ITERATIONS = 100_000
 
 
@@ -298,8 +299,9 @@ def params_model(spec: PlannerSpec) -> type[OmplParams]:
                 spec.max_state_checks,
                 ge=1,
                 description=(
-                    "end the search after this many configurations were checked for collision (states sampled plus the "
-                    "states along checked motions: info's states_checked + configs_checked). Counts work, not time, so "
+                    "end the search after this many configurations per second of the request's time limit were checked "
+                    "for collision (states sampled plus the states along checked motions: info's states_checked + "
+                    "configs_checked). Counts work, not time, so "
                     "a seeded run repeats on any machine; the time limit stays a hard cap. None: the time limit alone "
                     "ends it, and the result depends on the machine's speed and load"
                 ),
@@ -311,8 +313,8 @@ def params_model(spec: PlannerSpec) -> type[OmplParams]:
                 spec.max_iterations,
                 ge=1,
                 description=(
-                    "end the search after the planner asked its termination condition this many times (about once per "
-                    "iteration): bounds a search that stops checking states (AORRTC rejecting samples against its cost "
+                    "end the search after the planner asked its termination condition this many times per second of "
+                    "the request's time limit (about once per iteration): bounds a search that stops checking states (AORRTC rejecting samples against its cost "
                     "bound). None: no such bound"
                 ),
             ),

@@ -398,7 +398,7 @@ class OmplPlanner(PathPlanner):
             goals = goals[:1]  # see PlannerSpec.single_goal
         ss = simple_setup(si, start, goals, self.spec.ompl_class, self._planner_setters)
         first_only = repair or bool(getattr(p, "stop_at_first_solution", False))
-        work = self._work_budget(counter, repair)
+        work = self._work_budget(counter, repair, limit)
         log.debug(
             "%s: sampling for up to %.3f s (work budget: %s), %d goal(s), resolution %.4f rad",
             self.name,
@@ -467,15 +467,20 @@ class OmplPlanner(PathPlanner):
         waypoints[-1] = goals[gi]
         return _Attempt(waypoints, Status.SUCCESS, goal_index=gi, budget_spent=spent)
 
-    def _work_budget(self, counter: CheckCounter, repair: bool) -> Budget | None:
-        """The work budget of this search (`max_state_checks`, `max_iterations`: optimising planners, also
-        when told to stop at their first path), or None: a repair and a planner that stops at its first
-        path end by that path or the time limit."""
-        checks = getattr(self.params, "max_state_checks", None)
-        iterations = getattr(self.params, "max_iterations", None)
+    def _work_budget(self, counter: CheckCounter, repair: bool, time_limit_s: float) -> Budget | None:
+        """The work budget of this search, or None: a repair and a planner that stops at its first path end by
+        that path or the time limit. `max_state_checks` and `max_iterations` are per second of the request's
+        time limit (a 2 s limit buys twice the search of a 1 s one: still a count, so still deterministic)."""
+        checks = self.params.max_state_checks
+        iterations = self.params.max_iterations
         if repair or (checks is None and iterations is None):
             return None
-        return Budget(counter, checks, iterations)
+        scale = max(time_limit_s, 1e-3)
+        return Budget(
+            counter,
+            None if checks is None else max(1, round(checks * scale)),
+            None if iterations is None else max(1, round(iterations * scale)),
+        )
 
 
 def _dist_version() -> str:
