@@ -52,7 +52,7 @@ def ruckig_line(a: np.ndarray, b: np.ndarray, limits: Limits, *, dt: float = 0.0
     inp.synchronization = ruckig.Synchronization.Phase
     otg.calculate(inp, out)
     t = np.linspace(0.0, out.duration, max(2, int(np.ceil(out.duration / dt)) + 1))
-    q, qd, qdd = (np.array(x) for x in zip(*(out.at_time(float(ti)) for ti in t)))
+    q, qd, qdd = (np.array(x) for x in zip(*(out.at_time(float(ti)) for ti in t), strict=True))
     q[0], q[-1] = a, b
     qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
     return Trajectory(t, q, qd, qdd)
@@ -60,8 +60,10 @@ def ruckig_line(a: np.ndarray, b: np.ndarray, limits: Limits, *, dt: float = 0.0
 
 def join(a: Trajectory, b: Trajectory) -> Trajectory:
     return Trajectory(
-        np.concatenate([a.t, b.t[1:] + a.t[-1]]), np.concatenate([a.q, b.q[1:]]),
-        np.concatenate([a.qd, b.qd[1:]]), np.concatenate([a.qdd, b.qdd[1:]]),
+        np.concatenate([a.t, b.t[1:] + a.t[-1]]),
+        np.concatenate([a.q, b.q[1:]]),
+        np.concatenate([a.qd, b.qd[1:]]),
+        np.concatenate([a.qdd, b.qdd[1:]]),
     )
 
 
@@ -126,7 +128,9 @@ class StopsShort(StraightLine):
 class TooFast(StraightLine):
     def motion(self, request, goal):  # 1.6 x the velocity limit (acceleration and jerk kept)
         lim = request.limits
-        return ruckig_line(np.array(request.start), goal, Limits(1.6 * lim.max_joint_vel, lim.max_joint_acc, lim.max_joint_jerk))
+        return ruckig_line(
+            np.array(request.start), goal, Limits(1.6 * lim.max_joint_vel, lim.max_joint_acc, lim.max_joint_jerk)
+        )
 
 
 class Sleepy(StraightLine):
@@ -143,14 +147,20 @@ class Unseeded(StraightLine):
     def motion(self, request, goal):  # a random slow-down, within the limits
         f = np.random.default_rng().uniform(0.6, 0.95)
         lim = request.limits
-        return ruckig_line(np.array(request.start), goal, Limits(f * lim.max_joint_vel, f * lim.max_joint_acc, f * lim.max_joint_jerk))
+        return ruckig_line(
+            np.array(request.start), goal, Limits(f * lim.max_joint_vel, f * lim.max_joint_acc, f * lim.max_joint_jerk)
+        )
 
 
 class IgnoresTheStart(StraightLine):
     def plan(self, request, scene):  # no start check: from a start in collision it plans anyway
         if scene.in_collision(request.start):
             goal = self.goal_config(request, scene)
-            return goal if isinstance(goal, MotionResult) else MotionResult(Status.SUCCESS, "ok", self.motion(request, goal))
+            return (
+                goal
+                if isinstance(goal, MotionResult)
+                else MotionResult(Status.SUCCESS, "ok", self.motion(request, goal))
+            )
         return super().plan(request, scene)
 
 
@@ -163,7 +173,10 @@ class ThroughTheTable(StraightLine):
         T[2, 3] = -0.05
         sols = self.kin.ik(T)
         dip = sols[int(np.argmin(np.abs(sols - request.start).max(axis=1)))]
-        traj = join(ruckig_line(np.array(request.start), dip, request.limits), ruckig_line(dip, np.array(request.goal.q), request.limits))
+        traj = join(
+            ruckig_line(np.array(request.start), dip, request.limits),
+            ruckig_line(dip, np.array(request.goal.q), request.limits),
+        )
         return MotionResult(Status.SUCCESS, "ok", traj)
 
 
@@ -184,7 +197,13 @@ def test_a_conformant_planner_passes_every_rule(robocup):
     assert report.ok, report.summary()
     assert [r.rule for r in report.results] == list(RULES)
     assert report.result("start_goal").detail.startswith("2 queries solved")  # the blocked query: a COLLISION status
-    assert {q["purpose"] for q in report.requests} == {"query", "repeat", "unreachable", "colliding_goal", "invalid_start"}
+    assert {q["purpose"] for q in report.requests} == {
+        "query",
+        "repeat",
+        "unreachable",
+        "colliding_goal",
+        "invalid_start",
+    }
 
 
 @pytest.mark.parametrize(("planner", "rule", "refused", "kwargs"), BROKEN, ids=[b[0].__name__ for b in BROKEN])
@@ -233,7 +252,7 @@ def test_the_queries_are_seeded_free_and_include_one_that_must_search(robocup):
     scene, kin = PlanningScene.from_settings(robocup), UR5e()
     a = contract_queries(robocup, scene, kin, 4, seed=3)
     b = contract_queries(robocup, scene, kin, 4, seed=3)
-    assert all(np.array_equal(x.start, y.start) and np.array_equal(x.goal, y.goal) for x, y in zip(a, b))
+    assert all(np.array_equal(x.start, y.start) and np.array_equal(x.goal, y.goal) for x, y in zip(a, b, strict=True))
     assert [q.straight_free for q in a[:3]] == [True, False, True]
     res = robocup.collision.check_resolution_rad
     for q in a:
@@ -295,7 +314,15 @@ def twin(*args: str, extra_path: Path | None = None) -> subprocess.CompletedProc
     env = dict(os.environ)
     if extra_path is not None:
         env["PYTHONPATH"] = os.pathsep.join([str(extra_path), env.get("PYTHONPATH", "")])
-    return subprocess.run([sys.executable, "-m", "twin", *args], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "twin", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=300,
+        check=False,
+    )
 
 
 def test_cli_exits_0_when_every_rule_holds_and_writes_json(tmp_path):
@@ -311,7 +338,17 @@ def test_cli_exits_0_when_every_rule_holds_and_writes_json(tmp_path):
 
 def test_cli_exits_1_when_a_rule_breaks(acme_plugin, tmp_path):
     out = tmp_path / "check.json"
-    r = twin("check-planner", "acme.straight", "--config", "robocup", "--seed", "1", "--json", str(out), extra_path=acme_plugin)
+    r = twin(
+        "check-planner",
+        "acme.straight",
+        "--config",
+        "robocup",
+        "--seed",
+        "1",
+        "--json",
+        str(out),
+        extra_path=acme_plugin,
+    )
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert "FAIL" in r.stdout and "Traceback" not in r.stderr
     data = json.loads(out.read_text())
@@ -320,13 +357,16 @@ def test_cli_exits_1_when_a_rule_breaks(acme_plugin, tmp_path):
     assert {"acceleration", "collision_free", "invalid_start"} <= failed and data["seed"] == 1
 
 
-@pytest.mark.parametrize(("args", "needles"), [
-    (("ompl.rrtconect",), ("'ompl.rrtconect' is not registered", "Did you mean 'ompl.rrtconnect'")),
-    (("toppra",), ("'toppra' is not registered",)),
-    (("ompl.sorrtstar",), ("disabled",)),
-    (("ruckig.movej", "--time-limit", "0"), ("--time-limit must be positive",)),
-    (("ruckig.movej", "--config", "configs/nope.yaml"), ("nope.yaml",)),
-])
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (("ompl.rrtconect",), ("'ompl.rrtconect' is not registered", "Did you mean 'ompl.rrtconnect'")),
+        (("toppra",), ("'toppra' is not registered",)),
+        (("ompl.sorrtstar",), ("disabled",)),
+        (("ruckig.movej", "--time-limit", "0"), ("--time-limit must be positive",)),
+        (("ruckig.movej", "--config", "configs/nope.yaml"), ("nope.yaml",)),
+    ],
+)
 def test_cli_user_mistakes_are_one_line_and_exit_2(args, needles):
     r = twin("check-planner", *args)
     assert r.returncode == 2, (r.stdout, r.stderr)

@@ -18,9 +18,9 @@ import pytest
 
 pytest.importorskip("casadi")
 
-from twin.config import PROJECT_ROOT, PlannerBlock, load_config  # noqa: E402
-from twin.errors import ConfigError  # noqa: E402
-from twin.planning import (  # noqa: E402
+from twin.config import PROJECT_ROOT, PlannerBlock, load_config
+from twin.errors import ConfigError
+from twin.planning import (
     RecedingHorizonPlanner,
     Segment,
     _checked,
@@ -32,14 +32,14 @@ from twin.planning import (  # noqa: E402
     plan,
     plan_with,
 )
-from twin.registry import Kind, default_registry  # noqa: E402
-from twin.testing import contract_queries, limit_violations  # noqa: E402
-from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory  # noqa: E402
-from twin_nmpc.model import TCP_FRAME, ProblemShape, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres  # noqa: E402
-from twin_nmpc.params import NMPCParams  # noqa: E402
-from twin_nmpc.planner import NMPCPlanner  # noqa: E402
-from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes  # noqa: E402
-from twin_nmpc.spheres import object_spheres  # noqa: E402
+from twin.registry import Kind, default_registry
+from twin.testing import contract_queries, limit_violations
+from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
+from twin_nmpc.model import TCP_FRAME, ProblemShape, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres
+from twin_nmpc.params import NMPCParams
+from twin_nmpc.planner import NMPCPlanner
+from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes
+from twin_nmpc.spheres import object_spheres
 
 SEED000 = {"dt": 0.08, "execute_steps": 1}
 SEED001 = {"dt": 0.1, "execute_steps": 3}
@@ -79,7 +79,9 @@ def _run(planner, ts, settings, ctx):
     return plan_with(planner, ts.request, scene, ctx)
 
 
-def _loop(planner: NMPCPlanner, request: MotionRequest, scene, max_steps: int = 100) -> tuple[list[Segment], MotionResult]:
+def _loop(
+    planner: NMPCPlanner, request: MotionRequest, scene, max_steps: int = 100
+) -> tuple[list[Segment], MotionResult]:
     """The receding-horizon loop by hand, keeping every segment."""
     planner.reset(request, scene)
     q, segs = request.start, []
@@ -106,7 +108,14 @@ def test_nmpc_is_registered_as_receding_horizon_with_its_extra(ctx):
     p = make_planner("nmpc", ctx)
     assert isinstance(p, RecedingHorizonPlanner)
     P = p.params
-    assert (P.horizon, P.dt, P.execute_steps, P.max_step_rad, P.goal_tolerance_m, P.max_solves) == (30, 0.08, 1, 0.15, 0.03, 40)
+    assert (P.horizon, P.dt, P.execute_steps, P.max_step_rad, P.goal_tolerance_m, P.max_solves) == (
+        30,
+        0.08,
+        1,
+        0.15,
+        0.03,
+        40,
+    )
     assert P.terminal_weight_factor == 10.0 and P.step_weight < P.position_weight
     assert all(0.03 <= s[3] <= 0.05 for s in P.tool_spheres)
 
@@ -150,6 +159,14 @@ def test_sphere_box_distances():
     assert bound <= 1.2 - 0.1 + 1e-9
 
 
+def test_the_seeds_model_without_wrist_spheres_builds_and_plans(ctx, scenes, settings):
+    """`wrist_spheres: []` (the seed's model, spheres on the TCP only): the NLP's kinematics function then has
+    a single output, which CasADi returns bare rather than in a tuple."""
+    planner = make_planner(PlannerBlock(name="nmpc", params={**SEED000, "wrist_spheres": []}), ctx)
+    res = _run(planner, scenes[0], settings, ctx)
+    assert res.success, res.reason
+
+
 def test_proxy_spheres_cover_the_gripper_wrist_and_held_cube(settings, ctx, nmpc, scenes):
     """Every point of the URDF collision geometry of the gripper, the wrist links and the held cube lies
     within some proxy sphere grown by the box margin: so "spheres outside the margined box" implies
@@ -172,7 +189,9 @@ def test_proxy_spheres_cover_the_gripper_wrist_and_held_cube(settings, ctx, nmpc
             else:  # cylinder: rims and axis
                 r, length = s.size
                 a = np.linspace(0, 2 * math.pi, 16, endpoint=False)
-                local = np.array([[r * math.cos(t), r * math.sin(t), z] for t in a for z in np.linspace(-length / 2, length / 2, 5)])
+                local = np.array(
+                    [[r * math.cos(t), r * math.sin(t), z] for t in a for z in np.linspace(-length / 2, length / 2, 5)]
+                )
             pts.append(local @ T[:3, :3].T + T[:3, 3])
         Tc = ctx.kinematics.fk(q, "tcp") @ ts.T_tcp_cube
         h = CUBE_SIZE_M / 2
@@ -214,7 +233,13 @@ def _transfer_campaign(planner, scenes, settings, ctx):
             failures.append((ts.index, res.status.value, res.reason))
         # executed motion: on success the whole trajectory; FCL: spheres vs the perceived box, arm+cube vs table
         if res.trajectory is not None:
-            chk = check_trajectory(res.trajectory, ts, planner.proxy_spheres, build_scene(settings, ts, with_fixtures=False), ctx.kinematics)
+            chk = check_trajectory(
+                res.trajectory,
+                ts,
+                planner.proxy_spheres,
+                build_scene(settings, ts, with_fixtures=False),
+                ctx.kinematics,
+            )
             assert chk.ok, (ts.index, chk)
         assert res.status is not Status.COLLISION, (ts.index, res.reason)
     return ok, failures
@@ -286,7 +311,11 @@ def _pose_request(ts, position) -> MotionRequest:
     T = np.eye(4)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = position
-    return MotionRequest(ts.request.start, PoseGoal(Pose.from_matrix(T), position_tolerance_m=0.03, orientation_tolerance_rad=None), ts.request.limits)
+    return MotionRequest(
+        ts.request.start,
+        PoseGoal(Pose.from_matrix(T), position_tolerance_m=0.03, orientation_tolerance_rad=None),
+        ts.request.limits,
+    )
 
 
 def test_goal_out_of_reach_is_an_invalid_goal_without_solving(nmpc, scenes, settings):
@@ -313,7 +342,7 @@ def test_unreachable_goal_against_the_box_fails_after_at_most_40_solves_and_stay
     solved = [s for s in segs if not s.info.get("braking")]
     assert res.info["nmpc_solves"] <= 40 and len(solved) <= 40
     # the arm was still moving after the 40th solve: it brakes to rest (no solve) before the status
-    assert segs[len(solved):] and all(s.info["braking"] and s.solve_time_s == 0.0 for s in segs[len(solved):])
+    assert segs[len(solved) :] and all(s.info["braking"] and s.solve_time_s == 0.0 for s in segs[len(solved) :])
     last = segs[-1].trajectory
     assert np.array_equal(last.q[-1], last.q[-2]) and np.allclose(last.qd[-1], 0.0)
     _assert_clear(segs, ts, nmpc, settings, ctx)
@@ -411,7 +440,13 @@ def test_a_box_perceived_mid_motion_is_avoided_from_the_next_solve(nmpc, scenes,
     shape, solved cold from the moving state), and the arm reaches the goal clear of both boxes."""
     ts = next(t for t in scenes if t.direction == "over_out")
     c = np.array([*(_goal_position(ts.request, ctx)[:2] - [0.0, 0.16]), 0.05])
-    segs, res = _drive(nmpc, ts, build_scene(settings, ts), at_step=3, change=lambda sc: sc.add_box_bounds("pallet", c - 0.05, c + 0.05))
+    segs, res = _drive(
+        nmpc,
+        ts,
+        build_scene(settings, ts),
+        at_step=3,
+        change=lambda sc: sc.add_box_bounds("pallet", c - 0.05, c + 0.05),
+    )
     assert res.success, res.reason
     assert [e["warm"] for e in res.info["nmpc_solve_log"]][:5] == [False, True, True, False, True]
     _assert_clear(segs, ts, nmpc, settings, ctx)
@@ -427,7 +462,13 @@ def test_a_box_raised_around_the_arm_stops_it_with_a_reason_and_never_enters(nmp
     ts = next(t for t in scenes if t.direction == "over_out")
     b = ts.perceived_box
     taller = replace(ts, perceived_box=BoxBounds(b.x_min, b.x_max, b.y_min, b.y_max, b.z_min, b.z_max + 0.05))
-    segs, res = _drive(nmpc, ts, build_scene(settings, ts), at_step=4, change=lambda sc: sc.add_box_bounds("perceived_obstacle", b.lo, b.hi + [0, 0, 0.05]))
+    segs, res = _drive(
+        nmpc,
+        ts,
+        build_scene(settings, ts),
+        at_step=4,
+        change=lambda sc: sc.add_box_bounds("perceived_obstacle", b.lo, b.hi + [0, 0, 0.05]),
+    )
     # the raised box cuts through the plan it was following: the next solve finds no way over from
     # beside the wall, and the remainder of the old plan fails the check against the new box, so it stops
     assert res.status is Status.NO_SOLUTION and "no feasible plan is left to follow" in res.reason, res
@@ -441,7 +482,7 @@ def test_no_box_goes_straight(nmpc, scenes, settings):
     scene = build_scene(settings, ts)
     scene.remove("perceived_obstacle")
     scene.remove("obstacle")
-    segs, res = _loop(planner, ts.request, scene)
+    _, res = _loop(planner, ts.request, scene)
     assert res.success and res.info["initial_guess"] == "straight"
 
 

@@ -8,6 +8,8 @@ Contracts are declared, not probed:
 - a planner class may declare `goal_kinds` (subset of `GOAL_KINDS`, default all) and `Params` (a pydantic
   model validating its parameters); a path planner that takes a retimer subclasses `PathPlanner`;
 - a planner that stops near its goal rather than on it says how near in `MotionResult.goal_tolerance_m`;
+- a planner (or retimer) whose timing cannot keep the request's jerk limit declares `jerk_limited = False`
+  (TOPP-RA bounds velocity and acceleration only); `PathPlanner` answers for its retimer;
 - a detector that must be handed ground truth declares `needs_ground_truth = True` (only `oracle` does);
 - an optional classmethod `unavailable_reason() -> str | None` says why a registered name cannot run here;
 - a task is `cls(params, context)` with `run(cell) -> list[ObjectOutcome]`; it senses through the `Cell`

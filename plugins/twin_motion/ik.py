@@ -255,7 +255,8 @@ class DefensiveIK:
         if rejected.get("jump protection"):
             parts.append(
                 f"{rejected['jump protection']} by jump protection (smallest base jump {min_base_jump:.2f} rad, "
-                f"limit {p.max_base_jump_rad:g}; smallest wrist jump {min_wrist_jump:.2f} rad, limit {p.max_wrist_jump_rad:g})"
+                f"limit {p.max_base_jump_rad:g}; smallest wrist jump {min_wrist_jump:.2f} rad, "
+                f"limit {p.max_wrist_jump_rad:g})"
             )
         if rejected.get("joint limits"):
             parts.append(f"{rejected['joint limits']} outside the joint limits")

@@ -75,7 +75,10 @@ class MotionPlannerBase:
         ik: DefensiveIKParams = Field(default_factory=DefensiveIKParams)
         sample_dt_s: float = Field(0.001, gt=0, le=0.05, description="sampling period of the trajectory")
 
-    def __init__(self, params: Any = None, context: PluginContext | None = None):
+    # each subclass narrows this to its own `Params` (the registry validates with that model)
+    params: MotionPlannerBase.Params
+
+    def __init__(self, params: MotionPlannerBase.Params | None = None, context: PluginContext | None = None):
         self.params = params if params is not None else self.Params()
         self.context = context
         if context is not None:
@@ -149,7 +152,9 @@ class MotionPlannerBase:
             return None, MotionResult(Status.INVALID_GOAL, f"no acceptable IK for the goal pose: {res.reason}"), res
         return np.array(res.q), None, res
 
-    def point_to_point_goal(self, request: MotionRequest, scene: PlanningScene) -> tuple[np.ndarray, dict[str, Any]] | MotionResult:
+    def point_to_point_goal(
+        self, request: MotionRequest, scene: PlanningScene
+    ) -> tuple[np.ndarray, dict[str, Any]] | MotionResult:
         """The goal configuration of a MoveJ (start checked, pose goals through the defensive IK, joint goals
         unwrapped when the planner's `unwrap_joint_goals` asks), or the typed failure."""
         bad = self.check_start(request, scene)
@@ -177,7 +182,8 @@ class MotionPlannerBase:
         if hit is not None:
             return MotionResult(
                 Status.COLLISION,
-                f"the trajectory collides (densified sample {hit}, checked every {self.check_rad:g} rad / {self.check_m:g} m)",
+                f"the trajectory collides (densified sample {hit}, "
+                f"checked every {self.check_rad:g} rad / {self.check_m:g} m)",
                 path=path,
                 info=dict(info or {}),
             )
@@ -216,6 +222,8 @@ class RuckigMoveJ(MotionPlannerBase):
             False,
             description="move joint goals by 2*pi to the shortest difference (the end is then the goal modulo 2*pi)",
         )
+
+    params: Params
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         ends = self.point_to_point_goal(request, scene)
@@ -271,6 +279,8 @@ class QuinticMoveJ(MotionPlannerBase):
             False,
             description="seed's joint unwrapping for joint goals (the end is then the goal modulo 2*pi)",
         )
+
+    params: Params
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         ends = self.point_to_point_goal(request, scene)

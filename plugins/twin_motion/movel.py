@@ -207,6 +207,8 @@ class ToppraMoveL(_MoveLBase):
         refinements: int = Field(1, ge=0, le=10, description="TOPP-RA grid refinements where samples overshoot")
         verify_samples: bool = Field(True, description="re-check line and SLERP deviation at every output sample")
 
+    params: Params
+
     def _waypoint(self, line: CartesianLine, frame: str, s: float, q_prev: np.ndarray) -> tuple[np.ndarray, float]:
         T = line.poses(np.array([s]))[0]
         res = self.ik.solve(T, q_prev, q_prev, frame=frame, penalise_flip=False, penalise_singularity=False)
@@ -214,7 +216,8 @@ class ToppraMoveL(_MoveLBase):
             p = T[:3, 3]
             raise _LineFailure(
                 Status.IK_FAILED,
-                f"the line leaves the workspace at s = {s:.4f} (x, y, z = {p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f} m): {res.reason}",
+                f"the line leaves the workspace at s = {s:.4f} "
+                f"(x, y, z = {p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f} m): {res.reason}",
             )
         return np.array(res.q), res.condition
 
@@ -293,7 +296,8 @@ class ToppraMoveL(_MoveLBase):
         raise _LineFailure(
             Status.IK_FAILED,
             f"could not keep the joint path within {p.max_line_deviation_m * 1e3:g} mm / "
-            f"{p.max_orientation_deviation_deg:g} deg of the line (worst {dp.max() * 1e3:.2f} mm, {math.degrees(da.max()):.2f} deg)",
+            f"{p.max_orientation_deviation_deg:g} deg of the line "
+            f"(worst {dp.max() * 1e3:.2f} mm, {math.degrees(da.max()):.2f} deg)",
         )
 
     def _plan_line(self, request: MotionRequest, scene: PlanningScene, line: CartesianLine, frame: str) -> MotionResult:
@@ -328,7 +332,8 @@ class ToppraMoveL(_MoveLBase):
             if dp.max() > p.max_line_deviation_m or da.max() > math.radians(p.max_orientation_deviation_deg):
                 return MotionResult(
                     Status.IK_FAILED,
-                    f"the timed trajectory strays {dp.max() * 1e3:.2f} mm / {math.degrees(da.max()):.2f} deg from the line",
+                    f"the timed trajectory strays {dp.max() * 1e3:.2f} mm / "
+                    f"{math.degrees(da.max()):.2f} deg from the line",
                     path=Q,
                     info=info,
                 )
@@ -356,6 +361,8 @@ class SeedSlerpMoveL(_MoveLBase):
         nominal_speed_m_s: float = Field(0.12, gt=0, description="TCP speed that sets the duration")
         min_duration_s: float = Field(1.5, ge=0, description="shortest duration")
         respect_limits: bool = Field(True, description="stretch the duration to keep the joint limits")
+
+    params: Params
 
     def _plan_line(self, request: MotionRequest, scene: PlanningScene, line: CartesianLine, frame: str) -> MotionResult:
         p = self.params

@@ -401,6 +401,7 @@ def toppra_time_spline(
         W7 = np.column_stack([W, (knots - knots[0]) / (knots[-1] - knots[0]) * tcp_length_m])
         vlim = np.append(vlim, float(tcp_speed) * (1.0 - margin))
         alim = np.append(alim, 1e9)
+
     def _timed(grid: np.ndarray, sd: np.ndarray, k: float) -> tuple[np.ndarray, ...]:
         """Samples of the parameterisation `sd` (path velocity at the grid points) slowed down k times: t,
         s, qd, qdd, the per-sample ratios of |qd| and |qdd| to their limits, and each sample's grid interval."""

@@ -19,5 +19,8 @@ def twin_register_planners(registry: Registry) -> None:
         "twin_nmpc.planner:NMPCPlanner",
         receding_horizon=True,
         extra="nmpc",
-        description="warehouse NMPC (CasADi/IPOPT): 30 x 0.08 s horizon, proxy spheres over the obstacle box, first k steps executed",
+        description=(
+            "warehouse NMPC (CasADi/IPOPT): 30 x 0.08 s horizon, proxy spheres over the obstacle box, "
+            "first k steps executed"
+        ),
     )

@@ -11,6 +11,7 @@ with an acceleration bound, coming to rest at every corner.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from collections.abc import Sequence
@@ -46,8 +47,9 @@ def segment_hits_box(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarra
     return True
 
 
-
-def resample(path: np.ndarray, step: float, n: int, dstep: float | None = None, *, stops: Sequence[int] = ()) -> np.ndarray:
+def resample(
+    path: np.ndarray, step: float, n: int, dstep: float | None = None, *, stops: Sequence[int] = ()
+) -> np.ndarray:
     """n knots along the joint polyline `path` (m, 6) (path[0] excluded), from rest, at most `step` apart
     (inf-norm arc length). With `dstep`, every joint's step changes by at most about `dstep` per step:
     the speed along the path ramps by dstep, is capped where the path bends (sqrt(dstep / curvature)) and
@@ -81,7 +83,9 @@ def resample(path: np.ndarray, step: float, n: int, dstep: float | None = None, 
         for i in range(n):
             stop = next((r for r in rests if r > pos + 1e-12), L)
             d = stop - pos
-            v = min(v + dstep, max(float(np.interp(pos, s, vmax)), dstep), max(math.sqrt(2.0 * dstep * d) - dstep, dstep))
+            v = min(
+                v + dstep, max(float(np.interp(pos, s, vmax)), dstep), max(math.sqrt(2.0 * dstep * d) - dstep, dstep)
+            )
             if v >= d:  # arrive at a rest point (at most dstep away) and leave it from rest
                 v, pos = 0.0, stop
             else:
@@ -93,8 +97,7 @@ def resample(path: np.ndarray, step: float, n: int, dstep: float | None = None, 
     return out
 
 
-
-def guess_slack(kin: "UR5e", knots: np.ndarray, sph: np.ndarray, params: NMPCParams) -> np.ndarray:
+def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: NMPCParams) -> np.ndarray:
     """(N,) table-clearance slack per knot (N, 6) that makes the guess feasible for the soft table rows."""
     z = sphere_positions(kin, knots, sph)[:, :, 2]
     need = params.table_z_m + params.table_clearance_m - (z - sph[None, :, 4])
@@ -102,7 +105,7 @@ def guess_slack(kin: "UR5e", knots: np.ndarray, sph: np.ndarray, params: NMPCPar
 
 
 def initial_guess(
-    kin: "UR5e",
+    kin: UR5e,
     params: NMPCParams,
     q0: np.ndarray,
     target: np.ndarray,
@@ -129,19 +132,25 @@ def initial_guess(
     reach = float(np.max(np.linalg.norm(tcp_sph[:, :3] - track, axis=1) + tcp_sph[:, 3]))
     crossed = [(n, lo, hi) for n, lo, hi in boxes if segment_hits_box(p0, pg, lo - m - reach, hi + m + reach)]
     if crossed and P.initial_guess == "straight":
-        log.info("nmpc: the straight initial guess crosses %s; IPOPT may stay stuck below it", [n for n, _, _ in crossed])
+        log.info(
+            "nmpc: the straight initial guess crosses %s; IPOPT may stay stuck below it", [n for n, _, _ in crossed]
+        )
         crossed = []
     if crossed:
         below = float(np.max(tcp_sph[:, 3] - (R0 @ (tcp_sph[:, :3] - track).T)[2]))
         z_lift = max(hi[2] for _, _, hi in crossed) + m + below + P.lift_clearance_m
         way = [p0, np.array([p0[0], p0[1], max(z_lift, p0[2])]), np.array([pg[0], pg[1], max(z_lift, pg[2])]), pg]
         kind = "over_box"
-        log.info("nmpc: the straight line to the goal crosses %s; seeding the first solve over it (z %.3f m)", [n for n, _, _ in crossed], z_lift)
+        log.info(
+            "nmpc: the straight line to the goal crosses %s; seeding the first solve over it (z %.3f m)",
+            [n for n, _, _ in crossed],
+            z_lift,
+        )
     else:
         way = [p0, pg]
         kind = "straight"
     pts, corners = [way[0]], []
-    for a, b in zip(way[:-1], way[1:]):
+    for a, b in itertools.pairwise(way):
         n = max(1, math.ceil(float(np.linalg.norm(b - a)) / 0.02))
         pts += [a + (b - a) * i / n for i in range(1, n + 1)]
         corners.append(len(pts) - 1)  # the guess comes to rest here: joints may turn around

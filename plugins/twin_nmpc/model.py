@@ -53,17 +53,17 @@ if TYPE_CHECKING:
     from twin.plugin import DHParameters
 
 __all__ = [
-    "ProblemShape",
-    "Weights",
-    "SolveOutput",
-    "NMPCProblem",
-    "cached_problem",
     "TCP_FRAME",
-    "fk_tcp_sx",
+    "NMPCProblem",
+    "ProblemShape",
+    "SolveOutput",
+    "Weights",
+    "cached_problem",
     "fk_frames_sx",
-    "sphere_centres",
-    "sphere_box_clearance",
+    "fk_tcp_sx",
     "pair_clearance",
+    "sphere_box_clearance",
+    "sphere_centres",
 ]
 
 log = logging.getLogger("twin")
@@ -86,13 +86,13 @@ def _exact(v: float) -> float:
     return v
 
 
-def fk_tcp_sx(q: ca.SX, tcp_offset_m: float, dh: "DHParameters") -> tuple[ca.SX, ca.SX]:
+def fk_tcp_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> tuple[ca.SX, ca.SX]:
     """Symbolic forward kinematics (standard DH parameters `dh`, `UR5e.dh`): TCP position (3,) and rotation (3, 3)."""
     frames = fk_frames_sx(q, tcp_offset_m, dh)
     return frames[TCP_FRAME][:3, 3], frames[TCP_FRAME][:3, :3]
 
 
-def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: "DHParameters") -> dict[int, ca.SX]:
+def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, ca.SX]:
     """Symbolic DH frames 4, 5 and 6 (wrist_2 joint, wrist_3 joint, flange) and the TCP (key TCP_FRAME),
     (4, 4) each in the base frame, for the standard DH parameters `dh` (`UR5e.dh`)."""
     T = ca.SX.eye(4)
@@ -201,7 +201,7 @@ class NMPCProblem:
         shape: ProblemShape,
         *,
         robot_spheres: np.ndarray,
-        dh: "DHParameters",
+        dh: DHParameters,
         tcp_offset_m: float,
         weights: Weights,
         table_clearance_m: float,
@@ -226,7 +226,10 @@ class NMPCProblem:
         boxes = [(p[n0 + 6 * b : n0 + 3 + 6 * b], p[n0 + 3 + 6 * b : n0 + 6 + 6 * b]) for b in range(nb)]
         o0 = n0 + 6 * nb
         obj = [(p[o0 + 4 * s : o0 + 4 * s + 3], p[o0 + 4 * s + 3]) for s in range(no)]
-        spheres_local = [(int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres]
+        # (frame, centre in that frame, radius): the robot's are constants, the held object's parameters
+        spheres_local: list[tuple[int, ca.DM | ca.SX, float | ca.SX]] = [
+            (int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres
+        ]
         spheres_local += [(TCP_FRAME, off, r) for off, r in obj]
         used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME})
 
@@ -234,8 +237,10 @@ class NMPCProblem:
         frames = fk_frames_sx(qs, tcp_offset_m, dh)
         fk = ca.Function("fk", [qs], [frames[f] for f in used])
 
-        def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, ca.SX]], ca.SX, ca.SX]:
-            Fs = dict(zip(used, fk(q)))
+        def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, float | ca.SX]], ca.SX, ca.SX]:
+            # `call` returns a list even for one output; `fk(q)` would return the bare matrix when `used`
+            # is only the TCP frame (no wrist spheres), and a CasADi matrix is not iterable
+            Fs = dict(zip(used, fk.call([q]), strict=True))
             pts = [(Fs[f][:3, 3] + ca.mtimes(Fs[f][:3, :3], off), r) for f, off, r in spheres_local]
             T = Fs[TCP_FRAME]
             return pts, T[:3, 3], T[:3, :3]
@@ -244,7 +249,7 @@ class NMPCProblem:
             d = ca.fmax(ca.fabs(ps - c) - h, 0)
             return ca.sqrt(ca.dot(d, d) + _EPS2)
 
-        J = 0
+        J = ca.SX(0)
         g: list[ca.SX] = []
         lbg: list[np.ndarray] = []
         ubg: list[np.ndarray] = []
@@ -285,6 +290,7 @@ class NMPCProblem:
             q_prev, dq_prev, dq_prev2 = qj, dq, dq_prev
             R_last = Rj
         s_down = x[-1]
+        assert R_last is not None  # set by every stage, and a horizon has N >= 1 stages
         g.append(-R_last[2, 2] + s_down)
         lbg.append(np.full(1, facing_down_cos))
         ubg.append(np.full(1, np.inf))
@@ -298,7 +304,7 @@ class NMPCProblem:
         self._stage_rows_ddq = self._stage_rows_dq + 6
         self._stage_rows_dddq = self._stage_rows_dq + 12
         nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
-        quiet = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
+        quiet: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
         self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
         self._warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, dict(quiet, **warm_options))
         self.fk = fk
@@ -376,7 +382,7 @@ class NMPCProblem:
         lbx, ubx, lbg, ubg = bounds
         warm = lam_x0 is not None and lam_g0 is not None
         solver = self._warm if warm else self._cold
-        args = dict(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        args = {"x0": np.clip(x0, lbx, ubx), "p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
         if warm:
             args["lam_x0"] = lam_x0
             args["lam_g0"] = lam_g0
@@ -415,7 +421,7 @@ def cached_problem(
     shape: ProblemShape,
     *,
     robot_spheres: np.ndarray,
-    dh: "DHParameters",
+    dh: DHParameters,
     tcp_offset_m: float,
     weights: Weights,
     table_clearance_m: float,

@@ -55,15 +55,17 @@ class NMPCParams(BaseModel):
         description="bound the change of the step's change by the request's max_joint_jerk * dt^3 (not in the seed;"
         " declared as the planner's `jerk_limited`)",
     )
-    goal_tolerance_m: float = Field(0.03, gt=0, description="stop when the TCP is this close to the goal (or the goal's tighter tolerance)")
+    goal_tolerance_m: float = Field(
+        0.03, gt=0, description="stop when the TCP is this close to the goal (or the goal's tighter tolerance)"
+    )
     max_solves: int = Field(40, ge=1, description="give up after this many solves")
     tool_spheres: list[tuple[float, float, float, float]] = Field(
-        default_factory=lambda: [tuple(s) for s in DEFAULT_TOOL_SPHERES],
+        default_factory=lambda: list(DEFAULT_TOOL_SPHERES),
         description="proxy spheres (x, y, z, r) in the TCP frame",
         min_length=1,
     )
     wrist_spheres: list[tuple[int, float, float, float, float]] = Field(
-        default_factory=lambda: [tuple(s) for s in DEFAULT_WRIST_SPHERES],
+        default_factory=lambda: list(DEFAULT_WRIST_SPHERES),
         description="proxy spheres (DH frame 4..6, x, y, z, r) on the wrist",
     )
     object_sphere_min_radius_m: float = Field(0.03, gt=0)
@@ -109,7 +111,7 @@ class NMPCParams(BaseModel):
     )
 
     @model_validator(mode="after")
-    def _consistent(self) -> "NMPCParams":
+    def _consistent(self) -> NMPCParams:
         if self.execute_steps > self.horizon:
             raise ValueError(f"execute_steps ({self.execute_steps}) must not exceed horizon ({self.horizon})")
         if self.prebuild_boxes is not None and any(n < 0 for n in self.prebuild_boxes):

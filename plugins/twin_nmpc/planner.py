@@ -112,16 +112,16 @@ class NMPCPlanner:
     Params = NMPCParams
     goal_kinds = frozenset({"position"})  # see the module docstring
 
-    def __init__(self, params: NMPCParams | None, context: "PluginContext"):
+    def __init__(self, params: NMPCParams | None, context: PluginContext):
         self.params = params if params is not None else NMPCParams()
         self.context = context
-        self.kin: "UR5e" = context.kinematics
+        self.kin: UR5e = context.kinematics
         col = context.settings.collision
         self._resolution = {"max_step_rad": col.check_resolution_rad, "max_step_m": col.check_resolution_m}
         self._robot_sph = robot_spheres(self.params.tool_spheres, self.params.wrist_spheres)
         self._problems: dict[ProblemShape, NMPCProblem] = {}
         self._request: MotionRequest | None = None
-        self._scene: "PlanningScene | None" = None
+        self._scene: PlanningScene | None = None
         self._start_goal()
         P = self.params
         expected = P.prebuild_boxes
@@ -147,7 +147,13 @@ class NMPCPlanner:
                 robot_spheres=self._robot_sph,
                 dh=self.kin.dh,
                 tcp_offset_m=self.kin.tcp_offset_m,
-                weights=Weights(P.position_weight, P.terminal_weight_factor, P.step_weight, P.table_slack_weight, P.facing_down_weight),
+                weights=Weights(
+                    P.position_weight,
+                    P.terminal_weight_factor,
+                    P.step_weight,
+                    P.table_slack_weight,
+                    P.facing_down_weight,
+                ),
                 table_clearance_m=P.table_clearance_m,
                 facing_down_cos=math.cos(P.facing_down_tol_rad),
                 cold_options=self._ipopt_options(cold=True),
@@ -205,7 +211,9 @@ class NMPCPlanner:
             return np.zeros((0, 4))
         _, size, T = att
         P = self.params
-        obj = object_spheres(size, T, r_min=P.object_sphere_min_radius_m, r_max=P.object_sphere_max_radius_m, max_n=P.max_object_spheres)
+        obj = object_spheres(
+            size, T, r_min=P.object_sphere_min_radius_m, r_max=P.object_sphere_max_radius_m, max_n=P.max_object_spheres
+        )
         return drop_covered(obj, self._robot_sph)
 
     def _boxes(self) -> list[Box]:
@@ -240,7 +248,7 @@ class NMPCPlanner:
         self._target = np.zeros(3)  # the goal position, base frame
         self._tolerance = self.params.goal_tolerance_m  # or the goal's tighter position tolerance
 
-    def reset(self, request: MotionRequest, scene: "PlanningScene") -> None:
+    def reset(self, request: MotionRequest, scene: PlanningScene) -> None:
         """Start a new goal: resolve the goal's TCP target and forget the previous plan (keep the NLPs)."""
         self._request = request
         self._scene = scene
@@ -252,21 +260,30 @@ class NMPCPlanner:
             self._target = self.kin.fk(goal.q, "tcp")[:3, 3]
             self._goal_candidates = goal.q[None].copy()
             if not self.kin.within_limits(goal.q):
-                self._pending = self._final(Status.INVALID_GOAL, f"joint goal {np.round(goal.q, 3).tolist()} is outside the joint limits")
+                self._pending = self._final(
+                    Status.INVALID_GOAL, f"joint goal {np.round(goal.q, 3).tolist()} is outside the joint limits"
+                )
         elif isinstance(goal, PoseGoal):
             if goal.frame not in ("tcp", "flange"):
-                self._pending = self._final(Status.INVALID_GOAL, f"unknown goal frame {goal.frame!r}; allowed: tcp, flange")
+                self._pending = self._final(
+                    Status.INVALID_GOAL, f"unknown goal frame {goal.frame!r}; allowed: tcp, flange"
+                )
                 self._target = np.asarray(goal.pose.position, dtype=float)
                 return
             self._track = np.zeros(3) if goal.frame == "tcp" else np.array([0.0, 0.0, -self.kin.tcp_offset_m])
             self._target = np.asarray(goal.pose.position, dtype=float)
             self._goal_candidates = self._goal_ik(goal)
             if self._goal_candidates.shape[0] == 0:
-                self._pending = self._final(Status.INVALID_GOAL, f"goal position {np.round(self._target, 3).tolist()} is out of reach (no IK)")
+                self._pending = self._final(
+                    Status.INVALID_GOAL, f"goal position {np.round(self._target, 3).tolist()} is out of reach (no IK)"
+                )
         else:  # pragma: no cover - MotionRequest already rejects other goal types
             raise PlanningError(f"unsupported goal {goal!r}")
         if self._pending is None and self._target[2] < self.params.table_z_m:
-            self._pending = self._final(Status.INVALID_GOAL, f"goal z {self._target[2]:.3f} m is below the table top ({self.params.table_z_m} m)")
+            self._pending = self._final(
+                Status.INVALID_GOAL,
+                f"goal z {self._target[2]:.3f} m is below the table top ({self.params.table_z_m} m)",
+            )
 
     def _goal_ik(self, goal: PoseGoal) -> np.ndarray:
         """Joint solutions for the goal pose; when the orientation is out of reach, for the goal position
@@ -338,7 +355,9 @@ class NMPCPlanner:
                     "nmpc: at the goal but no way to come to rest within the limits; stopping from %.3f rad/step",
                     float(np.abs(self._dq_prev).max()),
                 )
-            self._done = self._final(Status.SUCCESS, f"TCP within {err:.4f} m of the goal after {self._solves} solves", q)
+            self._done = self._final(
+                Status.SUCCESS, f"TCP within {err:.4f} m of the goal after {self._solves} solves", q
+            )
             return self._done
         if self._solves >= P.max_solves:
             why = f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {self._tolerance} m)"
@@ -374,7 +393,13 @@ class NMPCPlanner:
             x0 = prob.pack_x(guess, guess_slack(self.kin, guess, sph, P))
             sol = prob.solve(x0, p, bounds)
         self._solves += 1
-        entry = {"solve": self._solves, "warm": sol.warm, "time_s": sol.solve_time_s, "status": sol.status, "iterations": sol.iterations}
+        entry = {
+            "solve": self._solves,
+            "warm": sol.warm,
+            "time_s": sol.solve_time_s,
+            "status": sol.status,
+            "iterations": sol.iterations,
+        }
         self._solve_log.append(entry)
 
         k = P.execute_steps
@@ -521,8 +546,17 @@ class NMPCPlanner:
         P = self.params
         step, dstep, jstep = self._step_bounds()
         return violation(
-            self.kin, knots, sph, boxes, step, dstep, jstep,
-            dq_prev=self._dq_prev, dq_prev2=self._dq_prev2, box_margin_m=P.box_margin_m, substeps=P.constraint_substeps,
+            self.kin,
+            knots,
+            sph,
+            boxes,
+            step,
+            dstep,
+            jstep,
+            dq_prev=self._dq_prev,
+            dq_prev2=self._dq_prev2,
+            box_margin_m=P.box_margin_m,
+            substeps=P.constraint_substeps,
         )
 
     def _fallback_knots(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], k: int) -> np.ndarray | None:
@@ -564,7 +598,8 @@ class NMPCPlanner:
         ends there, the shortest stop anyway (the loop then solves again from rest); None without any."""
         along, brake = self._stop_along_plan(q, sph, boxes), self._brake_knots(q)
         ok = [
-            k for k in (along, brake)
+            k
+            for k in (along, brake)
             if k is not None
             and np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance
             and self._violation(k, sph, boxes) is None

@@ -12,6 +12,7 @@ Why here and not in tests: the test and the benchmark must run exactly the same 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import fcl
@@ -31,7 +32,15 @@ from twin.plugin import (
     load_config,
 )
 
-__all__ = ["TransferScene", "transfer_scenes", "build_scene", "TrajectoryCheck", "check_trajectory", "CUBE_SIZE_M", "GOAL_TOLERANCE_M"]
+__all__ = [
+    "CUBE_SIZE_M",
+    "GOAL_TOLERANCE_M",
+    "TrajectoryCheck",
+    "TransferScene",
+    "build_scene",
+    "check_trajectory",
+    "transfer_scenes",
+]
 
 CUBE_SIZE_M = 0.05
 GOAL_TOLERANCE_M = 0.03  # SPEC: the seed's NMPC stops within 3 cm of the goal
@@ -72,7 +81,9 @@ def _cell(settings: Settings, obstacle_center: np.ndarray | None, *, only: tuple
     return settings.model_copy(update={"world": settings.world.model_copy(update={"fixtures": fixtures})})
 
 
-def build_scene(settings: Settings, ts: TransferScene, *, with_fixtures: bool = True, holding: bool = True) -> PlanningScene:
+def build_scene(
+    settings: Settings, ts: TransferScene, *, with_fixtures: bool = True, holding: bool = True
+) -> PlanningScene:
     """The FCL planning scene of `ts`: the cell with the obstacle moved to its place, the perceived box,
     the cube held in the gripper (closed on it). `with_fixtures=False` keeps the table only."""
     scene = PlanningScene.from_settings(_cell(settings, ts.obstacle_center, only=None if with_fixtures else ("table",)))
@@ -120,7 +131,9 @@ def transfer_scenes(n: int = 50, seed: int = 0, *, settings: Settings | None = N
         oc = np.array([rng.uniform(-0.45, -0.40), rng.uniform(-0.05, 0.25), 0.10])
         lo, hi = oc - _OBSTACLE_SIZE / 2, oc + _OBSTACLE_SIZE / 2
         noise = rng.uniform(-0.005, 0.005, 6)
-        box = BoxBounds(lo[0] + noise[0], hi[0] + noise[1], lo[1] + noise[2], hi[1] + noise[3], 0.0, hi[2] + abs(noise[5]))
+        box = BoxBounds(
+            lo[0] + noise[0], hi[0] + noise[1], lo[1] + noise[2], hi[1] + noise[3], 0.0, hi[2] + abs(noise[5])
+        )
         box = box.extended_y(_EXTENSION_Y_M)
         pick = np.array([rng.uniform(lo[0] - 0.17, lo[0] - 0.08), rng.uniform(0.0, 0.30), rng.uniform(0.05, 0.12)])
         drop = np.array([rng.uniform(hi[0] + 0.08, -0.22), rng.uniform(-0.25, 0.30), rng.uniform(0.06, 0.12)])
@@ -139,12 +152,21 @@ def transfer_scenes(n: int = 50, seed: int = 0, *, settings: Settings | None = N
         if q_goal is None:
             continue
         T_cube = np.eye(4)
-        T_cube[:3, :3] = np.array([[math.cos(cube_yaw), -math.sin(cube_yaw), 0], [math.sin(cube_yaw), math.cos(cube_yaw), 0], [0, 0, 1]])
+        T_cube[:3, :3] = np.array(
+            [[math.cos(cube_yaw), -math.sin(cube_yaw), 0], [math.sin(cube_yaw), math.cos(cube_yaw), 0], [0, 0, 1]]
+        )
         # NMPC reaches positions (orientation free) within 3 cm; `joint_goal` is still drawn so that the
         # scenes stay the ones measured before goals carried their tolerances
         del joint_goal
         goal = PoseGoal(Pose.from_matrix(Tb), position_tolerance_m=GOAL_TOLERANCE_M, orientation_tolerance_rad=None)
-        ts = TransferScene(len(out), oc, box, MotionRequest(q_start, goal, limits, seed=seed * 1000 + len(out)), "over_out" if out_dir else "over_in", T_cube)
+        ts = TransferScene(
+            len(out),
+            oc,
+            box,
+            MotionRequest(q_start, goal, limits, seed=seed * 1000 + len(out)),
+            "over_out" if out_dir else "over_in",
+            T_cube,
+        )
         # valid ends: the whole arm and the cube clear the perceived box by >= 5 cm and nothing collides
         box_only = _box_only_scene(settings, ts, boxes_only_cache)
         if min(box_only.min_distance(q, include_self=False).distance for q in (q_start, q_goal)) < _END_CLEARANCE_M:
@@ -171,19 +193,23 @@ class TrajectoryCheck:
 
 
 def check_trajectory(
-    traj: Trajectory, ts: TransferScene, spheres_fn: "object", table_scene: PlanningScene, kin: UR5e
+    traj: Trajectory,
+    ts: TransferScene,
+    spheres_fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    table_scene: PlanningScene,
+    kin: UR5e,
 ) -> TrajectoryCheck:
     """Densify `traj` (<= 0.01 rad, <= 5 mm of TCP travel between samples) and measure with FCL: every
     proxy sphere (`spheres_fn(qs) -> (centres (m, n, 3), radii (n,))`) against the perceived box, and the
     robot + held cube against a table-only scene."""
     qs = densify(traj, kin, max_step_rad=0.01, max_step_m=0.005)
-    centres, radii = spheres_fn(qs)  # type: ignore[operator]
+    centres, radii = spheres_fn(qs)
     b = ts.perceived_box
     box = fcl.CollisionObject(fcl.Box(*(b.hi - b.lo)), fcl.Transform(0.5 * (b.lo + b.hi)))
     req, best = fcl.DistanceRequest(enable_signed_distance=True), math.inf
     spheres = [fcl.CollisionObject(fcl.Sphere(float(r))) for r in radii]
     for frame in centres:
-        for obj, c in zip(spheres, frame):
+        for obj, c in zip(spheres, frame, strict=True):
             obj.setTranslation(c)
             res = fcl.DistanceResult()
             d = fcl.distance(obj, box, req, res)

@@ -25,8 +25,8 @@ if TYPE_CHECKING:
     from twin.plugin import UR5e
 
 __all__ = [
-    "Box",
     "CHECK_TOL_M",
+    "Box",
     "clearance",
     "drop_covered",
     "object_spheres",
@@ -65,7 +65,9 @@ def object_spheres(size: np.ndarray, T_tcp_obj: np.ndarray, *, r_min: float, r_m
     return np.hstack([centres, np.full((n, 1), r)])
 
 
-def robot_spheres(tool: np.ndarray | Sequence, wrist: np.ndarray | Sequence = ()) -> np.ndarray:
+def robot_spheres(
+    tool: np.ndarray | Sequence[Sequence[float]], wrist: np.ndarray | Sequence[Sequence[float]] = ()
+) -> np.ndarray:
     """(n, 5) spheres (frame, x, y, z, r): `tool` (x, y, z, r) in the TCP frame, then `wrist` as given."""
     t = np.asarray(tool, dtype=float).reshape(-1, 4)
     w = np.asarray(wrist, dtype=float).reshape(-1, 5)
@@ -89,7 +91,7 @@ def with_object(robot_sph: np.ndarray, obj: np.ndarray) -> np.ndarray:
     return np.vstack([robot_sph, np.hstack([np.full((obj.shape[0], 1), TCP_FRAME), obj])])
 
 
-def sphere_positions(kin: "UR5e", qs: np.ndarray, sph: np.ndarray) -> np.ndarray:
+def sphere_positions(kin: UR5e, qs: np.ndarray, sph: np.ndarray) -> np.ndarray:
     """Centres (m, n, 3) of the spheres `sph` (n, 5) at configurations `qs` (m, 6) (or one (6,)), base frame."""
     return sphere_centres(kin.dh_frames(np.atleast_2d(qs)), kin.tcp_offset_m, sph)
 
@@ -100,7 +102,7 @@ def subdivide(knots: np.ndarray, n: int) -> np.ndarray:
     return (knots[:-1, None, :] + f[None, :, None] * (knots[1:] - knots[:-1])[:, None, :]).reshape(-1, 6)
 
 
-def clearance(kin: "UR5e", qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, margin: float) -> np.ndarray:
+def clearance(kin: UR5e, qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, margin: float) -> np.ndarray:
     """(m, n_boxes * n_spheres) signed clearances of the spheres at qs from the boxes grown by `margin`."""
     if not boxes:
         return np.zeros((qs.shape[0], 0))
@@ -110,7 +112,7 @@ def clearance(kin: "UR5e", qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *,
 
 
 def violation(
-    kin: "UR5e",
+    kin: UR5e,
     knots: np.ndarray,
     sph: np.ndarray,
     boxes: list[Box],

@@ -30,7 +30,10 @@ __all__ = ["PLANNERS", "twin_register_planners"]
 
 # name -> (target, description); the classes are generated in twin_ompl.planner from one table
 PLANNERS: dict[str, tuple[str, str]] = {
-    "ompl.rrtconnect": ("twin_ompl.planner:RRTConnect", "OMPL RRT-Connect (bidirectional RRT); stops at the first path"),
+    "ompl.rrtconnect": (
+        "twin_ompl.planner:RRTConnect",
+        "OMPL RRT-Connect (bidirectional RRT); stops at the first path",
+    ),
     "ompl.rrt": ("twin_ompl.planner:RRT", "OMPL RRT with goal bias; stops at the first path"),
     "ompl.rrtstar": (
         "twin_ompl.planner:RRTstar",
@@ -40,13 +43,19 @@ PLANNERS: dict[str, tuple[str, str]] = {
         "twin_ompl.planner:InformedRRTstar",
         "OMPL Informed RRT*; optimises until its work budget is spent",
     ),
-    "ompl.sorrtstar": ("twin_ompl.planner:SORRTstar", "OMPL Sorting RRT*; disabled: hangs in OMPL 2.0.1 (see twin planners)"),
+    "ompl.sorrtstar": (
+        "twin_ompl.planner:SORRTstar",
+        "OMPL Sorting RRT*; disabled: hangs in OMPL 2.0.1 (see twin planners)",
+    ),
     "ompl.prm": ("twin_ompl.planner:PRM", "OMPL PRM (roadmap); stops at the first path"),
     "ompl.prmstar": (
         "twin_ompl.planner:PRMstar",
         "OMPL PRM* (asymptotically optimal roadmap); optimises until its work budget is spent",
     ),
-    "ompl.lazyprmstar": ("twin_ompl.planner:LazyPRMstar", "OMPL LazyPRM* (needs bindings that expose it; not in ompl 2.0.1)"),
+    "ompl.lazyprmstar": (
+        "twin_ompl.planner:LazyPRMstar",
+        "OMPL LazyPRM* (needs bindings that expose it; not in ompl 2.0.1)",
+    ),
     "ompl.bitstar": (
         "twin_ompl.planner:BITstar",
         "OMPL BIT* (batch informed trees); optimises until its work budget is spent",
@@ -55,11 +64,17 @@ PLANNERS: dict[str, tuple[str, str]] = {
         "twin_ompl.planner:AORRTC",
         "OMPL AORRTC (asymptotically optimal RRT-Connect); optimises until its work budget is spent",
     ),
-    "ompl.kpiece1": ("twin_ompl.planner:KPIECE1", "OMPL KPIECE1 (projection-grid exploration); stops at the first path"),
+    "ompl.kpiece1": (
+        "twin_ompl.planner:KPIECE1",
+        "OMPL KPIECE1 (projection-grid exploration); stops at the first path",
+    ),
     "ompl.bkpiece1": ("twin_ompl.planner:BKPIECE1", "OMPL bidirectional KPIECE1; stops at the first path"),
     "ompl.lbkpiece1": ("twin_ompl.planner:LBKPIECE1", "OMPL lazy bidirectional KPIECE1; stops at the first path"),
     "ompl.bitrrt": ("twin_ompl.planner:BiTRRT", "OMPL BiTRRT (needs bindings that expose it; not in ompl 2.0.1)"),
-    "ompl.fmt": ("twin_ompl.planner:FMT", "OMPL FMT* (fast marching tree over one batch of samples); stops at the first path"),
+    "ompl.fmt": (
+        "twin_ompl.planner:FMT",
+        "OMPL FMT* (fast marching tree over one batch of samples); stops at the first path",
+    ),
     "ompl.bfmt": ("twin_ompl.planner:BFMT", "OMPL BFMT* (bidirectional FMT*); stops at the first path"),
 }
 

@@ -54,7 +54,10 @@ class OmplParams(BaseModel):
         0.002, ge=0, le=0.1, description="joint step of the final check of the timed trajectory; 0 = no final check"
     )
     verify_resolution_m: float = Field(
-        0.004, gt=0, le=0.05, description="TCP travel resolution of the final check (checked every half of it, as twin.planning does)"
+        0.004,
+        gt=0,
+        le=0.05,
+        description="TCP travel resolution of the final check (checked every half of it, as twin.planning does)",
     )
     try_direct: bool = Field(
         False,
@@ -65,12 +68,26 @@ class OmplParams(BaseModel):
     )
     simplify: bool = Field(True, description="shortcut the path with OMPL's PathSimplifier before retiming")
     simplify_max_steps: int = Field(
-        20, ge=1, le=10_000, description="cap on vertex-reduction attempts per simplification pass (bounded, so seeded runs repeat)"
+        20,
+        ge=1,
+        le=10_000,
+        description="cap on vertex-reduction attempts per simplification pass (bounded, so seeded runs repeat)",
     )
-    simplify_passes: int = Field(1, ge=1, le=10, description="rope shortcut + vertex reduction + collapse passes (stops early when nothing changes)")
-    max_goal_states: int = Field(64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal set (nearest first)")
-    max_repairs: int = Field(2, ge=0, le=5, description="replans at 4x finer validity resolution if the final check finds a collision")
-    retimer: str = Field("toppra", description="retimer plugin that turns the path into a trajectory (a config block's retimer: wins)")
+    simplify_passes: int = Field(
+        1,
+        ge=1,
+        le=10,
+        description="rope shortcut + vertex reduction + collapse passes (stops early when nothing changes)",
+    )
+    max_goal_states: int = Field(
+        64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal set (nearest first)"
+    )
+    max_repairs: int = Field(
+        2, ge=0, le=5, description="replans at 4x finer validity resolution if the final check finds a collision"
+    )
+    retimer: str = Field(
+        "toppra", description="retimer plugin that turns the path into a trajectory (a config block's retimer: wins)"
+    )
     retimer_params: dict[str, Any] = Field(default_factory=dict, description="parameters of that retimer")
 
 
@@ -90,11 +107,18 @@ def _p(tp: Any, setter: str | tuple[str, ...], description: str, **bounds: Any) 
 
 # OMPL's declared parameter names (ParamSet keys) -> setter on the bound planner class
 OMPL_PARAMS: dict[str, OmplParam] = {
-    "range": _p(float, "setRange", "longest motion added in one step (joint-space L2, rad); None = OMPL's 20% of the extent", gt=0),
+    "range": _p(
+        float,
+        "setRange",
+        "longest motion added in one step (joint-space L2, rad); None = OMPL's 20% of the extent",
+        gt=0,
+    ),
     "goal_bias": _p(float, "setGoalBias", "probability of sampling the goal", ge=0, le=1),
     "intermediate_states": _p(bool, "setIntermediateStates", "keep the states passed on each extension in the tree"),
     "rewire_factor": _p(float, "setRewireFactor", "scales the rewiring radius / k", gt=0),
-    "use_k_nearest": _p(bool, ("setKNearest", "setNearestK"), "connect to the k nearest instead of those within a radius"),
+    "use_k_nearest": _p(
+        bool, ("setKNearest", "setNearestK"), "connect to the k nearest instead of those within a radius"
+    ),
     "delay_collision_checking": _p(bool, "setDelayCC", "check motions of rewiring candidates lazily"),
     "tree_pruning": _p(bool, "setTreePruning", "prune the tree by the current best cost"),
     "prune_threshold": _p(float, "setPruneThreshold", "fractional cost change that triggers pruning", ge=0, le=1),
@@ -110,26 +134,42 @@ OMPL_PARAMS: dict[str, OmplParam] = {
     "samples_per_batch": _p(int, "setSamplesPerBatch", "samples per BIT* batch", ge=1),
     "use_bitstar_k_nearest": _p(bool, "setUseKNearest", "BIT* k-nearest instead of r-disc graph"),
     "use_graph_pruning": _p(bool, "setPruning", "prune the BIT* graph by the informed set"),
-    "prune_threshold_as_fractional_cost_change": _p(float, "setPruneThresholdFraction", "cost change that triggers pruning", ge=0, le=1),
-    "delay_rewiring_to_first_solution": _p(bool, "setDelayRewiringUntilInitialSolution", "no rewiring before the first solution"),
+    "prune_threshold_as_fractional_cost_change": _p(
+        float, "setPruneThresholdFraction", "cost change that triggers pruning", ge=0, le=1
+    ),
+    "delay_rewiring_to_first_solution": _p(
+        bool, "setDelayRewiringUntilInitialSolution", "no rewiring before the first solution"
+    ),
     "use_just_in_time_sampling": _p(bool, "setJustInTimeSampling", "generate samples only where needed"),
     "drop_unconnected_samples_on_prune": _p(bool, "setDropSamplesOnPrune", "drop unconnected samples when pruning"),
     "stop_on_each_solution_improvement": _p(bool, "setStopOnSolnImprovement", "return after every improvement"),
     "use_strict_queue_ordering": _p(bool, "setStrictQueueOrdering", "re-sort the queue on every rewiring"),
     "find_approximate_solutions": _p(bool, "setConsiderApproximateSolutions", "track approximate solutions"),
     "border_fraction": _p(float, "setBorderFraction", "fraction of expansions spent on border cells", gt=0, le=1),
-    "failed_expansion_score_factor": _p(float, "setFailedExpansionCellScoreFactor", "score factor after a failed expansion", gt=0, le=1),
-    "min_valid_path_fraction": _p(float, "setMinValidPathFraction", "least valid fraction of a motion to keep it", ge=0, le=1),
+    "failed_expansion_score_factor": _p(
+        float, "setFailedExpansionCellScoreFactor", "score factor after a failed expansion", gt=0, le=1
+    ),
+    "min_valid_path_fraction": _p(
+        float, "setMinValidPathFraction", "least valid fraction of a motion to keep it", ge=0, le=1
+    ),
     "temp_change_factor": _p(float, "setTempChangeFactor", "BiTRRT temperature change factor", gt=0),
     "init_temperature": _p(float, "setInitTemperature", "BiTRRT initial temperature", gt=0),
     "frontier_threshold": _p(float, "setFrontierThreshold", "BiTRRT frontier distance", ge=0),
     "frontier_node_ratio": _p(float, "setFrontierNodeRatio", "BiTRRT frontier/non-frontier node ratio", gt=0),
     "cost_threshold": _p(float, "setCostThreshold", "BiTRRT cost threshold"),
-    "num_samples": _p(int, "setNumSamples", "FMT*/BFMT* samples drawn in one batch (the extended variant adds more if needed)", ge=10, le=1_000_000),
+    "num_samples": _p(
+        int,
+        "setNumSamples",
+        "FMT*/BFMT* samples drawn in one batch (the extended variant adds more if needed)",
+        ge=10,
+        le=1_000_000,
+    ),
     "radius_multiplier": _p(float, "setRadiusMultiplier", "FMT*/BFMT* scale of the connection radius (or k)", gt=0),
     "nearest_k": _p(bool, "setNearestK", "BFMT* connects to the k nearest instead of those within a radius"),
     "cache_cc": _p(bool, "setCacheCC", "FMT*/BFMT* remember collision-check results between samples"),
-    "heuristics": _p(bool, "setHeuristics", "FMT*/BFMT* order the open set by cost-to-come plus a cost-to-go heuristic"),
+    "heuristics": _p(
+        bool, "setHeuristics", "FMT*/BFMT* order the open set by cost-to-come plus a cost-to-go heuristic"
+    ),
     "extended_fmt": _p(bool, "setExtendedFMT", "FMT*/BFMT* add samples when the batch holds no path (else fail)"),
     "balanced": _p(bool, "setExploration", "BFMT* alternates the two trees (balanced exploration)"),
     "optimality": _p(bool, "setTermination", "BFMT* terminates on the optimal connection instead of the first one"),
@@ -227,9 +267,9 @@ PLANNER_SPECS: dict[str, PlannerSpec] = {
         True,
         **_budget(15_000),
         defect=(
-            "OMPL 2.0.1's SORRT* spins inside OrderedInfSampler::clearBatch once a path is found on an easy query and "
-            "ignores its time limit (seen with gdb), so it is disabled; use ompl.informedrrtstar (the same planner without "
-            "ordered sampling) or an OMPL build where this is fixed"
+            "OMPL 2.0.1's SORRT* spins inside OrderedInfSampler::clearBatch once a path is found on an easy query "
+            "and ignores its time limit (seen with gdb), so it is disabled; use ompl.informedrrtstar (the same "
+            "planner without ordered sampling) or an OMPL build where this is fixed"
         ),
     ),
     "PRM": PlannerSpec("PRM", ("max_nearest_neighbors",), single_goal=True, solution_thread=True),
@@ -242,7 +282,14 @@ PLANNER_SPECS: dict[str, PlannerSpec] = {
     "LBKPIECE1": PlannerSpec("LBKPIECE1", ("range", "border_fraction", "min_valid_path_fraction")),
     "BiTRRT": PlannerSpec(
         "BiTRRT",
-        ("range", "temp_change_factor", "init_temperature", "frontier_threshold", "frontier_node_ratio", "cost_threshold"),
+        (
+            "range",
+            "temp_change_factor",
+            "init_temperature",
+            "frontier_threshold",
+            "frontier_node_ratio",
+            "cost_threshold",
+        ),
     ),
     # FMT* and BFMT* march once through one batch of samples and return the path they find (they do not
     # optimise for the rest of the time limit). OMPL's defaults (1000 samples, radius multiplier 1.1 / 1.0,
@@ -262,7 +309,16 @@ PLANNER_SPECS: dict[str, PlannerSpec] = {
     # robocup pose goal with 11 IK solutions, reproducible with its seed): it gets the nearest goal only
     "BFMT": PlannerSpec(
         "BFMT",
-        ("num_samples", "radius_multiplier", "nearest_k", "balanced", "optimality", "heuristics", "cache_cc", "extended_fmt"),
+        (
+            "num_samples",
+            "radius_multiplier",
+            "nearest_k",
+            "balanced",
+            "optimality",
+            "heuristics",
+            "cache_cc",
+            "extended_fmt",
+        ),
         defaults=(("num_samples", 100), ("radius_multiplier", 0.6)),
         single_goal=True,
     ),
@@ -314,11 +370,14 @@ def params_model(spec: PlannerSpec) -> type[OmplParams]:
                 ge=1,
                 description=(
                     "end the search after the planner asked its termination condition this many times per second of "
-                    "the request's time limit (about once per iteration): bounds a search that stops checking states (AORRTC rejecting samples against its cost "
-                    "bound). None: no such bound"
+                    "the request's time limit (about once per iteration): bounds a search that stops checking states "
+                    "(AORRTC rejecting samples against its cost bound). None: no such bound"
                 ),
             ),
         )
     model = create_model(f"{spec.ompl_class}Params", __base__=OmplParams, **fields)
-    model.__doc__ = f"Parameters of ompl.{spec.ompl_class.lower()}: the shared options and OMPL's {', '.join(spec.params) or '(none)'}."
+    model.__doc__ = (
+        f"Parameters of ompl.{spec.ompl_class.lower()}: the shared options and OMPL's "
+        f"{', '.join(spec.params) or '(none)'}."
+    )
     return model

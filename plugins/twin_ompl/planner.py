@@ -146,7 +146,7 @@ class OmplPlanner(PathPlanner):
     spec: PlannerSpec = PLANNER_SPECS["RRTConnect"]
     Params: type[OmplParams] = params_model(spec)
 
-    def __init__(self, params: OmplParams | None = None, context: "PluginContext | None" = None):
+    def __init__(self, params: OmplParams | None = None, context: PluginContext | None = None):
         reason = self.unavailable_reason()
         if reason is not None:
             raise DependencyMissing(reason)
@@ -175,8 +175,9 @@ class OmplPlanner(PathPlanner):
 
         version = getattr(ompl, "__version__", "") or _dist_version()
         return (
-            f"planner 'ompl.{cls.spec.ompl_class.lower()}' needs ompl.geometric.{cls.spec.ompl_class}, which the installed OMPL "
-            f"{version} Python bindings do not expose (upstream ompl/ompl#1419). Install an OMPL build whose "
+            f"planner 'ompl.{cls.spec.ompl_class.lower()}' needs ompl.geometric.{cls.spec.ompl_class}, "
+            f"which the installed OMPL {version} Python bindings do not expose (upstream ompl/ompl#1419). "
+            "Install an OMPL build whose "
             "bindings include it, or pick another ompl.* planner (`twin planners`)."
         )
 
@@ -197,7 +198,8 @@ class OmplPlanner(PathPlanner):
             setter = next((s for s in candidates if hasattr(cls, s)), None)
             if setter is None:
                 raise ConfigError(
-                    f"{self.name}: parameter {pname!r} is not settable in this OMPL build ({' / '.join(candidates)} missing)"
+                    f"{self.name}: parameter {pname!r} is not settable in this OMPL build "
+                    f"({' / '.join(candidates)} missing)"
                 )
             out.append((setter, value))
         return out
@@ -236,15 +238,21 @@ class OmplPlanner(PathPlanner):
         return self._default_retimer
 
     # ---- the protocol ----------------------------------------------------------------------------
-    def plan(self, request: MotionRequest, scene: "PlanningScene") -> MotionResult:
+    def plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         """Plan `request` in `scene`; "no path" is a status with a reason, never an exception."""
         t0 = time.perf_counter()
-        limit = request.time_limit_s if self.params.time_limit_s is None else min(request.time_limit_s, self.params.time_limit_s)
+        limit = (
+            request.time_limit_s
+            if self.params.time_limit_s is None
+            else min(request.time_limit_s, self.params.time_limit_s)
+        )
         deadline = t0 + limit
         result = self._plan(request, scene, t0, deadline, limit)
         return replace(result, planning_time_s=time.perf_counter() - t0)
 
-    def _plan(self, request: MotionRequest, scene: "PlanningScene", t0: float, deadline: float, limit: float) -> MotionResult:
+    def _plan(
+        self, request: MotionRequest, scene: PlanningScene, t0: float, deadline: float, limit: float
+    ) -> MotionResult:
         p = self.params
         kin = self.kin
         start = np.array(request.start, dtype=float)
@@ -254,9 +262,17 @@ class OmplPlanner(PathPlanner):
         if not kin.within_limits(start):
             lo, hi = kin.joint_limits[:, 0], kin.joint_limits[:, 1]
             j = int(np.argmax(np.maximum(lo - start, start - hi)))
-            return MotionResult(Status.INVALID_START, f"start joint {j + 1} = {start[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]", info=info)
+            return MotionResult(
+                Status.INVALID_START,
+                f"start joint {j + 1} = {start[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]",
+                info=info,
+            )
         if scene.in_collision(start):
-            return MotionResult(Status.INVALID_START, f"the start configuration is in collision ({colliding_pair(scene, start)})", info=info)
+            return MotionResult(
+                Status.INVALID_START,
+                f"the start configuration is in collision ({colliding_pair(scene, start)})",
+                info=info,
+            )
         joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
         bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
         goals, failure = self._goal_set(request, scene, bounds)
@@ -280,7 +296,9 @@ class OmplPlanner(PathPlanner):
         # 2.-6. plan, simplify, retime, verify; repair a grazing segment by planning it finer -----------
         counter = CheckCounter()
         timings: dict[str, float] = {}
-        att = self._attempt(start, goals, bounds, scene, request.seed, p.validity_resolution_rad, counter, deadline, limit, timings)
+        att = self._attempt(
+            start, goals, bounds, scene, request.seed, p.validity_resolution_rad, counter, deadline, limit, timings
+        )
         info.update(direct=att.direct)
         if att.budget_spent is not None:
             info.update(budget_spent=att.budget_spent)
@@ -298,15 +316,26 @@ class OmplPlanner(PathPlanner):
                 return MotionResult(Status.SUCCESS, reason, traj, path=path, info=self._info(info, counter, timings))
             if segment is None or repairs >= p.max_repairs or time.perf_counter() >= deadline:
                 status = Status.LIMIT_VIOLATION if outcome.startswith("retiming failed") else Status.COLLISION
-                return MotionResult(status, f"{outcome} (after {repairs} repairs)", path=path, info=self._info(info, counter, timings))
+                return MotionResult(
+                    status, f"{outcome} (after {repairs} repairs)", path=path, info=self._info(info, counter, timings)
+                )
             # the straight segment grazes an obstacle between the states checked while planning: plan that
             # segment again at the final check's resolution and splice the detour in
             repairs += 1
             a, b = path[segment], path[segment + 1]
             fine = p.verify_resolution_rad
             sub = self._attempt(
-                a, b[None], repair_bounds(a, b, bounds), scene, request.seed + 7919 * repairs, fine, counter, deadline, limit,
-                timings, repair=True,
+                a,
+                b[None],
+                repair_bounds(a, b, bounds),
+                scene,
+                request.seed + 7919 * repairs,
+                fine,
+                counter,
+                deadline,
+                limit,
+                timings,
+                repair=True,
             )
             if sub.path is None:
                 return MotionResult(
@@ -333,7 +362,7 @@ class OmplPlanner(PathPlanner):
 
     # ---- steps -------------------------------------------------------------------------------------
     def _goal_set(
-        self, request: MotionRequest, scene: "PlanningScene", bounds: np.ndarray
+        self, request: MotionRequest, scene: PlanningScene, bounds: np.ndarray
     ) -> tuple[np.ndarray | None, tuple[Status, str] | None]:
         """(k, 6) collision-free goal configurations inside `bounds`, nearest to the start first."""
         kin, start = self.kin, request.start
@@ -354,12 +383,18 @@ class OmplPlanner(PathPlanner):
         inside = np.all((sols >= bounds[:, 0] - 1e-9) & (sols <= bounds[:, 1] + 1e-9), axis=1)
         sols = sols[inside]
         if sols.shape[0] == 0:  # cannot happen for 'compact' (every branch has a wrap in [-pi, pi])
-            return None, (Status.INVALID_GOAL, f"no IK solution of the goal pose lies inside the sampling bounds ({self.params.joint_range})")
+            return None, (
+                Status.INVALID_GOAL,
+                f"no IK solution of the goal pose lies inside the sampling bounds ({self.params.joint_range})",
+            )
         sols = sols[np.argsort(np.abs(sols - start).max(axis=1), kind="stable")]
         hits = scene.in_collision_batch(sols)
         free = sols[~hits]
         if free.shape[0] == 0:
-            return None, (Status.INVALID_GOAL, f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {colliding_pair(scene, sols[0])})")
+            return None, (
+                Status.INVALID_GOAL,
+                f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {colliding_pair(scene, sols[0])})",
+            )
         return free[: self.params.max_goal_states], None
 
     def _attempt(
@@ -367,7 +402,7 @@ class OmplPlanner(PathPlanner):
         start: np.ndarray,
         goals: np.ndarray,
         bounds: np.ndarray,
-        scene: "PlanningScene",
+        scene: PlanningScene,
         seed: int,
         resolution: float,
         counter: CheckCounter,
@@ -471,8 +506,9 @@ class OmplPlanner(PathPlanner):
         """The work budget of this search, or None: a repair and a planner that stops at its first path end by
         that path or the time limit. `max_state_checks` and `max_iterations` are per second of the request's
         time limit (a 2 s limit buys twice the search of a 1 s one: still a count, so still deterministic)."""
-        checks = self.params.max_state_checks
-        iterations = self.params.max_iterations
+        # only the optimising planners' params models have the budget fields (twin_ompl.params.params_model)
+        checks = getattr(self.params, "max_state_checks", None)
+        iterations = getattr(self.params, "max_iterations", None)
         if repair or (checks is None and iterations is None):
             return None
         scale = max(time_limit_s, 1e-3)
@@ -494,7 +530,11 @@ def _dist_version() -> str:
 
 def _planner_class(spec: PlannerSpec) -> type[OmplPlanner]:
     doc = f"`ompl.{spec.ompl_class.lower()}`: OMPL's {spec.ompl_class} with FCL validity, IK goal sets and retiming."
-    return type(spec.ompl_class, (OmplPlanner,), {"spec": spec, "Params": params_model(spec), "__doc__": doc, "__module__": __name__})
+    return type(
+        spec.ompl_class,
+        (OmplPlanner,),
+        {"spec": spec, "Params": params_model(spec), "__doc__": doc, "__module__": __name__},
+    )
 
 
 RRTConnect = _planner_class(PLANNER_SPECS["RRTConnect"])

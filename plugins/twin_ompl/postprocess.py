@@ -40,7 +40,7 @@ def path_length(path: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if path.shape[0] > 1 else 0.0
 
 
-def simplify(si: Any, path: Any, params: "OmplParams", deadline: float) -> None:
+def simplify(si: Any, path: Any, params: OmplParams, deadline: float) -> None:
     """OMPL shortcutting of `path` (an og.PathGeometric, changed in place) in at most `simplify_passes`
     bounded passes, none started after `deadline` (no wall-clock cut inside a pass, so seeded runs repeat)."""
     steps = params.simplify_max_steps
@@ -62,9 +62,9 @@ def timed_and_checked(
     path: np.ndarray,
     retimer: Retimer,
     request: MotionRequest,
-    scene: "PlanningScene",
-    kin: "UR5e",
-    params: "OmplParams",
+    scene: PlanningScene,
+    kin: UR5e,
+    params: OmplParams,
     timings: dict[str, float],
 ) -> tuple[Trajectory | None, str, int | None]:
     """Time `path` (m, 6) with `retimer` under the request's limits and check it on `scene`.

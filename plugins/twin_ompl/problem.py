@@ -50,7 +50,7 @@ _PI = math.pi
 _REPAIR_MARGIN_RAD = 0.3
 
 
-def sampling_bounds(kin: "UR5e", start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
+def sampling_bounds(kin: UR5e, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
     """(6, 2) sampling bounds in rad for `joint_range` 'compact' or 'full' (see the module docstring)."""
     lim = np.asarray(kin.joint_limits, dtype=float)
     if joint_range == "full":
@@ -71,7 +71,7 @@ def repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarra
 
 
 def space_information(
-    bounds: np.ndarray, scene: "PlanningScene", resolution_rad: float, counter: CheckCounter, seed: int
+    bounds: np.ndarray, scene: PlanningScene, resolution_rad: float, counter: CheckCounter, seed: int
 ) -> tuple[Any, SceneMotionValidator]:
     """OMPL SpaceInformation over RealVectorStateSpace(6) inside `bounds` (6, 2), with the scene's state
     validity checker and batched motion validator (states `resolution_rad` apart), set up; and the validator.

@@ -88,7 +88,10 @@ class QueryCell:
         if straight not in ("any", "free", "blocked"):
             raise ValueError(f"straight must be 'any', 'free' or 'blocked', got {straight!r}")
         rng = np.random.default_rng(seed)
-        yaw = lambda: rng.uniform(-math.pi, math.pi)
+
+        def yaw() -> float:
+            return float(rng.uniform(-math.pi, math.pi))
+
         out: list[tuple[np.ndarray, Any, np.ndarray]] = []
         draws = 0
         while len(out) < n:
@@ -102,7 +105,9 @@ class QueryCell:
                 Ta = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
                 if rng.random() < 0.6:
                     side = 1.0 if rng.random() < 0.5 else -1.0
-                    Tb = top_down(rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw())
+                    Tb = top_down(
+                        rng.uniform(-0.19, -0.01), side * rng.uniform(0.40, 0.50), rng.uniform(0.05, 0.10), yaw()
+                    )
                 else:
                     Tb = top_down(rng.uniform(-0.62, -0.30), rng.uniform(-0.30, 0.30), rng.uniform(0.03, 0.30), yaw())
             if rng.random() < 0.5:

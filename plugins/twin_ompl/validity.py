@@ -30,10 +30,10 @@ if TYPE_CHECKING:
 __all__ = [
     "CheckCounter",
     "SceneMotionValidator",
-    "state_validity_checker",
     "bisection_order",
-    "trajectory_check_points",
     "padded_scene",
+    "state_validity_checker",
+    "trajectory_check_points",
 ]
 
 
@@ -46,7 +46,7 @@ class CheckCounter:
     OMPL 2.0.1 can advance forever); a refusal ends those at once. A refusal by work count comes at the
     same point on every run, so a search it ends is repeatable (`twin_ompl.budget`)."""
 
-    __slots__ = ("states", "motions", "configs", "error", "deadline", "check_limit", "iterations", "expired")
+    __slots__ = ("check_limit", "configs", "deadline", "error", "expired", "iterations", "motions", "states")
 
     def __init__(self) -> None:
         self.states = 0
@@ -89,7 +89,7 @@ def bisection_order(n: int) -> np.ndarray:
     return out
 
 
-def state_validity_checker(scene: "PlanningScene", counter: CheckCounter) -> Any:
+def state_validity_checker(scene: PlanningScene, counter: CheckCounter) -> Any:
     """A plain function for `si.setStateValidityChecker`: True when the state is collision-free."""
     in_collision = scene.in_collision
 
@@ -107,16 +107,17 @@ def state_validity_checker(scene: "PlanningScene", counter: CheckCounter) -> Any
     return is_valid
 
 
-class SceneMotionValidator(ob.MotionValidator):
+# OMPL ships no type information (`ompl` is ignore_missing_imports), so its base class is Any to mypy
+class SceneMotionValidator(ob.MotionValidator):  # type: ignore[misc]
     """Checks the straight joint-space motion s1 -> s2 (s1 assumed valid, as OMPL does) in one batch."""
 
-    def __init__(self, si: Any, scene: "PlanningScene", resolution_rad: float, counter: CheckCounter):
+    def __init__(self, si: Any, scene: PlanningScene, resolution_rad: float, counter: CheckCounter):
         super().__init__(si)
         self.scene = scene
         self.resolution_rad = float(resolution_rad)
         self.counter = counter
 
-    def checkMotion(self, s1: Any, s2: Any, *_: Any) -> bool:  # noqa: N802 - OMPL's name
+    def checkMotion(self, s1: Any, s2: Any, *_: Any) -> bool:  # OMPL's method name
         c = self.counter
         if perf_counter() > c.deadline or c.states + c.configs >= c.check_limit:
             c.expired += 1
@@ -138,7 +139,7 @@ class SceneMotionValidator(ob.MotionValidator):
         return hit is None
 
 
-def trajectory_check_points(traj: Trajectory, kin: "UR5e", step_rad: float, step_m: float) -> np.ndarray:
+def trajectory_check_points(traj: Trajectory, kin: UR5e, step_rad: float, step_m: float) -> np.ndarray:
     """(k, 6) configurations along `traj` no more than `step_rad` apart in any joint and `step_m / 2` apart
     in TCP position (the factor 2 is `twin.planning.densify`'s margin for chords), end points included.
 
@@ -158,10 +159,10 @@ def trajectory_check_points(traj: Trajectory, kin: "UR5e", step_rad: float, step
 
 
 # ---- clearance: the same scene with the environment inflated ------------------------------------------------
-_PADDED: "weakref.WeakKeyDictionary[PlanningScene, tuple[Any, PlanningScene]]" = weakref.WeakKeyDictionary()
+_PADDED: weakref.WeakKeyDictionary[PlanningScene, tuple[Any, PlanningScene]] = weakref.WeakKeyDictionary()
 
 
-def _signature(scene: "PlanningScene") -> tuple[Any, ...]:
+def _signature(scene: PlanningScene) -> tuple[Any, ...]:
     boxes = tuple((n, sz.tobytes(), T.tobytes()) for n, (sz, T) in sorted(scene.boxes().items()))
     held = scene.attached_box()
     held_sig = None if held is None else (held[0], held[1].tobytes(), held[2].tobytes())
