@@ -153,10 +153,10 @@ class MotionPlannerBase:
         return np.array(res.q), None, res
 
     def point_to_point_goal(
-        self, request: MotionRequest, scene: PlanningScene
+        self, request: MotionRequest, scene: PlanningScene, *, unwrap_joint_goals: bool = False
     ) -> tuple[np.ndarray, dict[str, Any]] | MotionResult:
         """The goal configuration of a MoveJ (start checked, pose goals through the defensive IK, joint goals
-        unwrapped when the planner's `unwrap_joint_goals` asks), or the typed failure."""
+        unwrapped when `unwrap_joint_goals` asks), or the typed failure."""
         bad = self.check_start(request, scene)
         if bad:
             return bad
@@ -164,7 +164,7 @@ class MotionPlannerBase:
         if bad:
             return bad
         assert q_goal is not None
-        if getattr(self.params, "unwrap_joint_goals", False) and isinstance(request.goal, JointGoal):
+        if unwrap_joint_goals and isinstance(request.goal, JointGoal):
             q_goal = unwrap_goal(request.start, q_goal, self.kin)
         return q_goal, ({"ik": ik.reason} if ik else {})
 
@@ -226,7 +226,7 @@ class RuckigMoveJ(MotionPlannerBase):
     params: Params
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
-        ends = self.point_to_point_goal(request, scene)
+        ends = self.point_to_point_goal(request, scene, unwrap_joint_goals=self.params.unwrap_joint_goals)
         if isinstance(ends, MotionResult):
             return ends
         q_goal, info = ends
@@ -283,7 +283,7 @@ class QuinticMoveJ(MotionPlannerBase):
     params: Params
 
     def _plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
-        ends = self.point_to_point_goal(request, scene)
+        ends = self.point_to_point_goal(request, scene, unwrap_joint_goals=self.params.unwrap_joint_goals)
         if isinstance(ends, MotionResult):
             return ends
         q_goal, info = ends

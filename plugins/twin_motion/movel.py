@@ -24,14 +24,23 @@ import numpy as np
 from pydantic import Field
 from scipy.interpolate import CubicSpline
 
-from twin.plugin import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
+from twin.plugin import (
+    JointGoal,
+    MotionRequest,
+    MotionResult,
+    Pose,
+    PoseGoal,
+    Status,
+    Trajectory,
+    quats_to_matrices,
+)
 from twin_motion.movej import MotionPlannerBase, sample_times, stationary
 from twin_motion.retimers import toppra_time_spline
 
 if TYPE_CHECKING:
     from twin.plugin import PlanningScene
 
-__all__ = ["CartesianLine", "SeedSlerpMoveL", "ToppraMoveL", "quat_slerp", "quats_to_matrices"]
+__all__ = ["CartesianLine", "SeedSlerpMoveL", "ToppraMoveL", "quat_slerp"]
 
 log = logging.getLogger("twin")
 
@@ -52,23 +61,6 @@ def quat_slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
         return q / np.linalg.norm(q, axis=1, keepdims=True)
     theta = math.acos(min(1.0, dot))
     return (np.sin((1.0 - s) * theta) * q0 + np.sin(s * theta) * q1) / math.sin(theta)
-
-
-def quats_to_matrices(q: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of (n, 4) x-y-z-w quaternions."""
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    R = np.empty((q.shape[0], 3, 3))
-    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    R[:, 0, 1] = 2 * (x * y - z * w)
-    R[:, 0, 2] = 2 * (x * z + y * w)
-    R[:, 1, 0] = 2 * (x * y + z * w)
-    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    R[:, 1, 2] = 2 * (y * z - x * w)
-    R[:, 2, 0] = 2 * (x * z - y * w)
-    R[:, 2, 1] = 2 * (y * z + x * w)
-    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
 
 
 def rotation_angles(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:

@@ -20,7 +20,15 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-__all__ = ["OMPL_PARAMS", "PLANNER_SPECS", "OmplParam", "OmplParams", "PlannerSpec", "params_model"]
+__all__ = [
+    "OMPL_PARAMS",
+    "PLANNER_SPECS",
+    "OmplParam",
+    "OmplParams",
+    "OptimizingOmplParams",
+    "PlannerSpec",
+    "params_model",
+]
 
 
 class OmplParams(BaseModel):
@@ -335,47 +343,40 @@ def _bounds(field: Any) -> dict[str, Any]:
     return out
 
 
+_CHECKS_DOC = (
+    "end the search after this many configurations per second of the request's time limit were checked for "
+    "collision (states sampled plus the states along checked motions: info's states_checked + configs_checked). "
+    "Counts work, not time, so a seeded run repeats on any machine; the time limit stays a hard cap. None: the "
+    "time limit alone ends it, and the result depends on the machine's speed and load"
+)
+_ITERATIONS_DOC = (
+    "end the search after the planner asked its termination condition this many times per second of the "
+    "request's time limit (about once per iteration): bounds a search that stops checking states (AORRTC "
+    "rejecting samples against its cost bound). None: no such bound"
+)
+
+
+class OptimizingOmplParams(OmplParams):
+    """Options of the optimising (anytime) planners on top of the shared ones: when to stop improving."""
+
+    stop_at_first_solution: bool = Field(
+        False, description="stop at the first exact path instead of optimising until the budget or time limit ends it"
+    )
+    max_state_checks: int | None = Field(None, ge=1, description=_CHECKS_DOC)
+    max_iterations: int | None = Field(None, ge=1, description=_ITERATIONS_DOC)
+
+
 def params_model(spec: PlannerSpec) -> type[OmplParams]:
     """The pydantic model of one planner: the shared options plus its own OMPL parameters."""
     fields: dict[str, Any] = {name: (OMPL_PARAMS[name].type, OMPL_PARAMS[name].field) for name in spec.params}
     for name, value in spec.defaults:
         f = OMPL_PARAMS[name].field
         fields[name] = (OMPL_PARAMS[name].type, Field(value, description=f.description, **_bounds(f)))
-    if spec.optimizing:
-        fields["stop_at_first_solution"] = (
-            bool,
-            Field(
-                False,
-                description="stop at the first exact path instead of optimising until the budget or time limit ends it",
-            ),
-        )
-        fields["max_state_checks"] = (
-            int | None,
-            Field(
-                spec.max_state_checks,
-                ge=1,
-                description=(
-                    "end the search after this many configurations per second of the request's time limit were checked "
-                    "for collision (states sampled plus the states along checked motions: info's states_checked + "
-                    "configs_checked). Counts work, not time, so "
-                    "a seeded run repeats on any machine; the time limit stays a hard cap. None: the time limit alone "
-                    "ends it, and the result depends on the machine's speed and load"
-                ),
-            ),
-        )
-        fields["max_iterations"] = (
-            int | None,
-            Field(
-                spec.max_iterations,
-                ge=1,
-                description=(
-                    "end the search after the planner asked its termination condition this many times per second of "
-                    "the request's time limit (about once per iteration): bounds a search that stops checking states "
-                    "(AORRTC rejecting samples against its cost bound). None: no such bound"
-                ),
-            ),
-        )
-    model = create_model(f"{spec.ompl_class}Params", __base__=OmplParams, **fields)
+    if spec.optimizing:  # the budget defaults are the planner's own (PLANNER_SPECS)
+        fields["max_state_checks"] = (int | None, Field(spec.max_state_checks, ge=1, description=_CHECKS_DOC))
+        fields["max_iterations"] = (int | None, Field(spec.max_iterations, ge=1, description=_ITERATIONS_DOC))
+    base: type[OmplParams] = OptimizingOmplParams if spec.optimizing else OmplParams
+    model = create_model(f"{spec.ompl_class}Params", __base__=base, **fields)
     model.__doc__ = (
         f"Parameters of ompl.{spec.ompl_class.lower()}: the shared options and OMPL's "
         f"{', '.join(spec.params) or '(none)'}."

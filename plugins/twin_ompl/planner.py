@@ -83,7 +83,7 @@ from twin.plugin import (
     make_context,
 )
 from twin_ompl.budget import Budget, search_roadmap
-from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, PlannerSpec, params_model
+from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, OptimizingOmplParams, PlannerSpec, params_model
 from twin_ompl.postprocess import add_time, path_length, simplify, timed_and_checked
 from twin_ompl.problem import geometric_path, repair_bounds, sampling_bounds, simple_setup, space_information, states
 from twin_ompl.validity import CheckCounter, padded_scene
@@ -432,7 +432,7 @@ class OmplPlanner(PathPlanner):
         if self.spec.single_goal:
             goals = goals[:1]  # see PlannerSpec.single_goal
         ss = simple_setup(si, start, goals, self.spec.ompl_class, self._planner_setters)
-        first_only = repair or bool(getattr(p, "stop_at_first_solution", False))
+        first_only = repair or (isinstance(p, OptimizingOmplParams) and p.stop_at_first_solution)
         work = self._work_budget(counter, repair, limit)
         log.debug(
             "%s: sampling for up to %.3f s (work budget: %s), %d goal(s), resolution %.4f rad",
@@ -506,10 +506,10 @@ class OmplPlanner(PathPlanner):
         """The work budget of this search, or None: a repair and a planner that stops at its first path end by
         that path or the time limit. `max_state_checks` and `max_iterations` are per second of the request's
         time limit (a 2 s limit buys twice the search of a 1 s one: still a count, so still deterministic)."""
-        # only the optimising planners' params models have the budget fields (twin_ompl.params.params_model)
-        checks = getattr(self.params, "max_state_checks", None)
-        iterations = getattr(self.params, "max_iterations", None)
-        if repair or (checks is None and iterations is None):
+        if repair or not isinstance(self.params, OptimizingOmplParams):
+            return None
+        checks, iterations = self.params.max_state_checks, self.params.max_iterations
+        if checks is None and iterations is None:
             return None
         scale = max(time_limit_s, 1e-3)
         return Budget(
