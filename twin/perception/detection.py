@@ -20,7 +20,16 @@ from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
 if TYPE_CHECKING:
     from twin.config import RobocupPerceptionSettings
 
-__all__ = ["CLASSES", "Detection", "Detector", "SceneCloud", "detection_label", "needs_ground_truth", "scene_cloud"]
+__all__ = [
+    "CLASSES",
+    "Detection",
+    "Detector",
+    "SceneCloud",
+    "detection_label",
+    "needs_ground_truth",
+    "scene_cloud",
+    "with_ground_truth",
+]
 
 CLASSES = ("bottle", "can", "spam", "marker", "cube")
 """Object classes; cubes are further told apart by colour (cube_red, cube_blue, ...): 8 detection classes."""
@@ -71,6 +80,30 @@ class Detector(Protocol):
 def needs_ground_truth(detector: Any) -> bool:
     """Does this detector (instance or class) declare `needs_ground_truth = True` (default False)?"""
     return bool(getattr(detector, "needs_ground_truth", False))
+
+
+class _GroundTruthFed:
+    """A detector that declares `needs_ground_truth`, bound to the objects its caller (the judge, or the
+    perception evaluation) read from the simulator: perception code calls it like any detector."""
+
+    def __init__(self, detector: Detector, ground_truth: Any):
+        self.detector = detector
+        self.ground_truth = ground_truth
+
+    @property
+    def last_timings_s(self) -> dict[str, float]:
+        return dict(getattr(self.detector, "last_timings_s", {}))
+
+    def detect(
+        self, frame: RGBDFrame, T_base_camera: np.ndarray, *, cloud: SceneCloud | None = None, ground_truth: Any = None
+    ) -> list[Detection]:
+        return self.detector.detect(frame, T_base_camera, cloud=cloud, ground_truth=self.ground_truth)
+
+
+def with_ground_truth(detector: Detector, ground_truth: Any) -> Detector:
+    """The ORACLE hand-off, in one place: `detector` bound to `ground_truth` if it declares
+    `needs_ground_truth`, else `detector` itself (it never sees the truth)."""
+    return _GroundTruthFed(detector, ground_truth) if needs_ground_truth(detector) else detector
 
 
 @dataclass(frozen=True)

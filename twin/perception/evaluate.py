@@ -29,7 +29,7 @@ from twin.camera import camera_pose
 from twin.config import Settings
 from twin.perception.aruco import Calibration, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, wrist_camera_offset
-from twin.perception.detection import detection_label
+from twin.perception.detection import detection_label, with_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.tasks.robocup.perception import CYLINDERS
 from twin.transforms import rpy_to_matrix as rpy_matrix
@@ -321,7 +321,7 @@ def run_perception(
             objs = [o for o in truth if o.cls == "warehouse_cube"]
         else:
             assert det is not None
-            res_r = perceive_robocup(cap.frame, T_base_camera, settings, det, ground_truth=truth, seed=seed)
+            res_r = perceive_robocup(cap.frame, T_base_camera, settings, with_ground_truth(det, truth), seed=seed)
             timings.update(res_r.timings_s)
             estimates = [
                 {

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from twin.perception.detection import needs_ground_truth
+from twin.perception.detection import needs_ground_truth, with_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.types import ObjectOutcome, quat_to_matrix
 
@@ -332,6 +332,5 @@ def perceive_robocup_scene(
     hand-off: only a detector labelled as needing ground truth is given the simulator's objects."""
     from twin.tasks.robocup.perception import perceive_robocup
 
-    return perceive_robocup(
-        frame, T_base_camera, settings, detector, ground_truth=oracle_ground_truth(world, detector), seed=world.seed
-    )
+    fed = with_ground_truth(detector, oracle_ground_truth(world, detector))
+    return perceive_robocup(frame, T_base_camera, settings, fed, seed=world.seed)

@@ -31,14 +31,14 @@ import math
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from twin.camera import RGBDFrame
 from twin.config import RobocupPerceptionSettings, Settings
-from twin.perception.detection import Detection, Detector, SceneCloud, needs_ground_truth, scene_cloud
+from twin.perception.detection import Detection, Detector, SceneCloud, scene_cloud
 from twin.perception.geometry import pca, rot_z, trimmed_icp
 from twin.perception.segmentation import footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES
@@ -336,17 +336,16 @@ def perceive_robocup(
     settings: Settings,
     detector: Detector,
     *,
-    ground_truth: Any = None,
     seed: int = 0,
 ) -> RobocupResult:
-    """Detect, then estimate pose and grasp per detection (seed 002 pipeline)."""
+    """Detect, then estimate pose and grasp per detection (seed 002 pipeline). Nothing here hands the
+    simulator's truth on: an oracle detector arrives already bound to it by the judge."""
     params = settings.perception.robocup
     timings: dict[str, float] = {}
     cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
     timings.update(cloud.timings_s)
     t0 = time.perf_counter()
-    gt = ground_truth if needs_ground_truth(detector) else None
-    detections = detector.detect(frame, T_base_camera, cloud=cloud, ground_truth=gt)
+    detections = detector.detect(frame, T_base_camera, cloud=cloud)
     timings["detect"] = time.perf_counter() - t0
     timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"
     estimates = []
