@@ -4,9 +4,6 @@ planner and against planners that each break exactly one rule."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -14,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import ruckig
+from cli_runner import twin
 
 from twin import hookimpl
 from twin.config import load_config
@@ -310,19 +308,6 @@ def test_every_rule_is_named_and_numbered():
 
 
 # ---- the command line ---------------------------------------------------------------------------------
-def twin(*args: str, extra_path: Path | None = None) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    if extra_path is not None:
-        env["PYTHONPATH"] = os.pathsep.join([str(extra_path), env.get("PYTHONPATH", "")])
-    return subprocess.run(
-        [sys.executable, "-m", "twin", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=ROOT,
-        timeout=300,
-        check=False,
-    )
 
 
 def test_cli_exits_0_when_every_rule_holds_and_writes_json(tmp_path):

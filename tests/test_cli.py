@@ -3,31 +3,15 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import twin
 
 ROOT = Path(__file__).resolve().parent.parent
 START = "0,-1.6,1.5,-1.5,-1.57,0"
 GOAL = "0.3,-1.4,1.2,-1.4,-1.57,0.2"
-
-
-def twin(*args: str, extra_path: Path | None = None) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    if extra_path is not None:
-        env["PYTHONPATH"] = os.pathsep.join([str(extra_path), env.get("PYTHONPATH", "")])
-    return subprocess.run(
-        [sys.executable, "-m", "twin", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=ROOT,
-        timeout=300,
-        check=False,
-    )
 
 
 def assert_one_line_usage_error(r: subprocess.CompletedProcess, *needles: str) -> None:

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 import yaml
+from cli_runner import twin
 
 from twin.compare import (
     compare_spec_from_dict,
@@ -58,11 +59,6 @@ SWEEP: dict[str, Any] = {
 def write_spec(path: Path, data: dict[str, Any]) -> Path:
     path.write_text(yaml.safe_dump(data))
     return path
-
-
-def twin(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "twin", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=timeout, check=False)
 
 
 def assert_one_line_usage_error(r: subprocess.CompletedProcess, *needles: str) -> None:
