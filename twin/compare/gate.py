@@ -1,0 +1,407 @@
+"""A regression gate between two sweeps (`twin compare CONFIG --baseline OLD/results.jsonl`).
+
+A planner plugin's CI reruns a comparison and wants one verdict: did any planner get worse than in the
+baseline sweep? Why it works the way it does:
+
+* runs are paired by run id, never by label: a run id hashes the whole run definition (planner block,
+  scenario settings and loaded config, case, seed), so equal ids mean the same planner on the same problem
+  and seed. Runs without a partner (a planner or scenario added or removed since) are counted and shown,
+  and never fail the gate by themselves; a sweep that shares no run with its baseline is a ConfigError
+  (a gate that compares nothing must not pass);
+* per planner, over the paired runs only, three quantities are checked: the success rate, the p95 of
+  the planning time and the p95 of the trajectory duration. A statistic is taken over the runs where
+  both sides have the value (duration: runs successful in both sweeps; planning time: runs that finished
+  a plan in both), so a planner that now also solves a hard query with a long trajectory is not
+  reported as slower, and one that fails a query it solved before is reported once, by its success rate;
+* the tolerances are loose where the quantity is noise and tight where it is not: success and duration
+  are (nearly) deterministic for the same run id, planning time is wall-clock time on a shared CI machine
+  (see `Tolerance`).
+
+Rows are the dicts of results.jsonl (`twin.compare.worker`); rows with status 'skipped' are no runs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from twin.compare.runner import RESULTS_FILE, latest_rows, read_results
+from twin.errors import ConfigError
+
+__all__ = ["DEFAULT_TOLERANCE", "GateCheck", "GateReport", "Tolerance", "gate", "load_baseline"]
+
+Quantity = Literal["success_rate", "planning_time_p95_s", "duration_p95_s"]
+Verdict = Literal["ok", "regressed", "n/a"]
+
+# the keys of `Tolerance.parse` (as a user types them) and the fields they set
+_KEYS: dict[str, str] = {
+    "success": "success_drop",
+    "planning_time": "planning_time",
+    "planning_time_abs_s": "planning_time_abs_s",
+    "duration": "duration",
+}
+_ALIASES: dict[str, str] = {"success_drop": "success_drop"}  # the field name works as well
+_EXAMPLE = "success=0.05,planning_time=0.5,duration=0.1,planning_time_abs_s=0.01"
+_EPS = 1e-9  # float noise: a value this close to its limit is within it
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """How much worse than the baseline a planner may get before the gate fails.
+
+    `success_drop`: absolute drop of the success rate allowed (0.05 = five percentage points). Default 0:
+    a run id fixes the planner, the problem and the seed, so a run that succeeded in the baseline and fails
+    now is a change in behaviour, not noise. Raise it for sampling planners whose success depends on timing
+    (an RRT that finds a path just inside its time limit on a fast machine may miss it on a loaded one).
+
+    `planning_time`: relative growth of the p95 planning time allowed (1.0 = may double). Default 1.0:
+    planning time is wall-clock time, and CI machines are shared, throttled and differ from the one that
+    made the baseline; a 2x slowdown is what a real regression (an algorithmic change, a lost cache, a
+    debug build) looks like, while 30 % is an ordinary noisy neighbour.
+    `planning_time_abs_s`: absolute slack added on top (seconds). Default 0.005: for planners that answer
+    in about a millisecond, 1 ms -> 3 ms is scheduler noise, not a regression. The limit is
+    `baseline_p95 * (1 + planning_time) + planning_time_abs_s`.
+
+    `duration`: relative growth of the p95 trajectory duration allowed. Default 0.05: duration is
+    deterministic for time-optimal retimers and analytic planners (any growth is a real change, so the
+    limit stays tight), while sampling planners' paths vary with how far they got in their time; 5 % is
+    above that jitter on the shipped scenarios and well below a planner that got worse. The limit is
+    `baseline_p95 * (1 + duration)`.
+
+    Each may be `inf` to leave a quantity ungated; none may be negative.
+    """
+
+    success_drop: float = 0.0
+    planning_time: float = 1.0
+    planning_time_abs_s: float = 0.005
+    duration: float = 0.05
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or v < 0:
+                raise ConfigError(f"tolerance {f.name} must be a number >= 0 (or inf), got {v!r}")
+
+    @classmethod
+    def parse(cls, text: str) -> Tolerance:
+        """A Tolerance from the CLI's `--tolerance` text: comma-separated `key=value` pairs, e.g.
+        "success=0.05,planning_time=0.5,duration=0.1,planning_time_abs_s=0.01". Keys not given keep their
+        defaults; a value may end in `%` ("duration=10%" is 0.1) or be `inf`. An unknown key, a repeated
+        key or a bad number raises ConfigError (one line naming the allowed keys)."""
+        allowed = ", ".join(_KEYS)
+        values: dict[str, float] = {}
+        for part in text.split(","):
+            if not part.strip():
+                continue
+            key, sep, raw = part.partition("=")
+            key, raw = key.strip(), raw.strip()
+            name = _KEYS.get(key) or _ALIASES.get(key)
+            if not sep or name is None:
+                what = f"unknown key {key!r}" if sep else f"{part.strip()!r} is not key=value"
+                raise ConfigError(f"--tolerance {text!r}: {what}; allowed keys: {allowed} (e.g. {_EXAMPLE!r})")
+            if name in values:
+                raise ConfigError(f"--tolerance {text!r}: {key!r} is given twice; allowed keys: {allowed}")
+            try:
+                v = float(raw[:-1]) / 100 if raw.endswith("%") else float(raw)
+            except ValueError:
+                v = math.nan
+            if math.isnan(v) or v < 0:
+                raise ConfigError(
+                    f"--tolerance {text!r}: {key}={raw!r} is not a number >= 0; allowed keys: {allowed} "
+                    f"(e.g. {_EXAMPLE!r})"
+                )
+            values[name] = v
+        return cls(**values)
+
+    def describe(self) -> str:
+        """One line for a report: what each limit allows."""
+        return (
+            f"success may drop {_pp(self.success_drop)}, p95 planning time may grow "
+            f"{_pct(self.planning_time)} + {_seconds(self.planning_time_abs_s)}, p95 duration may grow "
+            f"{_pct(self.duration)}"
+        )
+
+
+DEFAULT_TOLERANCE = Tolerance()
+
+
+@dataclass(frozen=True)
+class GateCheck:
+    """One planner, one quantity: baseline and current value over the same `n` paired runs, and `limit`,
+    the worst current value allowed (the lowest success rate, or the highest p95 in seconds). `verdict` is
+    'n/a' when there is nothing to compare (a planner with no successful paired run has no duration)."""
+
+    planner: str
+    quantity: Quantity
+    baseline: float | None
+    now: float | None
+    limit: float | None
+    verdict: Verdict
+    n: int
+
+    @property
+    def change(self) -> float | None:
+        """Success rate: the absolute change (-0.25 = 25 points lower). Times: the relative change
+        (0.3 = 30 % longer), None when the baseline is 0 or a value is missing."""
+        if self.baseline is None or self.now is None:
+            return None
+        if self.quantity == "success_rate":
+            return self.now - self.baseline
+        return None if self.baseline == 0 else self.now / self.baseline - 1.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "change": self.change}
+
+
+@dataclass(frozen=True)
+class GateReport:
+    """The gate's outcome: a check per (planner, quantity), how many runs were paired, and how many had
+    no partner (only in this sweep / only in the baseline: reported, never failing by themselves)."""
+
+    checks: list[GateCheck]
+    matched: int
+    only_new: int
+    only_baseline: int
+    tolerance: Tolerance = field(default=DEFAULT_TOLERANCE)
+
+    @property
+    def passed(self) -> bool:
+        """True when no check regressed."""
+        return not self.regressions
+
+    @property
+    def regressions(self) -> list[GateCheck]:
+        return [c for c in self.checks if c.verdict == "regressed"]
+
+    def render(self) -> str:
+        """A markdown table (readable as plain text in a CI log, rendered in a job summary) with a verdict
+        line above it and each regression spelled out below it."""
+        bad = self.regressions
+        head = (
+            f"regression gate: FAILED, {len(bad)} of {len(self.checks)} checks regressed"
+            if bad
+            else f"regression gate: passed, none of {len(self.checks)} checks regressed"
+        )
+        lines = [
+            head,
+            f"runs compared: {self.matched} in both sweeps, {self.only_new} only in this sweep, "
+            f"{self.only_baseline} only in the baseline (unpaired runs are not checked)",
+            f"tolerance: {self.tolerance.describe()}",
+            "",
+        ]
+        header = ["planner", "quantity", "n", "baseline", "now", "change", "limit", "verdict"]
+        right = {2, 3, 4, 5, 6}
+        body = [
+            [
+                c.planner.replace("|", "\\|"),
+                c.quantity,
+                str(c.n),
+                *_cells(c),
+                "REGRESSED" if c.verdict == "regressed" else c.verdict,
+            ]
+            for c in self.checks
+        ]
+        widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
+
+        def row(cells: list[str]) -> str:
+            return (
+                "| "
+                + " | ".join(
+                    c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True))
+                )
+                + " |"
+            )
+
+        lines.append(row(header))
+        lines.append(
+            "|" + "|".join("-" * (w + 1) + ":" if i in right else "-" * (w + 2) for i, w in enumerate(widths)) + "|"
+        )
+        lines += [row(r) for r in body]
+        if bad:
+            lines += ["", "regressions:"]
+            for c in bad:
+                base, now, _, limit = _cells(c)
+                lines.append(f"- {c.planner}: {_LABEL[c.quantity]} {base} -> {now} (limit {limit}, n={c.n})")
+        return "\n".join(lines) + "\n"
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict: passed, the run counts, the tolerance and every check (with its change)."""
+        return {
+            "passed": self.passed,
+            "matched": self.matched,
+            "only_new": self.only_new,
+            "only_baseline": self.only_baseline,
+            "tolerance": asdict(self.tolerance),
+            "checks": [c.to_json() for c in self.checks],
+        }
+
+
+_LABEL: dict[str, str] = {
+    "success_rate": "success rate",
+    "planning_time_p95_s": "p95 planning time",
+    "duration_p95_s": "p95 duration",
+}
+
+
+# ---- the gate -------------------------------------------------------------------------------------
+def load_baseline(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of a baseline sweep: its results.jsonl, or the output folder that holds one. A missing
+    file, or one that holds no result rows, raises ConfigError in one line."""
+    p = Path(path)
+    if p.is_dir() and (p / RESULTS_FILE).is_file():
+        p = p / RESULTS_FILE
+    if not p.is_file():
+        what = "is a folder without a " + RESULTS_FILE if p.is_dir() else "does not exist"
+        raise ConfigError(f"baseline {p} {what}; pass the {RESULTS_FILE} of an earlier `twin compare` run")
+    try:
+        rows = read_results(p)
+    except OSError as e:
+        raise ConfigError(f"cannot read the baseline {p}: {e.strerror}") from None
+    except ConfigError as e:
+        raise ConfigError(f"baseline {p} is not a {RESULTS_FILE} of `twin compare`: {e}") from None
+    if not rows:
+        raise ConfigError(
+            f"baseline {p} holds no result rows; pass the {RESULTS_FILE} of an earlier `twin compare` run"
+        )
+    for i, r in enumerate(rows, 1):
+        missing = [k for k in ("planner", "success") if k not in r]
+        if missing:
+            raise ConfigError(f"baseline {p}: row {i} has no {missing[0]!r}: not a {RESULTS_FILE} of `twin compare`")
+    return rows
+
+
+def gate(
+    rows: Iterable[dict[str, Any]],
+    baseline_rows: Iterable[dict[str, Any]],
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+) -> GateReport:
+    """Compare this sweep's rows with a baseline's, run id by run id (the last row of each id on each
+    side; 'skipped' rows are no runs), and check per planner, over the paired runs: the success rate
+    (may drop by `tolerance.success_drop`), the p95 planning time over runs that finished a plan on both
+    sides, and the p95 duration over runs successful on both sides (may grow as `Tolerance` says).
+
+    Planners are checked in the order they first appear in `rows`. Raises ConfigError when no run id of
+    this sweep is in the baseline."""
+    new = {r["run_id"]: r for r in latest_rows(rows) if r.get("status") != "skipped"}
+    old = {r["run_id"]: r for r in latest_rows(baseline_rows) if r.get("status") != "skipped"}
+    paired = [rid for rid in new if rid in old]
+    if not paired:
+        raise ConfigError(
+            f"no run of this sweep is in the baseline: none of its {len(new)} run ids is among the baseline's "
+            f"{len(old)} (a run id hashes the planner block, scenario, scene config and seed); was it made "
+            "from another config?"
+        )
+    planners = list(dict.fromkeys(str(new[rid].get("planner")) for rid in paired))
+    checks: list[GateCheck] = []
+    for planner in planners:
+        pairs = [(old[rid], new[rid]) for rid in paired if str(new[rid].get("planner")) == planner]
+        checks.append(_success_check(planner, pairs, tolerance))
+        timed = [
+            (t0, t1)
+            for o, n in pairs
+            if (t0 := _num(o, "timing", "planning_time_s")) is not None
+            and (t1 := _num(n, "timing", "planning_time_s")) is not None
+        ]
+        checks.append(
+            _growth_check(planner, "planning_time_p95_s", timed, tolerance.planning_time, tolerance.planning_time_abs_s)
+        )
+        durations = [
+            (d0, d1)
+            for o, n in pairs
+            if o.get("success")
+            and n.get("success")
+            and (d0 := _num(o, "metrics", "duration_s")) is not None
+            and (d1 := _num(n, "metrics", "duration_s")) is not None
+        ]
+        checks.append(_growth_check(planner, "duration_p95_s", durations, tolerance.duration, 0.0))
+    return GateReport(
+        checks=checks,
+        matched=len(paired),
+        only_new=len(new) - len(paired),
+        only_baseline=sum(1 for rid in old if rid not in new),
+        tolerance=tolerance,
+    )
+
+
+def _num(row: dict[str, Any], group: str, key: str) -> float | None:
+    v = (row.get(group) or {}).get(key)
+    if v is None or isinstance(v, bool):
+        return None
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _success_check(planner: str, pairs: list[tuple[dict[str, Any], dict[str, Any]]], tol: Tolerance) -> GateCheck:
+    n = len(pairs)
+    before = sum(1 for o, _ in pairs if o.get("success")) / n
+    now = sum(1 for _, r in pairs if r.get("success")) / n
+    limit = max(0.0, before - tol.success_drop)
+    verdict: Verdict = "regressed" if now < limit - _EPS else "ok"
+    return GateCheck(planner, "success_rate", before, now, limit, verdict, n)
+
+
+def _p95(values: list[float]) -> float:
+    return float(np.percentile(np.asarray(values, dtype=float), 95))  # linear, as summary.md's p95
+
+
+def _growth_check(
+    planner: str, quantity: Quantity, pairs: list[tuple[float, float]], rel: float, abs_s: float
+) -> GateCheck:
+    if not pairs:
+        return GateCheck(planner, quantity, None, None, None, "n/a", 0)
+    before = _p95([a for a, _ in pairs])
+    now = _p95([b for _, b in pairs])
+    limit = math.inf if math.isinf(rel) else before * (1.0 + rel) + abs_s
+    verdict: Verdict = "regressed" if now > limit + _EPS * max(1.0, abs(limit)) else "ok"
+    return GateCheck(planner, quantity, before, now, limit, verdict, len(pairs))
+
+
+# ---- formatting -----------------------------------------------------------------------------------
+def _pp(x: float) -> str:
+    return "any amount" if math.isinf(x) else f"{100 * x:.3g} points"
+
+
+def _pct(x: float) -> str:
+    return "without limit" if math.isinf(x) else f"{100 * x:.3g}%"
+
+
+def _seconds(v: float) -> str:
+    if math.isinf(v):
+        return "inf"
+    a = abs(v)
+    if a == 0:
+        return "0 s"
+    if a < 1e-3:
+        return f"{v * 1e6:.3g} us"
+    if a < 1:
+        return f"{v * 1e3:.3g} ms"
+    return f"{v:.3g} s"
+
+
+def _cells(c: GateCheck) -> tuple[str, str, str, str]:
+    """(baseline, now, change, limit) of a check as table cells."""
+    if c.quantity == "success_rate":
+
+        def rate(v: float | None) -> str:
+            return "-" if v is None else f"{100 * v:.0f}% ({round(v * c.n)}/{c.n})"
+
+        ch = c.change
+        change = "-" if ch is None else f"{100 * ch:+.0f} pp"
+        limit = "-" if c.limit is None else f">= {100 * c.limit:.0f}%"
+        return rate(c.baseline), rate(c.now), change, limit
+    ch = c.change
+    change = "-" if ch is None else f"{100 * ch:+.1f}%" if abs(ch) < 0.1 else f"{100 * ch:+.0f}%"
+    if ch is None and c.baseline is not None and c.now is not None:
+        change = f"+{_seconds(c.now - c.baseline)}"
+    limit = "-" if c.limit is None else f"<= {_seconds(c.limit)}"
+    b = "-" if c.baseline is None else _seconds(c.baseline)
+    n = "-" if c.now is None else _seconds(c.now)
+    return b, n, change, limit
