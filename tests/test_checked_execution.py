@@ -158,6 +158,7 @@ def test_twin_compare_rows_show_the_refused_segment(acme_plugin, tmp_path):
     result = run_comparison(spec, out_dir=tmp_path / "out", workers=0, plots=False)
     (row,) = result.rows
     assert row["status"] == "collision" and "right_finger with table" in row["reason"] and not row["success"]
+    assert row["failure"] == "final_check_collision"  # refused by the independent check, not by the planner
 
 
 # ---- goals are judged by their own tolerances, the same way for every planner ----------------------------

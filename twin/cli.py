@@ -1,7 +1,7 @@
 """The `twin` command line: a thin layer that parses, calls one library function, and reports.
 
 A user mistake (bad config, unknown name, bad value, missing file) prints one line and exits 2.
-`twin plan` exits 1 when the planner found no solution.
+`twin plan` exits 1 when the planner found no solution, `twin compare --baseline` when the gate fails.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from twin.cli_exchange import COMMANDS as EXCHANGE_COMMANDS
+from twin.cli_exchange import add_parsers as add_exchange_parsers
 from twin.errors import TwinError
 
 __all__ = ["build_parser", "main"]
@@ -203,6 +205,25 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="check every planner block and scenario and count the runs; run and write nothing",
     )
+    p.add_argument(
+        "--export-ompl",
+        default=None,
+        metavar="DIR",
+        help="also write the results as OMPL benchmark logs and a Planner Arena database (twin export)",
+    )
+    p.add_argument(
+        "--baseline",
+        default=None,
+        metavar="RESULTS.jsonl",
+        help="regression gate: exit 1 when a planner's success drops or its p95 planning time or duration grows "
+        "beyond the tolerance on the runs this sweep shares with the baseline",
+    )
+    p.add_argument(
+        "--tolerance",
+        default=None,
+        metavar="KEY=VALUE,...",
+        help="with --baseline: success=0, planning_time=1.0 (relative), planning_time_abs_s=0.005, duration=0.05",
+    )
 
     p = sub.add_parser(
         "perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth"
@@ -237,6 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here"
     )
+    add_exchange_parsers(sub)
     return parser
 
 
@@ -402,8 +424,14 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from twin.compare import plan_comparison, run_comparison
+    from twin.compare.gate import Tolerance, gate, load_baseline
     from twin.compare.report import summary_table
+    from twin.errors import ConfigError
 
+    if args.tolerance is not None and args.baseline is None:
+        raise ConfigError("--tolerance goes with --baseline (the results the sweep is gated against)")
+    tolerance = Tolerance.parse(args.tolerance) if args.tolerance is not None else Tolerance()
+    baseline = load_baseline(args.baseline) if args.baseline is not None else None  # a typo fails before the sweep
     if args.dry_run:
         dry = plan_comparison(args.config, overrides=args.overrides)
         cases = dry.cases()
@@ -444,6 +472,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         f"{result.ran} runs done in {result.wall_time_s:.1f} s ({result.resumed} finished before{again}); wrote "
         + ", ".join(str(f) for f in result.files)
     )
+    if args.export_ompl is not None:
+        from twin.compare.ompl_export import export_planner_arena
+
+        files = export_planner_arena(result.rows, args.export_ompl, name=result.spec_name)
+        print("Planner Arena export: " + ", ".join(str(f) for f in files))
+    if baseline is not None:
+        report = gate(result.rows, baseline, tolerance)
+        print(report.render())
+        return EXIT_OK if report.passed else EXIT_NO_SOLUTION
     return EXIT_OK
 
 
@@ -565,6 +602,7 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
 
 
 _COMMANDS["check-planner"] = _cmd_check_planner
+_COMMANDS.update(EXCHANGE_COMMANDS)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

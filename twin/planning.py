@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from twin.kinematics import UR5e
 
 __all__ = [
+    "FINAL_CHECK",
     "GOAL_KINDS",
     "CheckedPlanner",
     "KinematicPlant",
@@ -60,6 +61,10 @@ __all__ = [
 ]
 
 log = logging.getLogger("twin")
+
+# `MotionResult.info["rejected_by"]` of a result the planner called a success and the independent check
+# (collision re-check of every returned trajectory or segment, goal reached) turned down
+FINAL_CHECK = "final_check"
 
 
 @runtime_checkable
@@ -444,7 +449,7 @@ class CheckedPlanner:
             return MotionResult(
                 Status.COLLISION,
                 f"{kind} {self._segments} would collide ({colliding_pair(self._scene, qs[hit])}); not executed",
-                info=dict(out.info, **info_extra),
+                info=dict(out.info, **info_extra, rejected_by=FINAL_CHECK),
             )
         if out.fallback:
             self._fallback_steps += traj.q.shape[0] - 1
@@ -555,7 +560,13 @@ def _checked(
         raise PlanningError(f"trajectory starts {start_err:.2e} rad away from the request's start")
     why = goal_miss(request.goal, traj.q[-1], kin)
     if why is not None:
-        return replace(result, status=Status.NO_SOLUTION, trajectory=None, reason=f"the trajectory {why}")
+        return replace(
+            result,
+            status=Status.NO_SOLUTION,
+            trajectory=None,
+            reason=f"the trajectory {why}",
+            info=dict(result.info, rejected_by=FINAL_CHECK),
+        )
     hit = first_collision(traj, scene, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
     if hit is not None:
         log.warning("planner returned a colliding trajectory; reported as COLLISION")
@@ -565,6 +576,7 @@ def _checked(
             status=Status.COLLISION,
             trajectory=None,
             reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})",
+            info=dict(result.info, rejected_by=FINAL_CHECK),
         )
     return result
 

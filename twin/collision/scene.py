@@ -689,6 +689,12 @@ class PlanningScene:
         self._fixture_names.discard(name)
         self._env.update()
 
+    def environment_shapes(self) -> dict[str, list[tuple[str, tuple[float, ...], np.ndarray]]]:
+        """Every environment object (fixtures and boxes) as its primitives, unpadded: name -> [(kind, size,
+        pose (4, 4) in the world frame)], kinds and sizes as twin.urdf_model.Shape. What a problem-set
+        export writes, so another tool plans against exactly this world."""
+        return {n: [(k, tuple(sz), T.copy()) for k, sz, T in shapes] for n, shapes in self._env_shapes.items()}
+
     def boxes(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """The boxes added at run time (perceived obstacles): name -> (size (3,), pose (4, 4)), world frame."""
         return {n: (sz.copy(), T.copy()) for n, (sz, T) in self._boxes.items()}

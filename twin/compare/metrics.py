@@ -14,6 +14,7 @@ stands on (it is fixed to the world and cannot move).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from twin.world import World
 
 __all__ = [
+    "FAILURES",
     "METRICS",
     "METRIC_KEYS",
     "TIMINGS",
@@ -37,13 +39,18 @@ __all__ = [
     "empty_metrics",
     "empty_timing",
     "execute_in_physics",
+    "failure_of_exception",
+    "failure_of_plan",
+    "failure_of_task",
     "finite_or_none",
+    "path_smoothness",
     "task_metrics",
     "timing_metrics",
     "trajectory_metrics",
 ]
 
 _MAX_FINE_SAMPLES = 200_000
+SMOOTHNESS_STEP_RAD = 0.05  # arc-length step of the path the smoothness is measured on
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,12 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("duration_s", "s", "trajectory duration"),
     MetricDef("joint_path_length_rad", "rad", "joint-space path length (sum of |dq|, 2-norm)"),
     MetricDef("tcp_path_length_m", "m", "TCP path length"),
+    MetricDef(
+        "smoothness",
+        "1/rad^2",
+        f"OMPL's path smoothness (sum of squared discrete curvature) of the joint path resampled every "
+        f"{SMOOTHNESS_STEP_RAD:g} rad; 0 for a straight line",
+    ),
     MetricDef("max_jerk", "rad/s^3", "max |jerk| of any joint (finite differences of qdd, fine resampling)"),
     MetricDef("min_clearance_m", "m", "minimum FCL distance to the environment along the trajectory", "higher"),
     MetricDef("contacts", "", "distinct (robot link, body) contacts seen when executed in physics"),
@@ -81,6 +94,80 @@ TIMINGS: tuple[MetricDef, ...] = (
     MetricDef("solve_time_max_s", "s", "longest solve (receding horizon)"),
     MetricDef("wall_time_s", "s", "wall time of the whole run in its worker"),
 )
+
+# Why a run failed: one fixed set for every planner (row["failure"]; None on success), so failures can be
+# counted and compared across planners whatever words their reasons use.
+FAILURES: dict[str, str] = {
+    "start_in_collision": "the start is in collision or outside the joint limits",
+    "goal_in_collision": "the goal is in collision, out of reach or outside the joint limits",
+    "ik_failure": "no acceptable inverse-kinematics solution for the goal or a waypoint",
+    "timeout": "the time limit ran out before a solution was found",
+    "no_solution": "the planner searched and found no solution",
+    "retiming_failed": "the path could not be time-parameterised within the limits",
+    "final_check_collision": "the returned trajectory failed the independent FCL re-check",
+    "execution_contact": "executed in physics, the arm touched something",
+    "grasp_lost": "a task run did not get an object where it belongs: never perceived, grasp not sensed, slipped, "
+    "dropped, or released outside its bin",
+    "dependency_missing": "the planner's backend is not installed",
+    "error": "the run raised an error or was stopped (time-out of the run, crashed worker)",
+}
+
+_STATUS_FAILURE = {
+    "no_solution": "no_solution",
+    "timeout": "timeout",
+    "invalid_start": "start_in_collision",
+    "invalid_goal": "goal_in_collision",
+    "collision": "no_solution",  # the planner's own check found only a colliding trajectory
+    "ik_failed": "ik_failure",
+    "limit_violation": "retiming_failed",
+    "execution_stopped": "execution_contact",
+}
+_TASK_STATUS = re.compile(r": (" + "|".join(_STATUS_FAILURE) + r"): ")
+
+
+def failure_of_plan(status: str, reason: str = "", info: Any = None) -> str | None:
+    """The failure reason (a FAILURES key) of a planning result: None on success.
+
+    From the status, refined where the status alone is ambiguous: an invalid goal whose reason names IK
+    (no or no acceptable IK solution) is an ik_failure; a result the independent check turned down
+    (`info["rejected_by"] == twin.planning.FINAL_CHECK`) is a final_check_collision when it collided."""
+    if status == "success":
+        return None
+    rejected = isinstance(info, dict) and info.get("rejected_by") == "final_check"
+    if status == "collision" and rejected:
+        return "final_check_collision"
+    if status == "invalid_goal" and re.search(r"\bIK\b", reason):
+        return "ik_failure"
+    return _STATUS_FAILURE.get(status, "error")
+
+
+def failure_of_task(errors: list[str]) -> str | None:
+    """The failure reason of a task run from the errors of its objects not placed (in object order): that
+    of the first one. None when every object was placed.
+
+    A stage that failed to move says its planner's status (`"<stage>: <planner>: <status>: <why>"`, see
+    twin.tasks.cell), which maps as for a motion query; a run out of time is a timeout; every other
+    object not placed (not perceived, grasp not sensed, slipped, dropped, released outside its bin) is
+    grasp_lost; a calibration failure is an error."""
+    if not errors:
+        return None
+    e = errors[0]
+    m = _TASK_STATUS.search(e)
+    if m:
+        return failure_of_plan(m.group(1), e[m.end() :])
+    if e.startswith("time:"):
+        return "timeout"
+    if e.startswith("calibration:"):
+        return "error"
+    return "grasp_lost"
+
+
+def failure_of_exception(e: BaseException) -> str:
+    """dependency_missing for a planner whose backend is not installed, else error."""
+    from twin.errors import DependencyMissing
+
+    return "dependency_missing" if isinstance(e, DependencyMissing) else "error"
+
 
 METRIC_KEYS: tuple[str, ...] = tuple(m.key for m in METRICS)
 TIMING_KEYS: tuple[str, ...] = tuple(m.key for m in TIMINGS)
@@ -108,6 +195,29 @@ def _fine(traj: Trajectory, dt: float) -> Trajectory:
         return traj
     dt = max(dt, traj.duration / _MAX_FINE_SAMPLES)
     return traj.resampled(dt)
+
+
+def path_smoothness(q: np.ndarray, step_rad: float = SMOOTHNESS_STEP_RAD) -> float:
+    """OMPL's `PathGeometric::smoothness` (sum over consecutive waypoint triples of the squared discrete
+    curvature 2 * turn angle / (a + b)) on the joint path `q` (n, 6) resampled at equal arc length
+    `step_rad`: OMPL measures its own waypoints, whose spacing differs between planners; a fixed spacing
+    makes the number comparable across planners and retimers."""
+    seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] < 2 * step_rad:
+        return 0.0
+    keep = np.concatenate([[True], seg > 1e-12])  # arc length must increase for the interpolation
+    s, q = s[keep], q[keep]
+    grid = np.arange(0.0, s[-1] + 1e-12, step_rad)
+    p = np.stack([np.interp(grid, s, q[:, j]) for j in range(q.shape[1])], axis=1)
+    d = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    a, b = d[:-1], d[1:]
+    c = np.linalg.norm(p[2:] - p[:-2], axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = (a * a + b * b - c * c) / (2.0 * a * b)
+    ok = (cos > -1.0) & (cos < 1.0)  # as OMPL: straight (cos = -1) and degenerate triples add nothing
+    k = 2.0 * (math.pi - np.arccos(cos[ok])) / (a[ok] + b[ok])
+    return float(np.sum(k * k))
 
 
 def trajectory_metrics(
@@ -141,6 +251,7 @@ def trajectory_metrics(
         "duration_s": traj.duration,
         "joint_path_length_rad": joint_len,
         "tcp_path_length_m": tcp_len,
+        "smoothness": path_smoothness(fine.q),
         "max_jerk": max_jerk,
         "min_clearance_m": finite_or_none(float(d.min())),
     }, pair

@@ -77,6 +77,7 @@ class CompareResult:
     files: list[Path] = field(default_factory=list)
     wall_time_s: float = 0.0
     retried: int = 0  # runs whose earlier row ended in 'error' and that ran again
+    spec_name: str = "compare"  # the comparison's name (experiment names of an export)
 
     @property
     def results_path(self) -> Path:
@@ -127,14 +128,18 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
     nothing in the way) is one error now rather than an error row per run."""
     from twin.config import load_config
     from twin.planning import accepts_retimer, make_context, make_planner
+    from twin.problems.world import check_robot
     from twin.registry import Kind, default_registry, validate_params
 
     source = spec.source or "<compare config>"
     settings = []
     for i, sc in enumerate(spec.scenarios):
         path = sc.task if isinstance(sc, TaskScenario) else sc.scene
+        assert path is not None  # resolved on load
         try:
             settings.append(load_config(path, sc.overrides))
+            if isinstance(sc, QueryScenario) and sc.problems is not None:
+                check_robot(sc.problem_set, settings[-1], source=sc.problems)
         except ConfigError as e:
             raise ConfigError(f"{source}: scenarios.{i} ({sc.name}): {e}") from None
     registry = default_registry()
@@ -169,7 +174,7 @@ def _draw_first_queries(spec: CompareSpec, source: str) -> None:
     from twin.compare.worker import cell_for, sample_query
 
     for i, sc in enumerate(spec.scenarios):
-        if not isinstance(sc, QueryScenario) or sc.random is None:
+        if not isinstance(sc, QueryScenario) or sc.random is None or sc.scene is None:
             continue
         seed = spec.seeds_for(sc)[0]
         task = RunTask(
@@ -622,4 +627,5 @@ def run_comparison(
         files=files,
         wall_time_s=time.perf_counter() - t_start,
         retried=retried,
+        spec_name=spec.name,
     )

@@ -54,6 +54,8 @@ from pydantic import (
 
 from twin.config import PlannerBlock, apply_override, find_config, read_yaml
 from twin.errors import ConfigError
+from twin.problems.model import ProblemSet, load_problem_set
+from twin.problems.queries import query_of_problem
 
 __all__ = [
     "ComparePlanner",
@@ -183,25 +185,40 @@ class QueryScenario(_Model):
     """
 
     name: str = Field(pattern=_NAME_PATTERN)
-    scene: str
+    scene: str | None = None
     overrides: list[str] = Field(default_factory=list)
     queries: list[QuerySpec] = Field(default_factory=list)
     random: RandomQueries | None = None
+    problems: str | None = None
     seeds: list[int] | None = None
     time_limit_s: float | None = Field(None, gt=0)
     unknown_fixtures: Literal["box", "ignore"] = "box"
+    _problem_set: ProblemSet | None = PrivateAttr(None)
 
     @model_validator(mode="after")
     def _one_source(self) -> QueryScenario:
-        if bool(self.queries) == (self.random is not None):
-            raise ValueError("give exactly one of `queries` (a list) or `random` ({count: N, ...})")
+        if bool(self.queries) + (self.random is not None) + (self.problems is not None) != 1:
+            raise ValueError(
+                "give exactly one of `queries` (a list), `random` ({count: N, ...}) or `problems` (a problem-set file)"
+            )
+        if self.scene is None and self.problems is None:
+            raise ValueError("`scene` (the scene config the queries are planned in) is missing")
         return self
 
     @property
     def kind(self) -> str:
         return "query"
 
+    @property
+    def problem_set(self) -> ProblemSet:
+        """The loaded problem set of a `problems:` scenario (loaded when the spec is)."""
+        if self._problem_set is None:
+            raise ConfigError(f"scenario {self.name!r}: its problem set is not loaded (load the spec from a file)")
+        return self._problem_set
+
     def case_count(self) -> int:
+        if self.problems is not None:
+            return len(self.problem_set.problems)
         return len(self.queries) if self.queries else self.random.count  # type: ignore[union-attr]
 
 
@@ -288,7 +305,21 @@ class CompareSpec(_Model):
         return self
 
     def seeds_for(self, scenario: QueryScenario | TaskScenario) -> list[int]:
-        return list(scenario.seeds) if scenario.seeds is not None else list(self.seeds)
+        """The seeds a scenario runs with; a problem set's problems without `seeds:` run once each, with
+        the seed the file gives them."""
+        if scenario.seeds is not None:
+            return list(scenario.seeds)
+        if isinstance(scenario, QueryScenario) and scenario.problems is not None:
+            return sorted({p.seed for p in scenario.problem_set.problems})
+        return list(self.seeds)
+
+    def cases(self, scenario: QueryScenario | TaskScenario) -> list[tuple[int | None, int]]:
+        """(case index or None for a task, seed) of every run a planner makes in `scenario`, in run order."""
+        if isinstance(scenario, TaskScenario):
+            return [(None, seed) for seed in self.seeds_for(scenario)]
+        if scenario.problems is not None and scenario.seeds is None:
+            return [(i, p.seed) for i, p in enumerate(scenario.problem_set.problems)]
+        return [(i, seed) for seed in self.seeds_for(scenario) for i in range(scenario.case_count())]
 
 
 # ---- runs ----------------------------------------------------------------------------------------
@@ -317,9 +348,17 @@ def scenario_definitions(spec: CompareSpec) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for sc in spec.scenarios:
         path = sc.task if isinstance(sc, TaskScenario) else sc.scene
-        d = sc.model_dump(mode="json", exclude={"seeds", "scene", "task"})
+        assert path is not None  # resolved on load
+        d = sc.model_dump(mode="json", exclude={"seeds", "scene", "task", "problems"})
         d["kind"] = sc.kind
         d["config"] = {"file": Path(path).name, "sha256": config_digest(path, sc.overrides)}
+        if isinstance(sc, QueryScenario) and sc.problems is not None:
+            ps = sc.problem_set
+            d["problems"] = {
+                "file": Path(sc.problems).name,
+                "world": digest(ps.model_dump(mode="json", include={"robot", "world"}), 16),
+                "list": [p.model_dump(mode="json") for p in ps.problems],
+            }
         if isinstance(sc, QueryScenario):
             d["time_limit_s"] = sc.time_limit_s or spec.time_limit_s
             d.update(execute=spec.execute, settle_s=spec.settle_s, jerk_dt_s=spec.jerk_dt_s)
@@ -343,6 +382,10 @@ def _case_definition(scenario: dict[str, Any], index: int | None) -> dict[str, A
         d["queries"] = [d["queries"][index or 0]]
     if d.get("random"):
         d["random"] = {k: v for k, v in d["random"].items() if k != "count"}
+    if d.get("problems"):
+        d["problems"] = {k: v for k, v in d["problems"].items() if k != "list"} | {
+            "problem": d["problems"]["list"][index or 0]
+        }
     d["case_index"] = index
     return d
 
@@ -372,6 +415,7 @@ class RunTask:
     seed: int
     config: str  # absolute path of the scene/task config
     overrides: tuple[str, ...] = ()
+    problems: str | None = None  # absolute path of the problem set whose world the cell is
     query_index: int | None = None
     query: dict[str, Any] | None = None  # an explicit QuerySpec as a dict
     random: dict[str, Any] | None = None  # RandomQueries as a dict
@@ -400,57 +444,64 @@ def default_run_timeout(kind: str, time_limit_s: float) -> float:
 
 
 def expand_runs(spec: CompareSpec, defs: dict[str, Any] | None = None) -> list[RunTask]:
-    """The cross product planners x cases x seeds, in a fixed order (scenario, case, seed, planner).
+    """The cross product planners x cases x seeds, in a fixed order (scenario, seed, case, planner; a
+    problem set's problems with their own seeds in file order).
 
     `defs`: `definitions(spec)` when the caller has them already (they load every scenario's config)."""
     defs = definitions(spec) if defs is None else defs
     out: list[RunTask] = []
     for sc in spec.scenarios:
-        for seed in spec.seeds_for(sc):
-            for i in range(sc.case_count()):
-                query_case = isinstance(sc, QueryScenario)
-                case = f"{sc.name}#{i}" if query_case else sc.name
-                case_def = _case_definition(defs["scenarios"][sc.name], i if query_case else None)
-                for p in spec.planners:
-                    rid = run_id(
-                        p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed}
-                    )
-                    common: dict[str, Any] = {
-                        "run_id": rid,
-                        "planner_id": p.id,
-                        "planner": p.block().model_dump(),
-                        "scenario": sc.name,
-                        "case": case,
-                        "seed": seed,
-                        "overrides": tuple(sc.overrides),
-                    }
-                    if isinstance(sc, QueryScenario):
-                        limit = sc.time_limit_s or spec.time_limit_s
-                        out.append(
-                            RunTask(
-                                kind="query",
-                                config=sc.scene,
-                                query_index=i,
-                                query=sc.queries[i].model_dump() if sc.queries else None,
-                                random=sc.random.model_dump() if sc.random is not None else None,
-                                time_limit_s=limit,
-                                execute=spec.execute,
-                                settle_s=spec.settle_s,
-                                jerk_dt_s=spec.jerk_dt_s,
-                                unknown_fixtures=sc.unknown_fixtures,
-                                timeout_s=spec.run_timeout_s or default_run_timeout("query", limit),
-                                **common,
-                            )
-                        )
-                    else:
-                        out.append(
-                            RunTask(
-                                kind="task",
-                                config=sc.task,
-                                timeout_s=spec.run_timeout_s or default_run_timeout("task", 0.0),
-                                **common,
-                            )
-                        )
+        for i, seed in spec.cases(sc):
+            out += _case_runs(spec, sc, i, seed, defs)
+    return out
+
+
+def _case_runs(
+    spec: CompareSpec, sc: QueryScenario | TaskScenario, i: int | None, seed: int, defs: dict[str, Any]
+) -> list[RunTask]:
+    """One run per planner of one case: a query (index i) or a task run (i None), with its seed."""
+    case = sc.name if i is None else f"{sc.name}#{i}"
+    case_def = _case_definition(defs["scenarios"][sc.name], i)
+    out = []
+    for p in spec.planners:
+        rid = run_id(p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed})
+        common: dict[str, Any] = {
+            "run_id": rid,
+            "planner_id": p.id,
+            "planner": p.block().model_dump(),
+            "scenario": sc.name,
+            "case": case,
+            "seed": seed,
+            "overrides": tuple(sc.overrides),
+        }
+        if isinstance(sc, TaskScenario):
+            timeout = spec.run_timeout_s or default_run_timeout("task", 0.0)
+            out.append(RunTask(kind="task", config=sc.task, timeout_s=timeout, **common))
+            continue
+        assert sc.scene is not None and i is not None
+        problem = sc.problem_set.problems[i] if sc.problems is not None else None
+        if problem is not None:
+            query: dict[str, Any] | None = query_of_problem(problem)
+        else:
+            query = sc.queries[i].model_dump() if sc.queries else None
+        limit = sc.time_limit_s or (problem.time_limit_s if problem is not None else spec.time_limit_s)
+        out.append(
+            RunTask(
+                kind="query",
+                config=sc.scene,
+                problems=sc.problems,
+                query_index=i,
+                query=query,
+                random=sc.random.model_dump() if sc.random is not None else None,
+                time_limit_s=limit,
+                execute=spec.execute,
+                settle_s=spec.settle_s,
+                jerk_dt_s=spec.jerk_dt_s,
+                unknown_fixtures=sc.unknown_fixtures,
+                timeout_s=spec.run_timeout_s or default_run_timeout("query", limit),
+                **common,
+            )
+        )
     return out
 
 
@@ -506,12 +557,40 @@ def _resolve_configs(spec: CompareSpec, base: Path, source: str) -> CompareSpec:
     scenarios = []
     for i, sc in enumerate(spec.scenarios):
         key = "task" if isinstance(sc, TaskScenario) else "scene"
+        update: dict[str, Any] = {}
+        ps = None
+        if isinstance(sc, QueryScenario) and sc.problems is not None:
+            ps, update["problems"] = _problem_set(sc.problems, base, f"{source}: scenarios.{i}.problems")
+        ref = getattr(sc, key)
+        where = base
+        if ref is None:  # a problem set planned in the config it was exported from
+            assert ps is not None
+            ref = ps.source.get("config")
+            where = Path(update["problems"]).parent
+            if not isinstance(ref, str) or not ref:
+                raise ConfigError(
+                    f"{source}: scenarios.{i}: the problem set {update['problems']} names no twin config "
+                    "(source.config); give `scene:` (the config whose robot, limits and collision settings plan it)"
+                )
         try:  # a path relative to the comparison file, or the name of a shipped config
-            p = find_config(getattr(sc, key), relative_to=base)
+            p = find_config(ref, relative_to=where)
         except ConfigError as e:
             raise ConfigError(f"{source}: scenarios.{i}.{key}: {e}") from None
-        scenarios.append(sc.model_copy(update={key: str(p.resolve())}))
+        update[key] = str(p.resolve())
+        new = sc.model_copy(update=update)
+        if isinstance(new, QueryScenario):
+            new._problem_set = ps
+        scenarios.append(new)
     return spec.model_copy(update={"scenarios": scenarios})
+
+
+def _problem_set(ref: str, base: Path, where: str) -> tuple[ProblemSet, str]:
+    """Load a scenario's problem set (a path relative to the comparison file); ConfigError naming it."""
+    path = Path(ref) if Path(ref).is_absolute() else base / ref
+    try:
+        return load_problem_set(path), str(path.resolve())
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e}") from None
 
 
 def compare_spec_from_dict(

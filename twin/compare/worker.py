@@ -24,6 +24,9 @@ from twin.compare.metrics import (
     empty_metrics,
     empty_timing,
     execute_in_physics,
+    failure_of_exception,
+    failure_of_plan,
+    failure_of_task,
     task_metrics,
     timing_metrics,
     trajectory_metrics,
@@ -67,7 +70,7 @@ class _Cell:
     world: World | None = None
 
 
-_CELLS: dict[tuple[str, tuple[str, ...], str], _Cell] = {}
+_CELLS: dict[tuple[str, tuple[str, ...], str, str | None], _Cell] = {}
 
 
 def worker_init() -> None:
@@ -105,10 +108,22 @@ def quiet_imports() -> None:
         os.close(devnull)
 
 
-def cell_for(config: str, overrides: tuple[str, ...], unknown_fixtures: str) -> _Cell:
-    """The static cell of a scene config (built on first use in this process, then reused)."""
-    key = (config, overrides, unknown_fixtures)
+def cell_for(config: str, overrides: tuple[str, ...], unknown_fixtures: str, problems: str | None = None) -> _Cell:
+    """The static cell of a scene config (built on first use in this process, then reused); with
+    `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`)."""
+    key = (config, overrides, unknown_fixtures, problems)
     cell = _CELLS.get(key)
+    if cell is None and problems is not None:
+        from twin.config import load_config
+        from twin.kinematics import UR5e
+        from twin.problems import load_problem_set
+        from twin.problems.world import check_robot, planning_scene, settings_for
+
+        ps = load_problem_set(problems)
+        s = load_config(config, overrides)
+        check_robot(ps, s, source=problems)
+        s = settings_for(ps, s)
+        cell = _CELLS[key] = _Cell(settings=s, scene=planning_scene(ps, s), kin=UR5e())
     if cell is None:
         from twin.collision import PlanningScene
         from twin.config import load_config
@@ -281,7 +296,7 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     from twin.config import PlannerBlock
     from twin.planning import make_context, make_planner, plan_with
 
-    cell = cell_for(task.config, task.overrides, task.unknown_fixtures)
+    cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems)
     settings = cell.settings.model_copy(update={"seed": task.seed})
     if task.query is not None:
         query = dict(task.query)
@@ -310,6 +325,7 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     row["status"] = result.status.value
     row["reason"] = result.reason
     row["success"] = result.success
+    row["failure"] = failure_of_plan(result.status.value, result.reason, result.info)
     row["metrics"]["solves"] = solves
     fallback = result.info.get("fallback_steps") if isinstance(result.info, dict) else None
     row["metrics"]["fallback_steps"] = None if fallback is None else int(fallback)
@@ -344,8 +360,9 @@ def _run_task(task: RunTask, row: dict[str, Any]) -> None:
     row["metrics"].update(m)
     row["success"] = summary.success_rate >= 1.0
     row["status"] = "success" if row["success"] else "incomplete"
-    failed = [f"{o.id}: {o.error}" for o in summary.objects if not o.placed]
-    row["reason"] = "; ".join(failed)
+    failed = [o for o in summary.objects if not o.placed]
+    row["reason"] = "; ".join(f"{o.id}: {o.error}" for o in failed)
+    row["failure"] = failure_of_task([o.error or "" for o in failed])
     row["timing"]["wall_time_s"] = float(summary.wall_time_s)
     row["task"] = summary.to_json()  # per-object outcomes and the run's planner metrics
 
@@ -388,6 +405,7 @@ def execute_run(task: RunTask) -> dict[str, Any]:
         else:
             log.warning("run %s failed: %s\n%s", task.run_id, e, traceback.format_exc())
         row["status"], row["reason"], row["success"] = "error", f"{type(e).__name__}: {e}", False
+        row["failure"] = failure_of_exception(e)
     if row["timing"].get("wall_time_s") is None:
         row["timing"]["wall_time_s"] = time.perf_counter() - t0
     return json_safe(row)
@@ -397,6 +415,7 @@ def error_row(task: RunTask, reason: str, *, wall_time_s: float | None = None) -
     """The row of a run that never returned its own (its worker was stopped or died): status 'error'."""
     row = _new_row(task)
     row["status"], row["reason"], row["success"] = "error", reason, False
+    row["failure"] = "error"
     row["timing"]["wall_time_s"] = wall_time_s
     return json_safe(row)
 
@@ -413,7 +432,9 @@ def _new_row(task: RunTask) -> dict[str, Any]:
         "status": None,
         "reason": "",
         "success": False,
+        "failure": None,  # a FAILURES key when the run failed (twin.compare.metrics)
         "query": task.query,
+        "time_limit_s": task.time_limit_s if task.kind == "query" else None,
         "straight_free": None,
         "metrics": empty_metrics(),
         "timing": empty_timing(),

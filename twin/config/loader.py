@@ -29,6 +29,7 @@ from twin.resources import CONFIG_SUFFIXES, config_names, packaged_config
 __all__ = [
     "apply_override",
     "find_config",
+    "format_validation",
     "load_config",
     "one_line",
     "read_yaml",
@@ -270,7 +271,7 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     node[parts[-1]] = value
 
 
-def _format_validation(source: str, err: ValidationError) -> str:
+def format_validation(source: str, err: ValidationError) -> str:
     """One line for a pydantic error: the dotted path of the first bad key and what is wrong with it."""
     errors = err.errors()
     e = errors[0]
@@ -319,7 +320,7 @@ def settings_from_dict(
     try:
         settings = Settings.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(_format_validation(source, err)) from None
+        raise ConfigError(format_validation(source, err)) from None
     except RecursionError:
         raise ConfigError(f"{source}: nested too deeply to validate") from None
     _check_settings(settings, source)

@@ -1,0 +1,43 @@
+"""Problem sets: motion problems written out for other tools and read back in (`twin problems`).
+
+    from twin.problems import export_problem_set, load_problem_set, save_problem_set
+    ps = export_problem_set("robocup", count=10, seed=0, random={"straight": "blocked"})
+    save_problem_set(ps, "robocup-blocked.json")
+
+Modules: `model` (the file format, validated; its JSON Schema), `queries` (problems <-> compare queries),
+`world` (a problem set's world as twin's fixtures and planning scene), `export` (from a scene config),
+`moveit` (from MoveIt PlanningScene / MotionPlanRequest YAML).
+"""
+
+from __future__ import annotations
+
+from twin.problems.model import (
+    FORMAT,
+    VERSION,
+    Problem,
+    ProblemSet,
+    json_schema,
+    load_problem_set,
+    problem_set_from_dict,
+    save_problem_set,
+)
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "Problem",
+    "ProblemSet",
+    "export_problem_set",
+    "json_schema",
+    "load_problem_set",
+    "problem_set_from_dict",
+    "save_problem_set",
+]
+
+
+def __getattr__(name: str) -> object:
+    if name == "export_problem_set":  # loads the compare worker (FCL, kinematics) only when asked for
+        from twin.problems.export import export_problem_set
+
+        return export_problem_set
+    raise AttributeError(f"module 'twin.problems' has no attribute {name!r}")
