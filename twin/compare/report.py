@@ -9,11 +9,26 @@ comparison on queries that need no search compares retimers, not planners.
 Statistics use every run that produced the value (None is "does not apply"): trajectory metrics come
 from successful plans only, planning time from every finished plan (a planner that gives up quickly
 is fast at giving up, and that is worth seeing), task metrics from every task run.
+
+Whether a difference is real, three ways (the statistics themselves live in `twin.compare.stats`):
+
+- 95 % confidence intervals of every median and success rate: percentile bootstrap
+  (`scipy.stats.bootstrap`, method="percentile", BOOTSTRAP_RESAMPLES resamples, vectorised). The
+  generator is seeded from crc32(planner, scenario, key), so the same rows always give the same
+  intervals. One value gives [v, v], none gives no interval. A percentile bootstrap cannot see beyond
+  the sample: 12/12 successes give [100 %, 100 %].
+- why runs failed: counts per reason of the fixed set `metrics.FAILURES` (`row["failure"]`).
+- a paired comparison against a reference planner (the first one unless told) on the same problems
+  (same scenario, case and seed): wins, ties and losses, the median of the differences
+  (planner - reference) and a two-sided Wilcoxon signed-rank p for `PAIRED_KEYS`; for success, the
+  runs one planner solved and the other did not and an exact sign test (binomial) on them. See
+  `PairedComparison` for the tie rule. p values are per comparison, not corrected for multiplicity.
 """
 
 from __future__ import annotations
 
 import csv
+import difflib
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -22,33 +37,72 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.compare.metrics import METRICS, TIMINGS, MetricDef
+from twin.compare.metrics import FAILURES, METRICS, TIMINGS, MetricDef
+from twin.compare.stats import (
+    BOOTSTRAP_RESAMPLES,
+    CONFIDENCE,
+    MIN_DISCORDANT,
+    bootstrap_ci,
+    is_tie,
+    sign_test,
+    signed_rank,
+    stable_seed,
+)
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
     from rich.table import Table
 
-__all__ = ["ALL", "Stat", "Summary", "SummaryRow", "summarize", "summary_table", "write_summary"]
+__all__ = [
+    "ALL",
+    "BOOTSTRAP_RESAMPLES",
+    "CONFIDENCE",
+    "MIN_DISCORDANT",
+    "PAIRED_KEYS",
+    "PairedComparison",
+    "Stat",
+    "Summary",
+    "SummaryRow",
+    "bootstrap_ci",
+    "is_tie",
+    "summarize",
+    "summary_table",
+    "write_summary",
+]
 
 ALL = "all"  # the scenario column of a planner's overall row
 _DEFS: tuple[MetricDef, ...] = METRICS + TIMINGS
+_BETTER = {d.key: d.better for d in _DEFS}
 _TABLE_KEYS = ("planning_time_s", "duration_s", "min_clearance_m", "max_jerk", "contacts", "goal_error_m")
+
+PAIRED_KEYS = ("planning_time_s", "duration_s")  # metrics compared pair by pair with the reference
+SUCCESS = "success"  # the metric name of the paired success comparison
 
 
 @dataclass(frozen=True)
 class Stat:
-    """Median and 95th percentile (linear interpolation) of n values."""
+    """Median and 95th percentile (linear interpolation) of n values, and the 95 % percentile-bootstrap
+    interval of the median [ci_low, ci_high] (None without values; [v, v] for one value)."""
 
     n: int
     median: float | None
     p95: float | None
+    ci_low: float | None = None
+    ci_high: float | None = None
 
     @classmethod
-    def of(cls, values: Sequence[float]) -> Stat:
-        if not values:
-            return cls(0, None, None)
+    def of(cls, values: Sequence[float] | np.ndarray, *, seed: int = 0) -> Stat:
+        """The statistics of `values`; `seed` seeds the bootstrap of the median's interval."""
         a = np.asarray(values, dtype=float)
-        return cls(int(a.size), float(np.median(a)), float(np.percentile(a, 95)))
+        if a.size == 0:
+            return cls(0, None, None)
+        ci = bootstrap_ci(a, seed=seed)
+        lo, hi = ci if ci is not None else (None, None)
+        return cls(int(a.size), float(np.median(a)), float(np.percentile(a, 95)), lo, hi)
+
+    @property
+    def ci(self) -> tuple[float, float] | None:
+        return None if self.ci_low is None or self.ci_high is None else (self.ci_low, self.ci_high)
 
 
 @dataclass(frozen=True)
@@ -67,6 +121,8 @@ class SummaryRow:
     common_pair_runs: int = 0  # ... in how many of them
     straight_free: int = 0  # query runs whose straight joint motion was collision-free
     straight_known: int = 0  # query runs that recorded it
+    success_ci: tuple[float, float] | None = None  # 95 % bootstrap interval of success_rate (0..1)
+    failures: dict[str, int] = field(default_factory=dict)  # reason -> runs, in FAILURES order, nonzero only
 
     @property
     def success_rate(self) -> float | None:
@@ -78,16 +134,55 @@ class SummaryRow:
 
 
 @dataclass(frozen=True)
+class PairedComparison:
+    """`planner` against `reference` on `metric` over the n problems both ran (same scenario, case and
+    seed; scenario == ALL pools every scenario) where both have a value.
+
+    Wins, ties and losses are from `planner`'s side: a win is a better value (lower, unless the metric's
+    `better` is "higher"; PAIRED_KEYS are all lower-is-better); a tie is `is_tie(a, b)`. `median_diff`
+    is the median of planner - reference over all n pairs (negative: planner lower). `p_value` is the
+    two-sided Wilcoxon signed-rank test (scipy.stats.wilcoxon, zero_method="wilcox", method="auto":
+    exact up to 50 pairs when no two differences have the same size) on the wins + losses pairs: ties
+    are set aside as zero differences, as the "wilcox" convention does, and reported as ties. With fewer
+    than MIN_DISCORDANT non-tied pairs, p is None.
+
+    metric == "success": every problem both ran; a win is a success where the reference failed, a tie is
+    both succeeded or both failed; p is the exact two-sided sign test (binomial, p = 1/2; McNemar's exact
+    test) on the discordant pairs, again None below MIN_DISCORDANT; median_diff is None (the difference in
+    success rate on these problems is (wins - losses) / n).
+    """
+
+    planner: str
+    reference: str
+    scenario: str
+    metric: str
+    n: int
+    wins: int
+    ties: int
+    losses: int
+    median_diff: float | None
+    p_value: float | None
+
+
+@dataclass(frozen=True)
 class Summary:
-    """Overall rows (one per planner, in config order) and per-scenario rows; skipped runs with reasons."""
+    """Overall rows (one per planner, in config order) and per-scenario rows; skipped runs with reasons;
+    the paired comparison of every planner with `reference`."""
 
     overall: list[SummaryRow]
     by_scenario: list[SummaryRow]
     skipped: list[tuple[str, str]] = field(default_factory=list)
+    paired: list[PairedComparison] = field(default_factory=list)
+    reference: str | None = None
 
     def metric_keys(self) -> list[str]:
         """Metrics that have at least one value (the others would be empty columns)."""
         return [d.key for d in _DEFS if any(r.stats[d.key].n for r in self.overall)]
+
+    def row(self, planner: str, scenario: str = ALL) -> SummaryRow | None:
+        """The row of `planner` on `scenario` (ALL: overall), None if it has no runs there."""
+        rows = self.overall if scenario == ALL else self.by_scenario
+        return next((r for r in rows if r.planner == planner and r.scenario == scenario), None)
 
 
 def _value(row: dict[str, Any], key: str) -> float | None:
@@ -97,8 +192,28 @@ def _value(row: dict[str, Any], key: str) -> float | None:
     return None if v is None else float(v)
 
 
+def _failure(row: dict[str, Any]) -> str | None:
+    """Why the run failed (a FAILURES key), None if it did not or the row does not say: a row without a
+    `failure` (written before it existed) counts as "error" only if its status is "error"."""
+    reason = row.get("failure")
+    if reason is None and row.get("status") == "error":
+        return "error"
+    return None if reason is None else str(reason)
+
+
+def _failure_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
+    counts = Counter(f for r in rows if (f := _failure(r)) is not None)
+    known = [k for k in FAILURES if counts[k]]
+    return {k: counts[k] for k in known + sorted(set(counts) - set(FAILURES))}
+
+
 def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> SummaryRow:
-    stats = {d.key: Stat.of([v for r in rows if (v := _value(r, d.key)) is not None]) for d in _DEFS}
+    stats = {
+        d.key: Stat.of(
+            [v for r in rows if (v := _value(r, d.key)) is not None], seed=stable_seed(planner, scenario, d.key)
+        )
+        for d in _DEFS
+    }
     with_pair = [
         (v, r["clearance_pair"])
         for r in rows
@@ -108,11 +223,12 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
     counts = Counter(p for _, p in with_pair)
     common, n_common = counts.most_common(1)[0] if counts else (None, 0)
     known = [r["straight_free"] for r in rows if r.get("straight_free") is not None]
+    ok = [1.0 if r.get("success") else 0.0 for r in rows]
     return SummaryRow(
         planner=planner,
         scenario=scenario,
         runs=len(rows),
-        successes=sum(1 for r in rows if r.get("success")),
+        successes=int(sum(ok)),
         errors=sum(1 for r in rows if r.get("status") == "error"),
         stats=stats,
         min_clearance_m=closest[0],
@@ -121,13 +237,79 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
         common_pair_runs=n_common,
         straight_free=sum(1 for v in known if v),
         straight_known=len(known),
+        success_ci=bootstrap_ci(ok, seed=stable_seed(planner, scenario, SUCCESS), statistic="mean"),
+        failures=_failure_counts(rows),
     )
 
 
+def _problem(row: dict[str, Any]) -> tuple[Any, ...]:
+    """What makes two runs the same problem: the same query (scenario and case) with the same seed."""
+    return (row["scenario"], row.get("case"), row.get("seed"))
+
+
+def _paired_metric(
+    planner: str, reference: str, scenario: str, metric: str, pairs: list[tuple[float, float]]
+) -> PairedComparison:
+    a, b = np.array(pairs, dtype=float).T
+    t = signed_rank(a, b, higher_is_better=_BETTER.get(metric) == "higher")
+    return PairedComparison(
+        planner, reference, scenario, metric, int(a.size), t.wins, t.ties, t.losses, t.median_diff, t.p_value
+    )
+
+
+def _paired_success(planner: str, reference: str, scenario: str, pairs: list[tuple[bool, bool]]) -> PairedComparison:
+    wins = sum(1 for mine, ref in pairs if mine and not ref)
+    losses = sum(1 for mine, ref in pairs if ref and not mine)
+    p = sign_test(wins, losses)
+    return PairedComparison(
+        planner, reference, scenario, SUCCESS, len(pairs), wins, len(pairs) - wins - losses, losses, None, p
+    )
+
+
+def _paired(
+    rows: list[dict[str, Any]], order: list[str], scenarios: list[str], reference: str
+) -> list[PairedComparison]:
+    """Every planner but the reference against it: overall, then per scenario; success, then PAIRED_KEYS."""
+    problems: dict[str, dict[tuple[Any, ...], dict[str, Any]]] = {}
+    for r in rows:
+        problems.setdefault(r["planner"], {})[_problem(r)] = r
+    ref = problems.get(reference, {})
+    out: list[PairedComparison] = []
+    for p in order:
+        mine = problems.get(p, {})
+        if p == reference or not mine:
+            continue
+        common = [k for k in mine if k in ref]
+        for s in [ALL, *scenarios]:
+            keys = [k for k in common if s == ALL or k[0] == s]
+            if not keys:
+                continue
+            out.append(
+                _paired_success(
+                    p, reference, s, [(bool(mine[k].get("success")), bool(ref[k].get("success"))) for k in keys]
+                )
+            )
+            for m in PAIRED_KEYS:
+                pairs = [
+                    (a, b)
+                    for k in keys
+                    if (a := _value(mine[k], m)) is not None and (b := _value(ref[k], m)) is not None
+                ]
+                if pairs:
+                    out.append(_paired_metric(p, reference, s, m, pairs))
+    return out
+
+
 def summarize(
-    rows: Iterable[dict[str, Any]], *, planners: Sequence[str] | None = None, skipped: Sequence[tuple[str, str]] = ()
+    rows: Iterable[dict[str, Any]],
+    *,
+    planners: Sequence[str] | None = None,
+    skipped: Sequence[tuple[str, str]] = (),
+    reference: str | None = None,
 ) -> Summary:
-    """Group result rows by planner (in `planners` order, then any others) and by planner x scenario."""
+    """Group result rows by planner (in `planners` order, then any others) and by planner x scenario, with
+    bootstrap intervals and failure counts, and compare every planner with `reference` on the problems
+    both ran (default: the first planner in that order that has runs)."""
     rows = [r for r in rows if r.get("status") != "skipped"]
     order = list(planners or [])
     order += sorted({r["planner"] for r in rows} - set(order))
@@ -142,7 +324,15 @@ def summarize(
         for p in order
         if (sel := [r for r in rows if r["planner"] == p and r["scenario"] == s])
     ]
-    return Summary(overall, by_scenario, list(skipped))
+    ran = [r.planner for r in overall if r.runs]
+    if reference is None:
+        reference = ran[0] if ran else None
+    elif reference not in order:
+        close = difflib.get_close_matches(reference, order, n=1)
+        hint = f" Did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(f"reference planner {reference!r} is not compared here.{hint} Planners: {', '.join(order)}")
+    paired = _paired(rows, order, scenarios, reference) if reference is not None else []
+    return Summary(overall, by_scenario, list(skipped), paired, reference)
 
 
 def _fmt(v: float | None, unit: str = "") -> str:
@@ -156,27 +346,70 @@ def _fmt(v: float | None, unit: str = "") -> str:
     return f"{v:.4g}" if a < 100 else f"{v:.1f}"
 
 
+def _signed(v: float | None, unit: str = "") -> str:
+    return "-" if v is None else ("+" if v > 0 else "") + _fmt(v, unit)
+
+
+def _p(p: float | None) -> str:
+    return "-" if p is None else "<0.001" if p < 1e-3 else f"{p:.3f}"
+
+
 def _rate(r: SummaryRow) -> str:
-    return "-" if r.success_rate is None else f"{100 * r.success_rate:.0f}% ({r.successes}/{r.runs})"
+    """'83% (10/12) [67, 100]': the success rate, the runs and its 95 % interval in percent."""
+    if r.success_rate is None:
+        return "-"
+    ci = "" if r.success_ci is None else f" [{100 * r.success_ci[0]:.0f}, {100 * r.success_ci[1]:.0f}]"
+    return f"{100 * r.success_rate:.0f}% ({r.successes}/{r.runs}){ci}"
+
+
+def _median_ci(st: Stat, unit: str) -> str:
+    """'median [lo, hi]' of a Stat with values."""
+    ci = "" if st.ci is None else f" [{_fmt(st.ci_low, unit)}, {_fmt(st.ci_high, unit)}]"
+    return _fmt(st.median, unit) + ci
+
+
+def _csv_float(v: float | None) -> str:
+    return "" if v is None else repr(v)
+
+
+_PAIRED_COLUMNS = (
+    "planner",
+    "reference",
+    "scenario",
+    "metric",
+    "n",
+    "wins",
+    "ties",
+    "losses",
+    "median_diff",
+    "p_value",
+)
 
 
 def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
-    """Write DIR/summary.csv (every metric, median and p95, per planner overall and per scenario) and
-    DIR/summary.md; returns both paths."""
+    """Write DIR/summary.csv (every metric, median and p95, per planner overall and per scenario, then the
+    95 % intervals and failure counts), DIR/summary.md and DIR/paired.csv (the paired comparison, one row
+    per planner, scenario and metric); returns the three paths."""
     out = Path(out_dir)
-    csv_path, md_path = out / "summary.csv", out / "summary.md"
+    csv_path, md_path, paired_path = out / "summary.csv", out / "summary.md", out / "paired.csv"
     keys = [d.key for d in _DEFS]
     try:
         with open(csv_path, "w", newline="", encoding="utf-8") as f:
             w = csv.writer(f)
+            # new columns go before the last three, which readers take as the last three
             w.writerow(
                 ["planner", "scenario", "runs", "successes", "success_rate", "errors"]
                 + [f"{k}_{s}" for k in keys for s in ("median", "p95")]
+                + ["success_ci_low", "success_ci_high"]
+                + [f"{k}_median_ci_{s}" for k in keys for s in ("low", "high")]
+                + ["failures"]
                 + ["closest_pair", "common_closest_pair", "straight_free_rate"]
             )
             for r in summary.overall + summary.by_scenario:
                 rate = "" if r.success_rate is None else f"{r.success_rate:.6g}"
-                stats = ["" if v is None else repr(v) for k in keys for v in (r.stats[k].median, r.stats[k].p95)]
+                stats = [_csv_float(v) for k in keys for v in (r.stats[k].median, r.stats[k].p95)]
+                cis = [_csv_float(v) for k in keys for v in (r.stats[k].ci_low, r.stats[k].ci_high)]
+                sci = ["", ""] if r.success_ci is None else [f"{v:.6g}" for v in r.success_ci]
                 free = "" if r.straight_free_rate is None else f"{r.straight_free_rate:.6g}"
                 w.writerow(
                     [
@@ -187,15 +420,36 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
                         rate,
                         r.errors,
                         *stats,
+                        *sci,
+                        *cis,
+                        ";".join(f"{k}={n}" for k, n in r.failures.items()),
                         r.closest_pair or "",
                         r.common_pair or "",
                         free,
                     ]
                 )
+        with open(paired_path, "w", newline="", encoding="utf-8") as f:
+            w = csv.writer(f)
+            w.writerow(_PAIRED_COLUMNS)
+            for c in summary.paired:
+                w.writerow(
+                    [
+                        c.planner,
+                        c.reference,
+                        c.scenario,
+                        c.metric,
+                        c.n,
+                        c.wins,
+                        c.ties,
+                        c.losses,
+                        _csv_float(c.median_diff),
+                        _csv_float(c.p_value),
+                    ]
+                )
         md_path.write_text(_markdown(summary), encoding="utf-8")
     except OSError as e:
         raise ConfigError(f"cannot write the summary in {out}: {e.strerror}") from None
-    return [csv_path, md_path]
+    return [csv_path, md_path, paired_path]
 
 
 def _markdown(summary: Summary) -> str:
@@ -203,16 +457,24 @@ def _markdown(summary: Summary) -> str:
     keys = summary.metric_keys()
     planners = [r.planner for r in summary.overall]
     lines = ["# Planner comparison", "", "## Success", ""]
-    lines += ["| planner | runs | success | errors |", "|---|---:|---:|---:|"]
+    lines += ["| planner | runs | success (runs) [95% CI] | errors |", "|---|---:|---:|---:|"]
     lines += [f"| {r.planner} | {r.runs} | {_rate(r)} | {r.errors} |" for r in summary.overall]
-    lines += ["", "## Metrics: median / p95 (n = runs with a value)", ""]
+    reasons = [k for k in FAILURES if any(k in r.failures for r in summary.overall)]
+    reasons += sorted({k for r in summary.overall for k in r.failures} - set(FAILURES))
+    if reasons:
+        lines += ["", "## Failures: runs per reason", ""]
+        lines += ["| planner | " + " | ".join(reasons) + " |", "|---|" + "---:|" * len(reasons)]
+        for r in summary.overall:
+            lines.append(f"| {r.planner} | " + " | ".join(str(r.failures.get(k, 0)) for k in reasons) + " |")
+        lines += [""] + [f"- `{k}`: {FAILURES.get(k, 'a reason outside the fixed set')}" for k in reasons]
+    lines += ["", "## Metrics: median [95% CI] / p95 (n = runs with a value)", ""]
     lines += ["| metric | unit | " + " | ".join(planners) + " |", "|---|---|" + "---:|" * len(planners)]
     for k in keys:
         d = defs[k]
         cells = []
         for r in summary.overall:
             st = r.stats[k]
-            cells.append("-" if not st.n else f"{_fmt(st.median, d.unit)} / {_fmt(st.p95, d.unit)} (n={st.n})")
+            cells.append("-" if not st.n else f"{_median_ci(st, d.unit)} / {_fmt(st.p95, d.unit)} (n={st.n})")
         lines.append(f"| {k} | {d.unit} | " + " | ".join(cells) + " |")
     if any(r.closest_pair for r in summary.overall):
         lines += ["", "## Closest approach to the cell", ""]
@@ -232,16 +494,38 @@ def _markdown(summary: Summary) -> str:
         lines += ["| scenario | free | share |", "|---|---:|---:|"]
         lines += [f"| {s} | {free}/{n} | {100 * free / n:.0f}% |" for s, (free, n) in difficulty.items()]
     if scen:
-        lines += ["", "## Success by scenario", ""]
+        lines += ["", "## Success by scenario [95% CI]", ""]
         lines += ["| planner | " + " | ".join(scen) + " |", "|---|" + "---:|" * len(scen)]
         cell = {(r.planner, r.scenario): _rate(r) for r in summary.by_scenario}
         for p in planners:
             lines.append(f"| {p} | " + " | ".join(cell.get((p, s), "-") for s in scen) + " |")
+    if summary.paired:
+        lines += _paired_markdown(summary, defs)
     if summary.skipped:
         lines += ["", "## Skipped", ""] + [f"- `{rid}`: {why}" for rid, why in summary.skipped]
     lines += ["", "## Metric definitions", ""]
     lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in _DEFS if d.key in keys]
     return "\n".join(lines) + "\n"
+
+
+def _paired_markdown(summary: Summary, defs: dict[str, MetricDef]) -> list[str]:
+    lines = ["", f"## Paired against {summary.reference}", ""]
+    lines += [
+        "The same problems (scenario, case, seed) for both planners. W/T/L: the planner did better / the same "
+        f"/ worse than {summary.reference} (lower time; for success: solved what the reference did not). "
+        "Median diff: planner - reference. p: two-sided Wilcoxon signed-rank test on the non-tied pairs "
+        f"(success: exact sign test on the discordant pairs), '-' below {MIN_DISCORDANT} of them; "
+        "not corrected for the number of comparisons. Ties: |a - b| <= 1e-9 + 1e-6 max(|a|, |b|).",
+        "",
+    ]
+    lines += ["| planner | scenario | metric | n | W/T/L | median diff | p |", "|---|---|---|---:|---:|---:|---:|"]
+    for c in summary.paired:
+        unit = defs[c.metric].unit if c.metric in defs else ""
+        lines.append(
+            f"| {c.planner} | {c.scenario} | {c.metric} | {c.n} | {c.wins}/{c.ties}/{c.losses} "
+            f"| {_signed(c.median_diff, unit)} | {_p(c.p_value)} |"
+        )
+    return lines
 
 
 def _straight_by_scenario(summary: Summary, scenarios: list[str]) -> dict[str, tuple[int, int]]:
@@ -256,7 +540,8 @@ def _straight_by_scenario(summary: Summary, scenarios: list[str]) -> dict[str, t
 
 
 def summary_table(summary: Summary, *, title: str = "planner comparison") -> Table:
-    """A rich table: per planner the success rate and the median (p95) of the headline metrics."""
+    """A rich table: per planner the success rate with its 95 % interval and the median (p95) of the
+    headline metrics."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -265,7 +550,7 @@ def summary_table(summary: Summary, *, title: str = "planner comparison") -> Tab
     keys += [k for k in ("task_success_rate", "cycle_time_s") if k in summary.metric_keys()]
     table = Table(title=title)
     table.add_column("planner")
-    table.add_column("success", justify="right")
+    table.add_column(escape("success\n(runs) [95% CI]"), justify="right")
     for k in keys:
         unit = defs[k].unit
         table.add_column(escape(f"{k}\nmedian (p95)" + (f" [{unit}]" if unit else "")), justify="right")
@@ -279,5 +564,5 @@ def summary_table(summary: Summary, *, title: str = "planner comparison") -> Tab
         ]
         if pairs:
             cells.append(escape(r.common_pair or "-"))
-        table.add_row(r.planner, _rate(r), *cells)
+        table.add_row(r.planner, escape(_rate(r)), *cells)
     return table

@@ -608,13 +608,13 @@ def run_comparison(
     rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
     from twin.compare.report import summarize, write_summary
 
-    summary = summarize(rows, planners=[p.id for p in spec.planners], skipped=skipped)
+    summary = summarize(rows, planners=[p.id for p in spec.planners], skipped=skipped, reference=spec.reference)
     files = [results, *write_summary(summary, out)]
     if plots:
         try:
             from twin.compare.plots import write_plots
 
-            files += write_plots(rows, out, planners=[p.id for p in spec.planners])
+            files += write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
         except DependencyMissing as e:
             log.warning("no plots: %s", e)
     return CompareResult(

@@ -257,6 +257,8 @@ class CompareSpec(_Model):
     `jerk_dt_s`: the resampling step for max |jerk| (finite differences of qdd).
     `run_timeout_s`: a run that has not returned after this long (a planner that ignores its time limit)
     is stopped and recorded as an error row (local backend); default `default_run_timeout`.
+    `reference`: the planner the summary pairs every other one against on the same problems (wins, ties,
+    losses, Wilcoxon signed-rank p); default the first planner.
     """
 
     name: str = Field("compare", pattern=_NAME_PATTERN)
@@ -268,6 +270,7 @@ class CompareSpec(_Model):
     settle_s: float = Field(0.5, ge=0, le=10)
     jerk_dt_s: float = Field(1e-3, gt=0, le=0.01)
     run_timeout_s: float | None = Field(None, gt=0)
+    reference: str | None = None  # the planner label every other planner is paired against (default: the first)
     _source: str | None = PrivateAttr(None)
 
     @property
@@ -295,6 +298,8 @@ class CompareSpec(_Model):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise ValueError(f"planner labels must be unique, repeated: {dup} (give each a `label`)")
+        if self.reference is not None and self.reference not in ids:
+            raise ValueError(f"reference {self.reference!r} is not a planner label of this comparison; labels: {ids}")
         names = [s.name for s in self.scenarios]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:

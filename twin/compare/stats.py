@@ -1,0 +1,135 @@
+"""The statistics of a comparison, apart from what they are applied to: bootstrap confidence intervals
+and paired tests (Wilcoxon signed-rank on paired values, an exact sign test on paired outcomes).
+
+Why these: planning times and durations are skewed and far from normal, so intervals come from a
+percentile bootstrap of the median (`scipy.stats.bootstrap`, vectorised, seeded: the same values give
+the same interval), and paired differences are tested by rank (Wilcoxon), not by a t-test; success
+pairs by an exact binomial test on the pairs where only one side succeeded (McNemar's exact form).
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import math
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, overload
+
+import numpy as np
+
+__all__ = [
+    "BOOTSTRAP_RESAMPLES",
+    "CONFIDENCE",
+    "MIN_DISCORDANT",
+    "PairedTest",
+    "bootstrap_ci",
+    "is_tie",
+    "sign_test",
+    "signed_rank",
+    "stable_seed",
+]
+
+CONFIDENCE = 0.95  # of every interval
+BOOTSTRAP_RESAMPLES = 2000
+MIN_DISCORDANT = 6  # fewer non-tied pairs give no p: with 5, the smallest exact two-sided p is 2/2^5 > 0.05
+TIE_ABS, TIE_REL = 1e-9, 1e-6  # see is_tie
+
+
+@overload
+def is_tie(a: float, b: float) -> bool: ...
+@overload
+def is_tie(a: np.ndarray, b: np.ndarray) -> np.ndarray: ...
+def is_tie(a: float | np.ndarray, b: float | np.ndarray) -> bool | np.ndarray:
+    """Whether paired values count as equal: |a - b| <= 1e-9 + 1e-6 * max(|a|, |b|) (elementwise on arrays).
+
+    Equal values are always ties; so are differences below a part per million (or a nanosecond for
+    values in seconds), which no timer or retimer resolves and no user would call a win.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    tie = np.abs(a - b) <= TIE_ABS + TIE_REL * np.maximum(np.abs(a), np.abs(b))
+    return bool(tie) if tie.ndim == 0 else tie
+
+
+def stable_seed(*parts: str) -> int:
+    """A seed that depends on the parts only (crc32 is stable across runs, unlike hash())."""
+    return zlib.crc32("\x1f".join(parts).encode("utf-8"))
+
+
+@functools.cache
+def _bootstrap() -> tuple[Callable[..., Any], str]:
+    """scipy.stats.bootstrap and the name of its generator argument (`rng` since scipy 1.15)."""
+    from scipy.stats import bootstrap
+
+    return bootstrap, "rng" if "rng" in inspect.signature(bootstrap).parameters else "random_state"
+
+
+def bootstrap_ci(
+    values: Sequence[float] | np.ndarray,
+    *,
+    seed: int,
+    statistic: Literal["median", "mean"] = "median",
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    confidence: float = CONFIDENCE,
+) -> tuple[float, float] | None:
+    """The percentile-bootstrap interval of the median (or mean) of `values`: None for no value, [v, v]
+    for one; otherwise `resamples` resamples drawn by numpy's Generator seeded with `seed`, all at once
+    (scipy.stats.bootstrap, vectorised), so the same values and seed give the same interval."""
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return None
+    if a.size == 1 or bool(np.all(a == a[0])):
+        return float(a[0]), float(a[0])
+    bootstrap, rng_kw = _bootstrap()
+    stat = np.median if statistic == "median" else np.mean
+    res = bootstrap(
+        (a,),
+        stat,
+        n_resamples=resamples,
+        vectorized=True,
+        method="percentile",
+        confidence_level=confidence,
+        **{rng_kw: np.random.default_rng(seed)},
+    )
+    ci = res.confidence_interval
+    return float(ci.low), float(ci.high)
+
+
+@dataclass(frozen=True)
+class PairedTest:
+    """Pairs (a, b) compared: a wins where it is better, ties by `is_tie`; median of a - b; p or None."""
+
+    wins: int
+    ties: int
+    losses: int
+    median_diff: float
+    p_value: float | None
+
+
+def signed_rank(a: np.ndarray, b: np.ndarray, *, higher_is_better: bool = False) -> PairedTest:
+    """Wins, ties and losses of `a` against `b` (paired, same length), the median of a - b, and the
+    two-sided Wilcoxon signed-rank p on the non-tied pairs (zero_method "wilcox": ties are set aside
+    and reported as ties); p is None below MIN_DISCORDANT non-tied pairs."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    d = a - b
+    tie = is_tie(a, b)
+    better = d > 0 if higher_is_better else d < 0
+    wins, ties = int(np.sum(~tie & better)), int(np.sum(tie))
+    losses = int(d.size) - wins - ties
+    p = None
+    if wins + losses >= MIN_DISCORDANT:
+        from scipy.stats import wilcoxon
+
+        res = wilcoxon(d[~tie], zero_method="wilcox", alternative="two-sided", method="auto")
+        p = float(res.pvalue) if math.isfinite(res.pvalue) else None
+    return PairedTest(wins, ties, losses, float(np.median(d)), p)
+
+
+def sign_test(wins: int, losses: int) -> float | None:
+    """Two-sided exact binomial p of `wins` against `losses` (discordant pairs); None below MIN_DISCORDANT."""
+    if wins + losses < MIN_DISCORDANT:
+        return None
+    from scipy.stats import binomtest
+
+    return float(binomtest(wins, wins + losses, 0.5, alternative="two-sided").pvalue)
