@@ -18,6 +18,8 @@ path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
         queries:
           - {start: [0, -1.6, 1.5, -1.5, -1.57, 0], goal: [0.3, -1.4, 1.2, -1.4, -1.57, 0.2]}
           - {start: [0, -1.6, 1.5, -1.5, -1.57, 0], goal_pose: [-0.5, 0.1, 0.2, 3.1416, 0, 0]}
+      - name: exported                                # a problem-set file (`twin problems export`,
+        problems: warehouse-blocked.json              #   MoveIt import): its world, each problem with its seed
       - name: warehouse-task                          # a full task run (`twin run`)
         task: warehouse.yaml
         seeds: [0, 1]                                 # this scenario's own seeds
@@ -176,6 +178,11 @@ class RandomQueries(_Model):
 
 class QueryScenario(_Model):
     """Motion queries planned in the static cell of a scene config, then executed in PyBullet.
+
+    The queries are listed (`queries`), drawn at random (`random`), or read from a problem-set file
+    (`problems`, relative to the comparison file): then the cell's fixtures are the file's primitives,
+    in the robot cell of `scene` (default: the config the file names in `source.config`), and each
+    problem runs once with its own seed and time limit unless `seeds` / `time_limit_s` are given.
 
     Loose objects are left out of both the planning scene and the physics, so the two agree. Fixtures
     marked `known: false` (obstacles a task must perceive first) are, with `unknown_fixtures: box`,
