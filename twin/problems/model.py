@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from twin.config.loader import format_validation
 from twin.errors import ConfigError
@@ -69,6 +69,10 @@ def _finite(values: Any, what: str) -> None:
         raise ValueError(f"{what} must be finite numbers")
 
 
+PositiveLength = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Size3 = tuple[PositiveLength, PositiveLength, PositiveLength]  # full extents, m
+
+
 class PoseSpec(_Model):
     """A rigid pose: position (m) and unit quaternion x, y, z, w."""
 
@@ -100,15 +104,9 @@ class PoseSpec(_Model):
 
 class BoxShape(_Model):
     shape: Literal["box"] = "box"
-    size: Vec3 = Field(description="full extents along the primitive's x, y, z (m)")
+    size: Size3 = Field(description="full extents along the primitive's x, y, z (m)")
     pose: PoseSpec
 
-    @field_validator("size")
-    @classmethod
-    def _positive(cls, v: Vec3) -> Vec3:
-        if not all(math.isfinite(s) and s > 0 for s in v):
-            raise ValueError(f"box size must be 3 positive numbers, got {list(v)}")
-        return v
 
     def dims(self) -> tuple[float, ...]:
         """Dimensions in twin's shape convention (twin.urdf_model.Shape)."""
@@ -148,15 +146,9 @@ class HeldObject(_Model):
     """A box the gripper holds: it moves with the TCP and is checked against the world and the arm."""
 
     name: str = Field(min_length=1)
-    size: Vec3
+    size: Size3
     pose_in_tcp: PoseSpec
 
-    @field_validator("size")
-    @classmethod
-    def _positive(cls, v: Vec3) -> Vec3:
-        if not all(math.isfinite(s) and s > 0 for s in v):
-            raise ValueError(f"held object size must be 3 positive numbers, got {list(v)}")
-        return v
 
 
 class WorldSpec(_Model):
