@@ -496,8 +496,8 @@ def write_ompl_logs(
 
     `rows`: result rows (results.jsonl). `planners`: labels in the order to list them (others follow as
     they come). `host`, `started`: the 'Running on' and 'Starting at' lines (default: this machine,
-    now). `time_limit_s`: the limit per run, one for all or per scenario (rows do not record it; 0 when
-    unknown). Raises ConfigError for no rows or an unwritable folder.
+    now). `time_limit_s`: the limit per run, one for all or per scenario (default: the largest the rows
+    record; 0 when none does). Raises ConfigError for no rows or an unwritable folder.
     """
     exps = _experiments(rows, name=name, planners=planners, host=host, started=started, time_limit_s=time_limit_s)
     paths = _write_logs(exps, out_dir)
