@@ -60,6 +60,19 @@ def add_parsers(sub: Any) -> None:
     m.add_argument("--config", default="robocup", help="twin config of the robot (default robocup)")
     m.add_argument("--name", default=None, help="set name (default: the scene's name)")
     m.add_argument("--time-limit", type=float, default=None, help="time limit per problem, s (default: the request's)")
+    m.add_argument(
+        "--frames",
+        choices=("ur_description", "twin"),
+        default="ur_description",
+        help="what base_link means: ROS's UR description (default; turned 180 deg about z from twin's) or twin's",
+    )
+    m.add_argument(
+        "--ignore-joints",
+        action="append",
+        default=[],
+        metavar="PATTERN",
+        help="joints of the start state to ignore (names or globs, e.g. 'robotiq_85_*' in MotionBenchMaker's UR5)",
+    )
     s = psub.add_parser("schema", help="print the JSON Schema of problem-set files")
     s.add_argument("--out", default=None, metavar="FILE.json", help="write it here instead")
 
@@ -98,10 +111,16 @@ def _cmd_problems(args: argparse.Namespace) -> int:
             time_limit_s=args.time_limit,
         )
     else:
-        from twin.problems.moveit import problem_set_from_moveit
+        from twin.problems import problem_set_from_moveit
 
         ps = problem_set_from_moveit(
-            args.scene, args.requests, config=args.config, name=args.name, time_limit_s=args.time_limit
+            args.scene,
+            args.requests,
+            config=args.config,
+            name=args.name,
+            time_limit_s=args.time_limit,
+            frames=args.frames,
+            ignore_joints=tuple(args.ignore_joints),
         )
     path = save_problem_set(ps, args.out)
     n_prims = sum(len(o.primitives) for o in ps.world.objects)

@@ -6,10 +6,12 @@
 
 Modules: `model` (the file format, validated; its JSON Schema), `queries` (problems <-> compare queries),
 `world` (a problem set's world as twin's fixtures and planning scene), `export` (from a scene config),
-`moveit` (from MoveIt PlanningScene / MotionPlanRequest YAML).
+`moveit` (from MoveIt PlanningScene / MotionPlanRequest YAML: `problem_set_from_moveit`).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from twin.problems.model import (
     FORMAT,
@@ -31,13 +33,19 @@ __all__ = [
     "json_schema",
     "load_problem_set",
     "problem_set_from_dict",
+    "problem_set_from_moveit",
     "save_problem_set",
 ]
 
 
-def __getattr__(name: str) -> object:
-    if name == "export_problem_set":  # loads the compare worker (FCL, kinematics) only when asked for
+def __getattr__(name: str) -> Any:
+    # these load the compare worker or the robot model (FCL, kinematics) only when asked for
+    if name == "export_problem_set":
         from twin.problems.export import export_problem_set
 
         return export_problem_set
+    if name == "problem_set_from_moveit":
+        from twin.problems.moveit import problem_set_from_moveit
+
+        return problem_set_from_moveit
     raise AttributeError(f"module 'twin.problems' has no attribute {name!r}")

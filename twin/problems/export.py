@@ -18,9 +18,9 @@ import numpy as np
 from pydantic import ValidationError
 
 from twin.errors import ConfigError
-from twin.problems.model import ProblemSet, RobotSpec
+from twin.problems.model import ProblemSet
 from twin.problems.queries import problem_of_query
-from twin.problems.world import world_of_scene
+from twin.problems.world import robot_spec, world_of_scene
 
 __all__ = ["export_problem_set"]
 
@@ -86,16 +86,7 @@ def export_problem_set(
             "seed": seed,
             "random": rq.model_dump(mode="json"),
         },
-        robot=RobotSpec(
-            urdf=settings.robot.urdf,
-            joint_names=list(model.arm_joints),
-            tcp_frame=cell.scene.tcp_link,
-            gripper_opening_m=cell.scene.gripper_opening,
-            allowed_self_collisions=sorted(cell.scene.excluded_pairs),
-            static_links=[
-                ln for ln in model.link_names if model.rigid_parent(ln, movable=model.arm_joints) == model.root
-            ],
-        ),
+        robot=robot_spec(cell.scene, settings),
         world=world_of_scene(cell.scene, frame=model.root),
         problems=problems,
     )

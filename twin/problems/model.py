@@ -107,7 +107,6 @@ class BoxShape(_Model):
     size: Size3 = Field(description="full extents along the primitive's x, y, z (m)")
     pose: PoseSpec
 
-
     def dims(self) -> tuple[float, ...]:
         """Dimensions in twin's shape convention (twin.urdf_model.Shape)."""
         return tuple(self.size)
@@ -150,11 +149,17 @@ class HeldObject(_Model):
     pose_in_tcp: PoseSpec
 
 
-
 class WorldSpec(_Model):
+    """The collision world. `perceived_boxes` names the objects (each one box) that a perception step
+    reports in twin's cell rather than fixtures it knows: planners that model obstacles as boxes (nmpc)
+    see those, as they do in a task; every planner's collision checks see every object."""
+
     frame: str = Field("base_link", description="the frame every pose of the world and goals is in")
     objects: list[CollisionObject] = Field(default_factory=list)
     held_object: HeldObject | None = None
+    perceived_boxes: list[str] = Field(
+        default_factory=list, description="objects (one box each) reported as obstacle boxes, not known fixtures"
+    )
 
     @model_validator(mode="after")
     def _unique(self) -> WorldSpec:
@@ -162,6 +167,11 @@ class WorldSpec(_Model):
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValueError(f"object names must be unique, repeated: {dup}")
+        by_name = {o.name: o for o in self.objects}
+        for n in self.perceived_boxes:
+            o = by_name.get(n)
+            if o is None or len(o.primitives) != 1 or o.primitives[0].shape != "box":
+                raise ValueError(f"perceived_boxes: {n!r} is not an object made of one box")
         return self
 
 

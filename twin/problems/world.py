@@ -23,6 +23,7 @@ from twin.problems.model import (
     HeldObject,
     PoseSpec,
     ProblemSet,
+    RobotSpec,
     SphereShape,
     WorldSpec,
 )
@@ -32,7 +33,7 @@ if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import Settings
 
-__all__ = ["check_robot", "object_urdf", "planning_scene", "settings_for", "world_of_scene"]
+__all__ = ["check_robot", "object_urdf", "planning_scene", "robot_spec", "settings_for", "world_of_scene"]
 
 _URDF_VERSION = "v1"  # bump when the generated URDF changes form
 
@@ -56,6 +57,7 @@ def world_of_scene(scene: PlanningScene, *, frame: str = "base_link") -> WorldSp
                 )
         if prims:
             objects.append(CollisionObject(name=name, primitives=prims))
+    boxes = scene.boxes()
     held = scene.attached_box()
     held_spec = None
     if held is not None:
@@ -63,7 +65,26 @@ def world_of_scene(scene: PlanningScene, *, frame: str = "base_link") -> WorldSp
         held_spec = HeldObject(
             name=hname, size=(float(hsize[0]), float(hsize[1]), float(hsize[2])), pose_in_tcp=PoseSpec.of(hpose)
         )
-    return WorldSpec(frame=frame, objects=objects, held_object=held_spec)
+    return WorldSpec(
+        frame=frame,
+        objects=objects,
+        held_object=held_spec,
+        perceived_boxes=[o.name for o in objects if o.name in boxes],
+    )
+
+
+def robot_spec(scene: PlanningScene, settings: Settings) -> RobotSpec:
+    """The robot of a problem set planned in `scene`: URDF as `settings` names it, arm joints, TCP, the
+    gripper opening, and the collision rules another tool needs to check as twin does."""
+    model = scene.model
+    return RobotSpec(
+        urdf=settings.robot.urdf,
+        joint_names=list(model.arm_joints),
+        tcp_frame=scene.tcp_link,
+        gripper_opening_m=scene.gripper_opening,
+        allowed_self_collisions=sorted(scene.excluded_pairs),
+        static_links=[ln for ln in model.link_names if model.rigid_parent(ln, movable=model.arm_joints) == model.root],
+    )
 
 
 def _origin(T: np.ndarray) -> str:
@@ -128,10 +149,14 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
 
 def settings_for(ps: ProblemSet, base: Settings) -> Settings:
     """`base` (robot, limits, collision settings) with the problem set's objects as its only fixtures and
-    no loose objects: the cell every problem of the set is planned and executed in."""
+    no loose objects: the cell every problem of the set is planned and executed in. Perceived boxes are
+    fixtures marked `known: false` (in the physics; added to the planning scene as boxes)."""
     from twin.config.schema import FixtureSettings
 
-    fixtures = [FixtureSettings(name=o.name, urdf=str(object_urdf(o))) for o in ps.world.objects]
+    perceived = set(ps.world.perceived_boxes)
+    fixtures = [
+        FixtureSettings(name=o.name, urdf=str(object_urdf(o)), known=o.name not in perceived) for o in ps.world.objects
+    ]
     objects = base.world.objects.model_copy(update={"items": []})
     world = base.world.model_copy(update={"fixtures": fixtures, "objects": objects})
     return base.model_copy(update={"world": world})
@@ -142,7 +167,8 @@ def planning_scene(ps: ProblemSet, settings: Settings) -> PlanningScene:
     (attached to the TCP) and the gripper opening the set states."""
     from twin.collision import PlanningScene
 
-    scene = PlanningScene.from_settings(settings)
+    scene = PlanningScene.from_settings(settings)  # the known fixtures
+    scene.add_unknown_fixtures(settings)  # the perceived boxes, as a perfect detector reports them
     if ps.robot.gripper_opening_m is not None and not math.isclose(
         ps.robot.gripper_opening_m, scene.gripper_opening, abs_tol=1e-9
     ):
