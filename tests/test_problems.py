@@ -68,8 +68,10 @@ def test_export_round_trips_and_its_world_is_the_planning_scene(exported: dict[s
     assert (original.in_collision_batch(qs) == rebuilt.in_collision_batch(qs)).all()
 
 
-def _rows(tmp: Path, scenario: dict[str, Any], seeds: list[int] | None = None) -> list[dict[str, Any]]:
-    spec: dict[str, Any] = {"name": "t", "planners": ["ruckig.movej"], "scenarios": [scenario], "execute": False}
+def _rows(
+    tmp: Path, scenario: dict[str, Any], seeds: list[int] | None = None, planners: tuple[str, ...] = ("ruckig.movej",)
+) -> list[dict[str, Any]]:
+    spec: dict[str, Any] = {"name": "t", "planners": list(planners), "scenarios": [scenario], "execute": False}
     if seeds is not None:
         spec["seeds"] = seeds
     result = run_comparison(compare_spec_from_dict(spec, base_dir=tmp), out_dir=tmp / scenario["name"], workers=0)
@@ -92,15 +94,22 @@ def _same_query(a: dict[str, Any], b: dict[str, Any]) -> None:
 def test_compare_plans_the_exported_problems_the_random_scenario_drew(
     exported: dict[str, Path], tmp_path: Path
 ) -> None:
-    drawn = _rows(
-        tmp_path, {"name": "warehouse-blocked", "scene": "warehouse", "random": {"count": 2, **WAREHOUSE_BLOCKED}}, [3]
-    )
-    from_file = _rows(tmp_path, {"name": "from-file", "problems": str(exported["warehouse"])})
-    assert len(drawn) == len(from_file) == 2
+    """The same problems in the same world give the same plans (to float rounding: a pose goal goes through a
+    quaternion in the file): a seeded sampling planner and nmpc (which sees the perceived obstacle as a box
+    in both) on the random scenario and on its export."""
+    planners = ("ompl.rrtconnect", "nmpc")
+    random = {"name": "warehouse-blocked", "scene": "warehouse", "random": {"count": 2, **WAREHOUSE_BLOCKED}}
+    drawn = _rows(tmp_path, {**random, "time_limit_s": 2.0}, [3], planners)
+    from_file = _rows(tmp_path, {"name": "from-file", "problems": str(exported["warehouse"])}, None, planners)
+    assert len(drawn) == len(from_file) == 4
     for a, b in zip(drawn, from_file, strict=True):
+        assert a["planner"] == b["planner"]
         _same_query(a["query"], b["query"])
         assert b["seed"] == 3 and b["time_limit_s"] == 2.0  # each problem with its own seed and limit
-        assert (a["status"], a["failure"]) == (b["status"], b["failure"])  # same problem, same outcome
+        assert (a["status"], a["failure"]) == (b["status"], b["failure"])
+        for key in ("duration_s", "joint_path_length_rad", "min_clearance_m"):
+            assert a["metrics"][key] == pytest.approx(b["metrics"][key], rel=1e-9, abs=1e-12), key
+    assert all(r["success"] for r in drawn if r["planner"] == "ompl.rrtconnect")
 
 
 def test_the_mplib_driver_reads_the_same_problems_and_obstacles(exported: dict[str, Path], tmp_path: Path) -> None:
