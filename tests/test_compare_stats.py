@@ -211,7 +211,7 @@ def failing_rows() -> list[dict[str, Any]]:
         row("a", 3, success=False, failure="timeout"),
         row("a", 4, success=False, failure="timeout"),
         row("a", 5, success=False, status="error", planning_time_s=None),  # no key, status error: "error"
-        row("a", 6, success=False),  # no key, not an error: not counted
+        row("a", 6, success=False, status="no_solution"),  # no key: derived from its status
         row("b", 0, failure=None),
     ]
 
@@ -219,7 +219,7 @@ def failing_rows() -> list[dict[str, Any]]:
 def test_failures_are_counted_per_reason_in_the_fixed_order():
     summary = summarize(failing_rows(), planners=["a", "b"])
     a, b = summary.overall
-    assert a.failures == {"timeout": 2, "no_solution": 1, "error": 1}
+    assert a.failures == {"timeout": 2, "no_solution": 2, "error": 1}
     assert list(a.failures) == ["timeout", "no_solution", "error"]  # FAILURES order
     assert b.failures == {}
     assert a.errors == 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from twin.compare.metrics import FAILURES, failure_of_exception, failure_of_plan, failure_of_task
+from twin.compare.metrics import FAILURES, failure_of_exception, failure_of_plan, failure_of_row, failure_of_task
 from twin.errors import DependencyMissing, PlanningError
 from twin.planning import FINAL_CHECK
 
@@ -53,3 +53,13 @@ def test_a_task_run_fails_for_its_first_object_not_placed(errors: list[str], wan
 def test_exceptions() -> None:
     assert failure_of_exception(DependencyMissing("ompl is not installed")) == "dependency_missing"
     assert failure_of_exception(PlanningError("broken contract")) == "error"
+
+
+def test_rows_written_before_the_taxonomy_get_their_reason_from_the_status() -> None:
+    assert failure_of_row({"status": "timeout", "success": False, "reason": "x"}) == "timeout"
+    assert failure_of_row({"status": "error", "success": False, "reason": "WorkerDied"}) == "error"
+    assert failure_of_row({"status": "success", "success": True}) is None
+    assert failure_of_row({"status": "skipped", "success": None}) is None
+    assert failure_of_row({"status": "collision", "success": False, "failure": "final_check_collision"}) == (
+        "final_check_collision"
+    )

@@ -41,6 +41,7 @@ __all__ = [
     "execute_in_physics",
     "failure_of_exception",
     "failure_of_plan",
+    "failure_of_row",
     "failure_of_task",
     "finite_or_none",
     "path_smoothness",
@@ -160,6 +161,17 @@ def failure_of_task(errors: list[str]) -> str | None:
     if e.startswith("calibration:"):
         return "error"
     return "grasp_lost"
+
+
+def failure_of_row(row: dict[str, Any]) -> str | None:
+    """The failure reason of a result row: its `failure`; for a row written before rows carried one,
+    derived from its status as the worker would (None for a success, a skipped or unfinished row)."""
+    if "failure" in row:
+        return None if row["failure"] is None else str(row["failure"])
+    status = row.get("status")
+    if row.get("success") or status in (None, "skipped"):
+        return None
+    return failure_of_plan(str(status), str(row.get("reason") or ""))
 
 
 def failure_of_exception(e: BaseException) -> str:

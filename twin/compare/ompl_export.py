@@ -53,7 +53,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Literal
 
-from twin.compare.metrics import FAILURES, failure_of_plan
+from twin.compare.metrics import FAILURES, failure_of_row
 from twin.compare.runner import latest_rows
 from twin.errors import ConfigError
 
@@ -63,7 +63,6 @@ __all__ = [
     "RUN_PROPERTIES",
     "RunProperty",
     "export_planner_arena",
-    "failure_of_row",
     "ompl_status",
     "write_ompl_logs",
     "write_planner_arena_db",
@@ -99,16 +98,6 @@ FAILURE_NONE = "none"  # twin_failure of a successful run
 _PREFIX = "twin"
 _MEMORY_LIMIT_MB = 0.0  # twin sets no memory limit
 _NO_VERSION = "twin-export"  # the version written when OMPL is not installed
-
-
-def failure_of_row(row: Row) -> str | None:
-    """The failure reason of a row (a FAILURES key, None on success); for rows written before rows
-    carried `failure`, derived from the status as the worker would."""
-    if "failure" in row:
-        return row["failure"]
-    if row.get("success"):
-        return None
-    return failure_of_plan(str(row.get("status")), str(row.get("reason") or ""))
 
 
 def ompl_status(row: Row) -> str:

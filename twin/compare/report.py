@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.compare.metrics import FAILURES, METRICS, TIMINGS, MetricDef
+from twin.compare.metrics import FAILURES, METRICS, TIMINGS, MetricDef, failure_of_row
 from twin.compare.stats import (
     BOOTSTRAP_RESAMPLES,
     CONFIDENCE,
@@ -192,17 +192,8 @@ def _value(row: dict[str, Any], key: str) -> float | None:
     return None if v is None else float(v)
 
 
-def _failure(row: dict[str, Any]) -> str | None:
-    """Why the run failed (a FAILURES key), None if it did not or the row does not say: a row without a
-    `failure` (written before it existed) counts as "error" only if its status is "error"."""
-    reason = row.get("failure")
-    if reason is None and row.get("status") == "error":
-        return "error"
-    return None if reason is None else str(reason)
-
-
 def _failure_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
-    counts = Counter(f for r in rows if (f := _failure(r)) is not None)
+    counts = Counter(f for r in rows if (f := failure_of_row(r)) is not None)
     known = [k for k in FAILURES if counts[k]]
     return {k: counts[k] for k in known + sorted(set(counts) - set(FAILURES))}
 
