@@ -201,3 +201,19 @@ def test_a_compare_scenario_names_a_bad_or_foreign_problem_set_in_one_line(
             },
             base_dir=tmp_path,
         )
+
+
+def test_each_problem_runs_once_with_its_own_seed_unless_the_scenario_gives_seeds(
+    exported: dict[str, Path], tmp_path: Path
+) -> None:
+    from twin.compare import plan_comparison
+
+    d = _doc(exported["robocup"])
+    d["problems"][1]["seed"] = 7
+    (tmp_path / "two-seeds.json").write_text(json.dumps(d))
+    spec = {"planners": ["ruckig.movej"], "scenarios": [{"name": "p", "problems": "two-seeds.json"}]}
+    dry = plan_comparison(compare_spec_from_dict(spec, base_dir=tmp_path))
+    assert dry.cases() == {"p": 2} and [r.seed for r in dry.runs] == [3, 7]
+    spec["scenarios"][0]["seeds"] = [0, 1]  # every problem with each of these seeds instead
+    dry = plan_comparison(compare_spec_from_dict(spec, base_dir=tmp_path))
+    assert dry.cases() == {"p": 4} and [r.seed for r in dry.runs] == [0, 0, 1, 1]

@@ -106,7 +106,7 @@ class DryRun:
 
     def cases(self) -> dict[str, int]:
         """Cases (queries x seeds, or task seeds) per scenario: what each planner runs there."""
-        return {s.name: s.case_count() * len(self.spec.seeds_for(s)) for s in self.spec.scenarios}
+        return {s.name: len(self.spec.cases(s)) for s in self.spec.scenarios}
 
 
 # ---- checks before anything runs ----------------------------------------------------------------
