@@ -11,6 +11,7 @@ success rate.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -108,9 +109,10 @@ def comparison_figures(
             row = summary.row(p, s)
             rate = row.success_rate if row is not None else None
             ci = row.success_ci if row is not None else None
-            rates.append(100.0 * rate if rate is not None else 0.0)
-            err_lo.append(100.0 * (rate - ci[0]) if rate is not None and ci is not None else 0.0)
-            err_hi.append(100.0 * (ci[1] - rate) if rate is not None and ci is not None else 0.0)
+            # no runs (a skipped pair): no bar, which a 0 % bar would misreport as a planner that failed
+            rates.append(100.0 * rate if rate is not None else math.nan)
+            err_lo.append(100.0 * (rate - ci[0]) if rate is not None and ci is not None else math.nan)
+            err_hi.append(100.0 * (ci[1] - rate) if rate is not None and ci is not None else math.nan)
         ax.bar(
             [i - 0.4 + bar * (j + 0.5) for i in range(len(order))],
             rates,
