@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.executor import execute
+from twin.planning import FINAL_CHECK
 from twin.types import JointGoal, MotionRequest, MotionResult, RunSummary, Trajectory
 
 if TYPE_CHECKING:
@@ -134,7 +135,7 @@ def failure_of_plan(status: str, reason: str = "", info: Any = None) -> str | No
     (`info["rejected_by"] == twin.planning.FINAL_CHECK`) is a final_check_collision when it collided."""
     if status == "success":
         return None
-    rejected = isinstance(info, dict) and info.get("rejected_by") == "final_check"
+    rejected = isinstance(info, dict) and info.get("rejected_by") == FINAL_CHECK
     if status == "collision" and rejected:
         return "final_check_collision"
     if status == "invalid_goal" and re.search(r"\bIK\b", reason):
