@@ -193,6 +193,14 @@ def test_twin_run_writes_the_summary_json(tmp_path):
     for o in data["objects"]:
         assert set(o) >= {"id", "class", "color", "target_bin", "placed", "error", "cycle_time_s", "pose_error_m"}
     assert "placed" in r.stdout
+    # where the time went: stages that sum to the command's wall time, each where its work happens
+    t = data["timings"]
+    assert sum(t.values()) == pytest.approx(data["command_wall_time_s"], rel=1e-9)
+    assert sum(v for k, v in t.items() if k != "startup") == pytest.approx(data["wall_time_s"], rel=1e-9)
+    assert {"physics", "rendering", "execution", "setup", "startup", "other"} <= set(t)
+    assert {"perception.cloud", "perception.plane", "perception.dbscan", "planning.nmpc"} <= set(t)
+    assert t["other"] < 0.2 * data["wall_time_s"]  # the stages account for most of the run
+    assert "time: " in r.stdout and "physics" in r.stdout.split("time: ")[1]
 
 
 def test_twin_run_with_an_unknown_planner_is_one_line_and_exit_2():

@@ -373,7 +373,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from twin.tasks import run_task
+    from twin.timing import format_breakdown, process_age_s
 
+    startup = process_age_s()  # interpreter start, imports and argument parsing, before the run's own clock
     settings = _settings(args)
     console = Console(stderr=True)
     with Progress(
@@ -388,8 +390,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
             config_name=str(args.config),
             on_stage=lambda text: progress.update(bar, description=f"{settings.name} seed {settings.seed}: {text}"),
         )
+    timings = dict(summary.timings)
+    if startup is not None:
+        timings = {"startup": startup, **timings}
+    total = sum(timings.values())
     if args.json_path:
-        _write_json(args.json_path, summary.to_json())
+        data = summary.to_json()
+        data["timings"] = timings
+        data["command_wall_time_s"] = total
+        _write_json(args.json_path, data)
     table = Table(title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}")
     for col in ("object", "class", "colour", "target", "placed", "cycle s", "pose err mm", "error"):
         table.add_column(col)
@@ -408,7 +417,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(
         f"placed {sum(o.placed for o in summary.objects)}/{len(summary.objects)} "
         f"({summary.success_rate:.0%}), simulated {summary.sim_time_s:.1f} s, wall {summary.wall_time_s:.1f} s"
+        f" ({summary.sim_time_s / total:.1f}x real time over the whole command, {total:.1f} s)"
     )
+    print(f"time: {format_breakdown(timings, total)}")
     return EXIT_OK
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from twin.errors import InvalidRequestError, PlanningError, TwinError
 from twin.registry import PluginContext, Registry, default_registry
+from twin.timing import stage
 from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 
 if TYPE_CHECKING:
@@ -475,14 +476,19 @@ class CheckedPlanner:
         """Plan and hand every checked piece to `plant`: a one-shot plan is one piece, a receding-horizon
         planner gives one piece per step from the plant's measured state. Nothing unchecked reaches the
         plant. The result's trajectory is what was commanded; `info` holds `solve_times_s`, `solves`,
-        `fallback_steps` and, when the plant stopped execution, `execution_stop`."""
+        `fallback_steps` and, when the plant stopped execution, `execution_stop`. Its wall time goes to
+        the run's breakdown as `planning.<name>`, less the plant's (`execution`, and the physics in it)."""
+        with stage(f"planning.{self.name}"):
+            return self._drive(request, scene, plant, max_segments=max_segments)
+
+    def _drive(self, request: MotionRequest, scene: PlanningScene, plant: Plant, *, max_segments: int) -> MotionResult:
         if request.goal.kind not in self.goal_kinds:
             return MotionResult(Status.INVALID_GOAL, cannot_reach(self.name, request.goal.kind, self.goal_kinds))
         if not self.receding_horizon:
             result = self._plan_one_shot(request, scene)
             if result.success:
                 assert result.trajectory is not None
-                stop = plant.run(result.trajectory)
+                stop = _execute(plant, result.trajectory)
                 if stop is not None:
                     return replace(
                         result,
@@ -504,7 +510,7 @@ class CheckedPlanner:
                 break
             solve_times.append(out.solve_time_s)
             pieces.append(out.trajectory)
-            stop = plant.run(out.trajectory)
+            stop = _execute(plant, out.trajectory)
             if stop is not None:
                 final = MotionResult(
                     Status.EXECUTION_STOPPED,
@@ -528,6 +534,12 @@ class CheckedPlanner:
     def plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         """Plan `request` without a robot: one-shot as is, receding horizon on the kinematic model."""
         return self.drive(request, scene, KinematicPlant(request.start))
+
+
+def _execute(plant: Plant, traj: Trajectory) -> str | None:
+    """`plant.run(traj)`, timed as the run's `execution` stage."""
+    with stage("execution"):
+        return plant.run(traj)
 
 
 def as_checked(planner: Any, context: PluginContext, *, name: str | None = None) -> CheckedPlanner:

@@ -99,6 +99,9 @@ _LAZY: dict[str, str] = {
     "scene_cloud": "twin.perception.detection",
     "CLASSES": "twin.perception.detection",
     "cluster_points": "twin.perception.segmentation",
+    "Cluster": "twin.perception.segmentation",
+    # where a run's time goes: time a stage of your plugin into the run's breakdown
+    "stage": "twin.timing",
     "footprint": "twin.perception.segmentation",
     "color_distance": "twin.perception.colors",
     "palette": "twin.perception.colors",
@@ -126,6 +129,7 @@ __all__ = [
     "OBJECT_TEMPLATES",
     "BoxBounds",
     "Cell",
+    "Cluster",
     "ConfigError",
     "DHParameters",
     "DependencyMissing",
@@ -193,6 +197,7 @@ __all__ = [
     "rpy_matrix",
     "rpy_to_matrix",
     "scene_cloud",
+    "stage",
     "top_down",
     "urdf_rgba",
     "wrap_to_pi",
@@ -205,7 +210,7 @@ if TYPE_CHECKING:
     from twin.kinematics import DHParameters, UR5e, wrap_to_pi
     from twin.perception.colors import color_distance, palette
     from twin.perception.detection import CLASSES, Detection, Detector, SceneCloud, scene_cloud
-    from twin.perception.segmentation import cluster_points, footprint
+    from twin.perception.segmentation import Cluster, cluster_points, footprint
     from twin.planning import (
         GOAL_KINDS,
         OneShotPlanner,
@@ -228,6 +233,7 @@ if TYPE_CHECKING:
     from twin.scene_layout import OBJECT_TEMPLATES
     from twin.tasks.cell import Cell, GraspCheck, GripStatus, StageFailed, top_down
     from twin.tasks.judge import Verdict, judge_in_bin, judge_in_zone
+    from twin.timing import stage
     from twin.transforms import (
         matrix_to_quat,
         matrix_to_rpy,

@@ -324,6 +324,9 @@ class RunSummary:
     sim_time_s: float
     wall_time_s: float
     metrics: dict[str, Any] = field(default_factory=dict)  # planner metrics gathered over the run
+    # wall seconds per stage (twin.timing): physics, rendering, perception.<step>, planning.<planner>,
+    # execution, world_build, other; they sum to wall_time_s
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def success_rate(self) -> float:
@@ -350,5 +353,6 @@ class RunSummary:
             "success_rate": self.success_rate,
             "sim_time_s": self.sim_time_s,
             "wall_time_s": self.wall_time_s,
+            "timings": self.timings,
             "metrics": self.metrics,
         }

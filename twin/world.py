@@ -50,6 +50,7 @@ from twin.scene_layout import (
     marker_quad_size_m,
     sample_layout,
 )
+from twin.timing import stage
 from twin.transforms import rpy_to_matrix
 
 __all__ = [
@@ -409,13 +410,14 @@ class World:
         c = self._check()
         if n < 0:
             raise InvalidRequestError(f"cannot step a negative number of times ({n})")
-        for _ in range(int(n)):
-            pb.stepSimulation(physicsClientId=c)
-            self._steps += 1
-            if self._observers:
-                for every, fn in self._observers:
-                    if self._steps % every == 0:
-                        fn(self)
+        with stage("physics"):
+            for _ in range(int(n)):
+                pb.stepSimulation(physicsClientId=c)
+                self._steps += 1
+                if self._observers:
+                    for every, fn in self._observers:
+                        if self._steps % every == 0:
+                            fn(self)
 
     def observe(self, fn: Callable[[World], None], *, every_s: float) -> None:
         """Call `fn(world)` every `every_s` simulated seconds while stepping (recorders, GUI pacing)."""
@@ -661,7 +663,7 @@ class World:
         from twin.camera import RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix
 
         c = self._check()
-        with _quiet_stdout(self._egl):
+        with stage("rendering"), _quiet_stdout(self._egl):
             _, _, rgba, zbuf, _ = pb.getCameraImage(
                 intrinsics.width,
                 intrinsics.height,

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from twin.plugin import (
     OBJECT_TEMPLATES,
+    Cluster,
     Detection,
     RGBDFrame,
     SceneCloud,
@@ -30,6 +30,7 @@ from twin.plugin import (
     footprint,
     palette,
     scene_cloud,
+    stage,
     urdf_rgba,
 )
 
@@ -129,17 +130,23 @@ class GeometricDetector:
             keep &= np.all(cloud.points <= np.array(p.roi_max), axis=1)
         for lo, hi in p.exclude:
             keep &= ~np.all((cloud.points >= np.array(lo)) & (cloud.points <= np.array(hi)), axis=1)
-        t0 = time.perf_counter()
-        clusters = cluster_points(
-            cloud.points[keep],
-            cloud.rgb[keep],
-            eps_m=p.eps_m,
-            min_points=p.min_points,
-            voxel_m=p.voxel_m,
-            pixels=cloud.pixels[keep],
-        )
-        t1 = time.perf_counter()
-        W = frame.depth_m.shape[1]
+        with stage("perception.dbscan") as dbscan:
+            clusters = cluster_points(
+                cloud.points[keep],
+                cloud.rgb[keep],
+                eps_m=p.eps_m,
+                min_points=p.min_points,
+                voxel_m=p.voxel_m,
+                pixels=cloud.pixels[keep],
+            )
+        with stage("perception.classify") as classify:
+            out = self._detections(clusters, cloud, frame.depth_m.shape[1])
+        self.last_timings_s = {"dbscan": dbscan.seconds, "classify": classify.seconds}
+        return out
+
+    def _detections(self, clusters: list[Cluster], cloud: SceneCloud, W: int) -> list[Detection]:
+        """The clusters that match a class prototype closely enough, as detections (`W`: image width)."""
+        p = self.params
         out: list[Detection] = []
         for cl in clusters:
             if cl.n_points < p.min_cluster_points:
@@ -175,5 +182,4 @@ class GeometricDetector:
                     feats,
                 )
             )
-        self.last_timings_s = {"dbscan": t1 - t0, "classify": time.perf_counter() - t1}
         return out

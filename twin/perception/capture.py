@@ -22,6 +22,7 @@ import numpy as np
 from twin.camera import Intrinsics, RGBDFrame, camera_pose
 from twin.config import Settings
 from twin.perception.noise import apply_sensor_noise
+from twin.timing import stage
 
 if TYPE_CHECKING:
     from twin.world import World
@@ -95,7 +96,7 @@ def capture_frame(
     t2 = time.perf_counter()
     clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)
     t3 = time.perf_counter()
-    frame = apply_sensor_noise(clean, cam.noise, rng if rng is not None else noise_rng(world.seed))
-    t4 = time.perf_counter()
+    with stage("perception.noise") as noise:
+        frame = apply_sensor_noise(clean, cam.noise, rng if rng is not None else noise_rng(world.seed))
     log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)
-    return Capture(frame, q, T_nominal, cam.mount, pose, {"settle": t1 - t0, "render": t3 - t2, "noise": t4 - t3})
+    return Capture(frame, q, T_nominal, cam.mount, pose, {"settle": t1 - t0, "render": t3 - t2, "noise": noise.seconds})

@@ -8,7 +8,6 @@ estimation that follows (`twin.tasks.robocup.perception`) only needs the mask.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -16,6 +15,7 @@ import numpy as np
 
 from twin.camera import RGBDFrame, point_cloud
 from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
+from twin.timing import stage
 
 if TYPE_CHECKING:
     from twin.config import RobocupPerceptionSettings
@@ -136,19 +136,19 @@ def scene_cloud(
     The plane is fitted by RANSAC on every 4th point (threshold: the table removal threshold), then
     refitted on its inliers; it is the largest plane in view, which from the capture pose is the table.
     """
-    t0 = time.perf_counter()
-    H, W = frame.depth_m.shape
-    pts, rgb = point_cloud(frame)
-    v, u = np.nonzero(frame.depth_m > 0)
-    pixels = v * W + u
-    ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
-    pts, rgb, pixels = pts[ok], rgb[ok], pixels[ok]
-    base = transform_points(T_base_camera, pts)
-    sub = base[::4]
-    t1 = time.perf_counter()
-    plane = fit_plane_ransac(sub, params.table_threshold_m / 2, iterations=200, rng=np.random.default_rng(seed))
-    plane = plane.oriented(np.array([0.0, 0.0, 10.0]))  # normal up: towards a point high above the table
-    plane = Plane(plane.normal, plane.offset, np.zeros(0, dtype=bool))
-    height = plane.distance(base)
-    t2 = time.perf_counter()
-    return SceneCloud(base, rgb, pixels, plane, height, (H, W), {"cloud": t1 - t0, "plane": t2 - t1})
+    with stage("perception.cloud") as cloud_stage:
+        H, W = frame.depth_m.shape
+        pts, rgb = point_cloud(frame)
+        v, u = np.nonzero(frame.depth_m > 0)
+        pixels = v * W + u
+        ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
+        pts, rgb, pixels = pts[ok], rgb[ok], pixels[ok]
+        base = transform_points(T_base_camera, pts)
+        sub = base[::4]
+    with stage("perception.plane") as plane_stage:
+        plane = fit_plane_ransac(sub, params.table_threshold_m / 2, iterations=200, rng=np.random.default_rng(seed))
+        plane = plane.oriented(np.array([0.0, 0.0, 10.0]))  # normal up: towards a point high above the table
+        plane = Plane(plane.normal, plane.offset, np.zeros(0, dtype=bool))
+        height = plane.distance(base)
+    timings = {"cloud": cloud_stage.seconds, "plane": plane_stage.seconds}
+    return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings)

@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from twin.timing import collect_timings, stage
 from twin.types import RunSummary
 
 if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
@@ -55,26 +56,32 @@ def run_task(
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record) if record else None
     t0 = time.perf_counter()
-    planners = stage_planners(settings, planner)
-    task = make_task(settings)
-    from twin.world import World  # pybullet prints a banner on import: only once the input is known good
+    with collect_timings() as clock:
+        with stage("setup"):  # planners built, task, the world and its bodies
+            planners = stage_planners(settings, planner)
+            task = make_task(settings)
+            from twin.world import World  # pybullet prints a banner on import: only once the input is known good
 
-    with World(settings, seed=seed, gui=gui) as world:
-        cell = Cell(settings, world, planner_override=planner, on_stage=on_stage, planners=planners)
+            world = World(settings, seed=seed, gui=gui)
+        with world:
+            cell = Cell(settings, world, planner_override=planner, on_stage=on_stage, planners=planners)
+            if recorder is not None:
+                recorder.attach(world)
+            if gui:
+                world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
+            outcomes = task.run(cell)
+            sim_time = world.sim_time
         if recorder is not None:
-            recorder.attach(world)
-        if gui:
-            world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
-        outcomes = task.run(cell)
-        sim_time = world.sim_time
-    if recorder is not None:
-        recorder.save()
+            with stage("recording"):
+                recorder.save()
+    wall = time.perf_counter() - t0
     return RunSummary(
         config=config_name or settings.name,
         seed=seed,
         planner=cell.block("transfer").name,
         objects=tuple(outcomes),
         sim_time_s=sim_time,
-        wall_time_s=time.perf_counter() - t0,
+        wall_time_s=wall,
         metrics=cell.metrics(),
+        timings=clock.breakdown(wall),
     )

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Literal
@@ -42,6 +41,7 @@ from twin.perception.detection import Detection, Detector, SceneCloud, scene_clo
 from twin.perception.geometry import pca, rot_z, trimmed_icp
 from twin.perception.segmentation import footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES
+from twin.timing import stage
 from twin.transforms import rpy_to_matrix as rpy_matrix
 
 __all__ = [
@@ -231,56 +231,56 @@ def estimate_object(det: Detection, cloud: SceneCloud, params: RobocupPerception
     Classes without a model in `twin.scene_layout.OBJECT_TEMPLATES` get the PCA estimate only.
     """
     timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    idx = cloud.select(det.pixels)
-    idx = idx[cloud.height[idx] > params.table_threshold_m]
-    if len(idx) < 3:
-        log.debug("robocup: %s has %d points above the table, skipped", det.label, len(idx))
-        return None
-    pts = cloud.points[idx]
-    h = cloud.height[idx]
-    top = float(np.percentile(h, 98))
-    f = pca_features(pts)
-    orient_pca = classify_orientation(f, det.cls, params)
-    known = det.cls in OBJECT_TEMPLATES  # a third-party detector may report classes we have no model of
-    orient = orient_pca
-    if params.height_check and known:
-        orient = height_orientation(top, det.cls, params.height_check_min_diff_m)
-    yaw_pca = pca_yaw(f, det.cls)
-    timings["pca"] = time.perf_counter() - t0
+    with stage("perception.pca") as pca_stage:
+        idx = cloud.select(det.pixels)
+        idx = idx[cloud.height[idx] > params.table_threshold_m]
+        if len(idx) < 3:
+            log.debug("robocup: %s has %d points above the table, skipped", det.label, len(idx))
+            return None
+        pts = cloud.points[idx]
+        h = cloud.height[idx]
+        top = float(np.percentile(h, 98))
+        f = pca_features(pts)
+        orient_pca = classify_orientation(f, det.cls, params)
+        known = det.cls in OBJECT_TEMPLATES  # a third-party detector may report classes we have no model of
+        orient = orient_pca
+        if params.height_check and known:
+            orient = height_orientation(top, det.cls, params.height_check_min_diff_m)
+        yaw_pca = pca_yaw(f, det.cls)
+    timings["pca"] = pca_stage.seconds
 
-    t0 = time.perf_counter()
-    n = cloud.table.normal
-    centroid_pca = f.centroid
-    position, yaw, source, rmse = centroid_pca, yaw_pca, "pca", None
-    obs = _denoise(pts, params)
-    if known and len(obs) >= params.icp.min_points:
-        # initial pose: the footprint rectangle (robust where PCA axes are not: squares, short boxes) at
-        # half the observed height; the observed centroid itself sits high, the camera sees the top
-        fp = footprint(pts)
-        long_yaw = fp.angle
-        R0 = _model_rotation(det.cls, orient, long_yaw)
-        c_fp = np.array([fp.center[0], fp.center[1], centroid_pca[2]])
-        c0 = c_fp - n * (float(cloud.table.distance(c_fp[None])[0]) - top / 2.0)
-        T0 = np.eye(4)
-        T0[:3, :3], T0[:3, 3] = R0, c0
-        _, tree = _template(det.cls, params.icp.template_points)
-        res = trimmed_icp(
-            obs,
-            tree,
-            np.linalg.inv(T0),
-            max_iterations=params.icp.max_iterations,
-            tolerance=params.icp.tolerance,
-            inlier_ratio=params.icp.inlier_ratio,
-        )
-        rmse = res.rmse
-        if res.rmse < params.icp.accept_rmse_m:
-            T_obj = np.linalg.inv(res.T)
-            if orient == "vertical":
-                position, yaw, source = T_obj[:3, 3], _grasp_yaw_from_rotation(T_obj[:3, :3], det.cls), "icp"
-            elif det.cls in CYLINDERS:
-                position, source = T_obj[:3, 3], "icp_centroid"
-    timings["icp"] = time.perf_counter() - t0
+    with stage("perception.icp") as icp_stage:
+        n = cloud.table.normal
+        centroid_pca = f.centroid
+        position, yaw, source, rmse = centroid_pca, yaw_pca, "pca", None
+        obs = _denoise(pts, params)
+        if known and len(obs) >= params.icp.min_points:
+            # initial pose: the footprint rectangle (robust where PCA axes are not: squares, short boxes) at
+            # half the observed height; the observed centroid itself sits high, the camera sees the top
+            fp = footprint(pts)
+            long_yaw = fp.angle
+            R0 = _model_rotation(det.cls, orient, long_yaw)
+            c_fp = np.array([fp.center[0], fp.center[1], centroid_pca[2]])
+            c0 = c_fp - n * (float(cloud.table.distance(c_fp[None])[0]) - top / 2.0)
+            T0 = np.eye(4)
+            T0[:3, :3], T0[:3, 3] = R0, c0
+            _, tree = _template(det.cls, params.icp.template_points)
+            res = trimmed_icp(
+                obs,
+                tree,
+                np.linalg.inv(T0),
+                max_iterations=params.icp.max_iterations,
+                tolerance=params.icp.tolerance,
+                inlier_ratio=params.icp.inlier_ratio,
+            )
+            rmse = res.rmse
+            if res.rmse < params.icp.accept_rmse_m:
+                T_obj = np.linalg.inv(res.T)
+                if orient == "vertical":
+                    position, yaw, source = T_obj[:3, 3], _grasp_yaw_from_rotation(T_obj[:3, :3], det.cls), "icp"
+                elif det.cls in CYLINDERS:
+                    position, source = T_obj[:3, 3], "icp_centroid"
+    timings["icp"] = icp_stage.seconds
 
     yaw = wrap_half_turn(yaw)
     entry = params.grasp.get(f"{det.cls}_{orient}")
@@ -344,9 +344,9 @@ def perceive_robocup(
     timings: dict[str, float] = {}
     cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
     timings.update(cloud.timings_s)
-    t0 = time.perf_counter()
-    detections = detector.detect(frame, T_base_camera, cloud=cloud)
-    timings["detect"] = time.perf_counter() - t0
+    with stage("perception.detect") as detect_stage:
+        detections = detector.detect(frame, T_base_camera, cloud=cloud)
+    timings["detect"] = detect_stage.seconds
     timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"
     estimates = []
     timings["pca"] = timings["icp"] = 0.0

@@ -18,7 +18,6 @@ top face ("resting" centroid) because the mean of the visible points sits ~2 cm 
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +27,7 @@ from twin.config import WarehousePerceptionSettings
 from twin.perception.colors import classify_color
 from twin.perception.geometry import Plane, transform_points
 from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
+from twin.timing import stage
 from twin.types import BoxBounds
 
 __all__ = ["LabeledCube", "WarehouseResult", "perceive_warehouse"]
@@ -71,25 +71,25 @@ def perceive_warehouse(
     """Run the seed's cube_detector on one frame; `T_base_camera` (4, 4) from the ArUco calibration."""
     o3d = open3d()
     timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    pts, rgb = point_cloud(frame)
-    ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
-    pts, rgb = pts[ok], rgb[ok]
-    timings["cloud"] = time.perf_counter() - t0
+    with stage("perception.cloud") as cloud_stage:
+        pts, rgb = point_cloud(frame)
+        ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
+        pts, rgb = pts[ok], rgb[ok]
+    timings["cloud"] = cloud_stage.seconds
 
-    t0 = time.perf_counter()
-    o3d.utility.random.seed(int(seed))
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-    model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
-    a, b, c, d = model
-    n = np.array([a, b, c])
-    plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(
-        np.zeros(3)
-    )
-    keep = np.ones(len(pts), dtype=bool)
-    keep[np.asarray(inliers, dtype=np.int64)] = False
-    pts, rgb = pts[keep], rgb[keep]
-    timings["plane"] = time.perf_counter() - t0
+    with stage("perception.plane") as plane_stage:
+        o3d.utility.random.seed(int(seed))
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+        model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
+        a, b, c, d = model
+        n = np.array([a, b, c])
+        plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(
+            np.zeros(3)
+        )
+        keep = np.ones(len(pts), dtype=bool)
+        keep[np.asarray(inliers, dtype=np.int64)] = False
+        pts, rgb = pts[keep], rgb[keep]
+    timings["plane"] = plane_stage.seconds
 
     plane_base = plane_to_frame(plane_cam, T_base_camera)
     plane_base = plane_base.oriented(np.array([0.0, 0.0, 10.0]))  # normal up
@@ -97,40 +97,42 @@ def perceive_warehouse(
     roi = np.all((pts_base >= params.roi_min) & (pts_base <= params.roi_max), axis=1)
     pts, rgb, pts_base = pts[roi], rgb[roi], pts_base[roi]
 
-    t0 = time.perf_counter()
-    clusters = cluster_points(
-        pts_base, rgb, eps_m=params.dbscan_eps_m, min_points=params.dbscan_min_points, voxel_m=params.voxel_m
-    )
-    timings["dbscan"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    obstacle: BoxBounds | None = None
-    obstacle_n = 0
-    cubes: list[LabeledCube] = []
-    rejected = 0
-    table_z = _table_height(plane_base)
-    T_camera_base = np.linalg.inv(T_base_camera)
-    for cl in clusters:
-        label = classify_color(cl.mean_rgb, params.labels)
-        if label == params.obstacle_color and cl.n_points >= params.obstacle_min_points:
-            if cl.n_points > obstacle_n:
-                lo, hi = cl.points.min(axis=0), cl.points.max(axis=0)
-                lo[2] = min(lo[2], table_z)  # it stands on the table: the plane step removed its bottom
-                obstacle = BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])
-                obstacle_n = cl.n_points
-            continue
-        extent = cl.points.max(axis=0) - cl.points.min(axis=0)
-        if cl.n_points < params.cube_min_points or float(extent.max()) > params.cube_max_extent_m:
-            rejected += 1
-            log.debug(
-                "warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3)
-            )
-            continue
-        centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
-        cubes.append(
-            LabeledCube(centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb)
+    with stage("perception.dbscan") as dbscan_stage:
+        clusters = cluster_points(
+            pts_base, rgb, eps_m=params.dbscan_eps_m, min_points=params.dbscan_min_points, voxel_m=params.voxel_m
         )
-    timings["label"] = time.perf_counter() - t0
+    timings["dbscan"] = dbscan_stage.seconds
+
+    with stage("perception.label") as label_stage:
+        obstacle: BoxBounds | None = None
+        obstacle_n = 0
+        cubes: list[LabeledCube] = []
+        rejected = 0
+        table_z = _table_height(plane_base)
+        T_camera_base = np.linalg.inv(T_base_camera)
+        for cl in clusters:
+            label = classify_color(cl.mean_rgb, params.labels)
+            if label == params.obstacle_color and cl.n_points >= params.obstacle_min_points:
+                if cl.n_points > obstacle_n:
+                    lo, hi = cl.points.min(axis=0), cl.points.max(axis=0)
+                    lo[2] = min(lo[2], table_z)  # it stands on the table: the plane step removed its bottom
+                    obstacle = BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])
+                    obstacle_n = cl.n_points
+                continue
+            extent = cl.points.max(axis=0) - cl.points.min(axis=0)
+            if cl.n_points < params.cube_min_points or float(extent.max()) > params.cube_max_extent_m:
+                rejected += 1
+                log.debug(
+                    "warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3)
+                )
+                continue
+            centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
+            cubes.append(
+                LabeledCube(
+                    centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb
+                )
+            )
+    timings["label"] = label_stage.seconds
     extended = obstacle.extended_y(params.box_extension_y_m) if obstacle is not None else None
     log.debug("warehouse: %d cubes, obstacle %s (%d points), %d rejected", len(cubes), obstacle, obstacle_n, rejected)
     return WarehouseResult(obstacle, extended, tuple(cubes), obstacle_n, rejected, plane_base, timings)
