@@ -9,6 +9,7 @@ row depends only on its RunTask, whichever worker, backend or order ran it.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -71,6 +72,8 @@ class _Cell:
 
 
 _CELLS: dict[tuple[str, tuple[str, ...], str, str | None], _Cell] = {}
+_QUERIES: dict[tuple[Any, ...], dict[str, Any]] = {}  # random queries drawn in this process (`_drawn_query`)
+_STRAIGHT_FREE: dict[tuple[int, str], bool | None] = {}  # (cell, query) -> its straight motion is free
 
 
 def worker_init() -> None:
@@ -265,6 +268,31 @@ def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: UR5e, res
     return bool(scene.check_path(np.stack([start, goal]), resolution_rad=resolution_rad).free)
 
 
+def _drawn_query(task: RunTask, cell: _Cell) -> dict[str, Any]:
+    """The random query of `task`, drawn once per process: every planner of a sweep plans the same query
+    (its generator is seeded by scenario, seed and index alone), so the second planner's draw, often
+    hundreds of IK solutions and collision checks for a `straight: blocked` pair, would repeat the first's."""
+    assert task.random is not None
+    key = (
+        task.config,
+        task.overrides,
+        task.unknown_fixtures,
+        json.dumps(task.random, sort_keys=True),
+        *task.random_seed(),
+    )
+    query = _QUERIES.get(key)
+    if query is None:
+        query = _QUERIES[key] = sample_query(
+            task.random,
+            np.random.default_rng(task.random_seed()),
+            scene=cell.scene,
+            kin=cell.kin,
+            home=np.asarray(cell.settings.robot.home, dtype=float),
+            resolution_rad=cell.settings.collision.check_resolution_rad,
+        )
+    return query
+
+
 def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> MotionRequest:
     from twin.planning import limits_from_settings
     from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
@@ -298,24 +326,14 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
 
     cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems)
     settings = cell.settings.model_copy(update={"seed": task.seed})
-    if task.query is not None:
-        query = dict(task.query)
-    else:
-        assert task.random is not None
-        rng = np.random.default_rng(task.random_seed())
-        home = np.asarray(settings.robot.home, dtype=float)
-        query = sample_query(
-            task.random,
-            rng,
-            scene=cell.scene,
-            kin=cell.kin,
-            home=home,
-            resolution_rad=settings.collision.check_resolution_rad,
-        )
+    query = dict(task.query) if task.query is not None else dict(_drawn_query(task, cell))
     row["query"] = query
-    row["straight_free"] = straight_free(
-        query, scene=cell.scene, kin=cell.kin, resolution_rad=settings.collision.check_resolution_rad
-    )
+    key = (id(cell), json.dumps(query, sort_keys=True))
+    if key not in _STRAIGHT_FREE:  # the same for every planner of the query
+        _STRAIGHT_FREE[key] = straight_free(
+            query, scene=cell.scene, kin=cell.kin, resolution_rad=settings.collision.check_resolution_rad
+        )
+    row["straight_free"] = _STRAIGHT_FREE[key]
     request = _request(task, query, settings)
     context = make_context(settings, kinematics=cell.kin)
     planner = make_planner(PlannerBlock(**task.planner), context)
