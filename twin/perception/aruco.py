@@ -30,6 +30,7 @@ import numpy as np
 from twin.camera import Intrinsics, RGBDFrame
 from twin.config import ArucoSettings, Settings
 from twin.errors import TwinError
+from twin.timing import stage
 
 __all__ = ["Calibration", "MarkerNotFound", "MarkerPose", "calibrate", "detect_marker", "transform_error"]
 
@@ -210,6 +211,11 @@ def calibrate(
     marker (see `_plane_constrained_pose`), and falls back to "pnp" when the plane does not fit.
     MarkerNotFound when the marker is not visible.
     """
+    with stage("perception.calibration"):
+        return _calibrate(frame, settings, method=method, refine=refine)
+
+
+def _calibrate(frame: RGBDFrame, settings: Settings, *, method: str | None, refine: bool | None) -> Calibration:
     from twin.scene_layout import marker_pose_in_base
 
     method = settings.aruco.method if method is None else method
