@@ -1,6 +1,9 @@
-"""Task-run benchmark (issue 8): success rate, mean simulated cycle time per object, wall time per run.
+"""Task-run benchmark (issues 8, 15): success rate, simulated cycle time, and how fast a run is as a user
+runs it: `twin run CONFIG --seed N --json` in a fresh process per seed (process start included), so the
+real-time factor is simulated time / wall time of the whole command. Prints per config the median of each
+stage of the run's time breakdown (`timings` in the --json file; twin.timing) beside the median total.
 
-    python bench/bench_tasks.py [--seeds 10] [--planner NAME] [--config configs/robocup.yaml ...]
+    python bench/bench_tasks.py [--seeds 10] [--planner NAME] [--config robocup ...]
 
 The seed-002 report: 100 % bottle/can/spam, 0/5 marker, mean cycle ~21.5 s simulated (~51 s wall).
 """
@@ -8,49 +11,66 @@ The seed-002 report: 100 % bottle/can/spam, 0/5 marker, mean cycle ~21.5 s simul
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from twin.config import load_config  # noqa: E402
-from twin.tasks import run_task  # noqa: E402
-from twin.tasks.cell import stage_block  # noqa: E402
+
+def run_once(config: str, seed: int, planner: str | None) -> dict[str, Any]:
+    """One `twin run` in its own process; its --json summary."""
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d) / "run.json"
+        cmd = [sys.executable, "-m", "twin", "run", config, "--seed", str(seed), "--json", str(out)]
+        if planner:
+            cmd += ["--planner", planner]
+        r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
+        if r.returncode != 0:
+            raise SystemExit(f"{' '.join(cmd)} failed: {r.stderr.strip().splitlines()[-3:]}")
+        data: dict[str, Any] = json.loads(out.read_text())
+        return data
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--config", action="append", default=None, help="config(s) to run (default: both reference systems)"
-    )
+    ap.add_argument("--config", action="append", default=None, help="config(s) to run (default: robocup, warehouse)")
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--planner", default=None, help="transfer planner (default: the config's)")
     args = ap.parse_args()
-    for cfg in args.config or ["configs/robocup.yaml", "configs/warehouse.yaml"]:
-        settings = load_config(ROOT / cfg)
+    for cfg in args.config or ["robocup", "warehouse"]:
         per_class: dict[str, list[bool]] = defaultdict(list)
-        cycles, walls, sims = [], [], []
+        cycles, walls, sims, factors = [], [], [], []
+        stages: dict[str, list[float]] = defaultdict(list)
         t0 = time.perf_counter()
+        planner = "?"
         for seed in range(args.seeds):
-            r = run_task(settings, seed=seed, planner=args.planner)
-            walls.append(r.wall_time_s)
-            sims.append(r.sim_time_s)
-            for o in r.objects:
-                per_class[o.cls].append(o.placed)
-                if o.placed:
-                    cycles.append(o.cycle_time_s)
-            failed = [(o.id, o.error) for o in r.objects if not o.placed]
+            r = run_once(cfg, seed, args.planner)
+            planner = r["planner"]
+            wall = r["command_wall_time_s"]
+            walls.append(wall)
+            sims.append(r["sim_time_s"])
+            factors.append(r["sim_time_s"] / wall)
+            for k, v in r["timings"].items():
+                stages[k].append(v)
+            for o in r["objects"]:
+                per_class[o["class"]].append(o["placed"])
+                if o["placed"]:
+                    cycles.append(o["cycle_time_s"])
+            failed = [(o["id"], o["error"]) for o in r["objects"] if not o["placed"]]
             print(
-                f"{cfg} seed {seed}: {r.success_rate:.0%} placed, sim {r.sim_time_s:.1f} s, "
-                f"wall {r.wall_time_s:.1f} s {failed or ''}",
+                f"{cfg} seed {seed}: {r['success_rate']:.0%} placed, sim {r['sim_time_s']:.1f} s, "
+                f"wall {wall:.2f} s ({r['sim_time_s'] / wall:.1f}x real time) {failed or ''}",
                 flush=True,
             )
         allp = [p for v in per_class.values() for p in v]
-        print(f"\n{cfg} ({args.seeds} seeds, transfer planner {stage_block(settings, 'transfer', args.planner).name}):")
+        print(f"\n{cfg} ({args.seeds} seeds, transfer planner {planner}):")
         print(f"  success rate {sum(allp) / len(allp):.1%} ({sum(allp)}/{len(allp)} objects)")
         for cls, v in sorted(per_class.items()):
             print(f"    {cls:15s} {sum(v)}/{len(v)}")
@@ -60,9 +80,14 @@ def main() -> None:
                 f" (median {statistics.median(cycles):.1f} s)"
             )
         print(
-            f"  wall time per run: mean {statistics.mean(walls):.1f} s, simulated {statistics.mean(sims):.1f} s; "
-            f"total {time.perf_counter() - t0:.0f} s\n"
+            f"  whole command: median {statistics.median(walls):.2f} s wall for {statistics.median(sims):.1f} s "
+            f"simulated = {statistics.median(factors):.1f}x real time (min {min(factors):.1f}x); "
+            f"bench total {time.perf_counter() - t0:.0f} s"
         )
+        print("  median seconds per stage:")
+        for k, v in sorted(stages.items(), key=lambda kv: -statistics.median(kv[1])):
+            print(f"    {k:28s} {statistics.median(v):6.3f}")
+        print()
 
 
 if __name__ == "__main__":
