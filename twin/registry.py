@@ -25,6 +25,7 @@ from pydantic import BaseModel, ValidationError
 from twin.config import one_line, short_repr
 from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, PluginError, TwinError, UnknownNameError
 from twin.hookspecs import TwinSpec
+from twin.timing import stage
 
 if TYPE_CHECKING:
     from twin.config import Settings
@@ -76,7 +77,8 @@ class Entry:
             return self.target
         module, _, attr = self.target.partition(":")
         try:
-            mod = importlib.import_module(module)
+            with stage("imports"):
+                mod = importlib.import_module(module)
         except ImportError as e:
             hint = f" Install it with `pip install 'twin[{self.extra}]'`." if self.extra else ""
             raise DependencyMissing(

@@ -33,7 +33,7 @@ import ruckig
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.interpolate import CubicSpline
 
-from twin.plugin import Limits, PlanningError, Trajectory, densify_path
+from twin.plugin import Limits, PlanningError, Trajectory, densify_path, stage
 
 __all__ = [
     "RetimingFailed",
@@ -384,9 +384,10 @@ def toppra_time_spline(
     If `tcp_speed` is given, the TCP travels `tcp_length_m * (s - s0) / (s1 - s0)` along a straight line
     and its speed is limited too, through a virtual seventh coordinate.
     """
-    import toppra
-    import toppra.algorithm as algo
-    from toppra import constraint
+    with stage("imports"):  # the first call imports TOPP-RA (and the matplotlib it pulls in): not planning
+        import toppra
+        import toppra.algorithm as algo
+        from toppra import constraint
 
     knots = np.asarray(knots, dtype=float)
     W = np.asarray(waypoints, dtype=float)

@@ -60,7 +60,8 @@ def run_task(
         with stage("setup"):  # planners built, task, the world and its bodies
             planners = stage_planners(settings, planner)
             task = make_task(settings)
-            from twin.world import World  # pybullet prints a banner on import: only once the input is known good
+            with stage("imports"):  # pybullet prints a banner on import: only once the input is known good
+                from twin.world import World
 
             world = World(settings, seed=seed, gui=gui)
         with world:
