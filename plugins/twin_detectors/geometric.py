@@ -66,14 +66,18 @@ class GeometricDetector:
     class Params(BaseModel):
         """eps/min_points: DBSCAN (full-resolution min_points); sigma/weights: the prototype distance.
 
-        roi_min/roi_max: base-frame box to search (None: everything above the table); exclude: base-frame
-        boxes (min, max) to ignore, e.g. the bins.
+        voxel_m: the grid DBSCAN runs on (see `twin.perception.segmentation`). 5 mm since issue 15 (the
+        earlier 4 mm reproduces the earlier results exactly): DBSCAN takes ~20 ms less per frame (a third
+        fewer points, half the neighbour pairs) and the objects come out the same - on the bench's scenes
+        the same classes and orientations, positions within 0.9 mm, accuracy against the truth unchanged;
+        3-5 mm keeps the cubes intact. roi_min/roi_max: base-frame box to search (None: everything above
+        the table); exclude: base-frame boxes (min, max) to ignore, e.g. the bins.
         """
 
         model_config = ConfigDict(extra="forbid")
         eps_m: float = Field(0.015, gt=0)
         min_points: int = Field(40, ge=1)
-        voxel_m: float = Field(0.004, ge=0)
+        voxel_m: float = Field(0.005, ge=0)
         min_cluster_points: int = Field(60, ge=1)
         roi_min: tuple[float, float, float] | None = None
         roi_max: tuple[float, float, float] | None = None
@@ -123,26 +127,40 @@ class GeometricDetector:
         p = self.params
         rc = self.settings.perception.robocup
         cloud = cloud if cloud is not None else scene_cloud(frame, T_base_camera, rc)
-        keep = cloud.height > rc.table_threshold_m
-        if p.roi_min is not None:
-            keep &= np.all(cloud.points >= np.array(p.roi_min), axis=1)
-        if p.roi_max is not None:
-            keep &= np.all(cloud.points <= np.array(p.roi_max), axis=1)
-        for lo, hi in p.exclude:
-            keep &= ~np.all((cloud.points >= np.array(lo)) & (cloud.points <= np.array(hi)), axis=1)
+        keep = self._search_region(cloud.points, np.flatnonzero(cloud.height > rc.table_threshold_m))
         with stage("perception.dbscan") as dbscan:
             clusters = cluster_points(
-                cloud.points[keep],
-                cloud.rgb[keep],
+                np.take(cloud.points, keep, axis=0),
+                np.take(cloud.rgb, keep, axis=0),
                 eps_m=p.eps_m,
                 min_points=p.min_points,
                 voxel_m=p.voxel_m,
-                pixels=cloud.pixels[keep],
+                pixels=np.take(cloud.pixels, keep, axis=0),
             )
         with stage("perception.classify") as classify:
             out = self._detections(clusters, cloud, frame.depth_m.shape[1])
         self.last_timings_s = {"dbscan": dbscan.seconds, "classify": classify.seconds}
         return out
+
+    def _search_region(self, points: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """The indices in `idx` (ascending) of the points (n, 3) inside the region of interest and outside
+        every excluded box; tested only on those candidates (above the table), one axis at a time."""
+        p = self.params
+        cand = np.take(points, idx, axis=0)
+        ok = np.ones(len(idx), dtype=bool)
+        for k in range(3):
+            x = cand[:, k]
+            if p.roi_min is not None:
+                ok &= x >= p.roi_min[k]
+            if p.roi_max is not None:
+                ok &= x <= p.roi_max[k]
+        for lo, hi in p.exclude:
+            inside = np.ones(len(idx), dtype=bool)
+            for k in range(3):
+                x = cand[:, k]
+                inside &= (x >= lo[k]) & (x <= hi[k])
+            ok &= ~inside
+        return idx[ok]
 
     def _detections(self, clusters: list[Cluster], cloud: SceneCloud, W: int) -> list[Detection]:
         """The clusters that match a class prototype closely enough, as detections (`W`: image width)."""
@@ -153,12 +171,13 @@ class GeometricDetector:
                 continue
             top = float(np.percentile(cloud.table.distance(cl.points), 98))
             fp = footprint(cl.points)
-            proto, d = self.classify(top, fp.length, fp.width, cl.mean_rgb)
+            mean_rgb = cl.mean_rgb  # a property that averages every time
+            proto, d = self.classify(top, fp.length, fp.width, mean_rgb)
             feats = {
                 "top_m": top,
                 "length_m": fp.length,
                 "width_m": fp.width,
-                "mean_rgb": cl.mean_rgb.tolist(),
+                "mean_rgb": mean_rgb.tolist(),
                 "distance": d,
             }
             if d > p.max_distance:

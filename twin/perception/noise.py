@@ -40,18 +40,36 @@ def apply_sensor_noise(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.rand
     """A copy of `frame` with D435i-like depth noise, dropouts and colour noise; unchanged when disabled."""
     if not noise.enabled:
         return frame
+    # The same draws in the same order and the same arithmetic as the plain formulas; what is saved is
+    # gathering and scattering when every pixel has depth (the usual case) and temporary arrays.
     depth = frame.depth_m.astype(np.float64, copy=True)
     valid = depth > 0
-    edges = _depth_edges(depth, noise.edge_threshold_m) & valid
-    depth[valid] += rng.standard_normal(int(valid.sum())) * depth_noise_rms(depth[valid], noise)
+    all_valid = bool(valid.all())
+    edges = _depth_edges(depth, noise.edge_threshold_m)
+    if not all_valid:
+        edges &= valid
+    n_valid = depth.size if all_valid else int(np.count_nonzero(valid))
+    if all_valid:
+        depth += rng.standard_normal(n_valid).reshape(depth.shape) * depth_noise_rms(depth, noise)
+    else:
+        depth[valid] += rng.standard_normal(n_valid) * depth_noise_rms(depth[valid], noise)
     drop = rng.random(depth.shape) < noise.dropout_fraction
     drop |= edges & (rng.random(depth.shape) < noise.edge_dropout_fraction)
-    drop |= (depth < noise.min_range_m) | (depth > noise.max_range_m)
+    drop |= depth < noise.min_range_m
+    drop |= depth > noise.max_range_m
     if noise.depth_unit_m > 0:
-        depth = np.round(depth / noise.depth_unit_m) * noise.depth_unit_m
-    depth[drop | ~valid] = 0.0
+        depth /= noise.depth_unit_m
+        np.round(depth, out=depth)
+        depth *= noise.depth_unit_m
+    if not all_valid:
+        drop |= ~valid
+    depth[drop] = 0.0
     rgb = frame.rgb
     if noise.rgb_noise_std > 0:
-        noisy = rgb.astype(np.float32) + rng.standard_normal(rgb.shape).astype(np.float32) * noise.rgb_noise_std
-        rgb = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        noisy = rng.standard_normal(rgb.shape).astype(np.float32)
+        noisy *= noise.rgb_noise_std
+        noisy += rgb  # uint8 + float32 -> float32: the same sum as rgb.astype(float32) + noise
+        np.rint(noisy, out=noisy)
+        np.clip(noisy, 0, 255, out=noisy)
+        rgb = noisy.astype(np.uint8)
     return RGBDFrame(rgb, depth, frame.intrinsics)

@@ -14,9 +14,8 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
-from twin.perception.geometry import Plane
+from twin.perception.geometry import NearestNeighbors, Plane
 
 __all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "open3d", "plane_to_frame"]
 
@@ -112,16 +111,25 @@ def cluster_points(
         return []
     if voxel_m > 0:
         dpts = np.asarray(down.points)
-        dist, nn = cKDTree(dpts).query(points, distance_upper_bound=max(voxel_m * 1.5, eps_m))
+        dist, nn = NearestNeighbors(dpts).query(points, distance_upper_bound=max(voxel_m * 1.5, eps_m))
         full = np.full(len(points), -1)
         hit = np.isfinite(dist)
         full[hit] = labels[nn[hit]]
     else:
         full = labels
+    # the points of each label in their original order (a stable sort by label), picked by index
+    order = np.argsort(full, kind="stable")
+    bounds = np.searchsorted(full[order], np.arange(labels.max() + 2))
     out = []
     for k in range(labels.max() + 1):
-        m = full == k
-        if m.any():
-            out.append(Cluster(points[m], rgb[m], None if pixels is None else pixels[m]))
+        sel = order[bounds[k] : bounds[k + 1]]
+        if len(sel):
+            out.append(
+                Cluster(
+                    np.take(points, sel, axis=0),
+                    np.take(rgb, sel, axis=0),
+                    None if pixels is None else np.take(pixels, sel, axis=0),
+                )
+            )
     out.sort(key=lambda c: -c.n_points)
     return out

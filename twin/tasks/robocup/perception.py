@@ -12,11 +12,12 @@ table is removed (points less than `table_threshold_m` above the fitted plane), 
 - Yaw: cylinder atan2(PC1) + pi/2; box atan2(PC2); cube atan2(PC2) + pi/4 (diagonal grip).
 - ICP against a template sampled on our own object model (2048 points, centroid at the origin): denoise
   (10 neighbours, 1.5 sigma), voxel 3 mm when > 500 points, skipped below 20 points, 60 iterations,
-  tolerance [1e-4, 1e-6], inlier ratio 0.7. The observed points are registered onto the template (every
-  observed point has a true counterpart on the full model; the other way round the hidden underside has
-  none). Initial pose (the seed: template at the observed centroid): the orientation hypothesis turned
-  to the footprint rectangle's long side, at the footprint's centre and half the observed height (the
-  camera sees the top, so the plain centroid sits high; PCA axes of a square are noise).
+  tolerance [1e-4 m, 1e-3 rad] (the seed: 1e-6 rad; see IcpSettings), inlier ratio 0.7. The observed
+  points are registered onto the template (every observed point has a true counterpart on the full
+  model; the other way round the hidden underside has none). Initial pose (the seed: template at the
+  observed centroid): the orientation hypothesis turned to the footprint rectangle's long side, at the
+  footprint's centre and half the observed height (the camera sees the top, so the plain centroid sits
+  high; PCA axes of a square are noise).
 - Accept when RMSE < 0.025 m: vertical -> centroid + yaw from ICP; horizontal cylinder -> centroid from
   ICP, yaw from PCA; otherwise (ICP rejected, skipped, or a lying box) the PCA centroid and yaw.
 - Grasp vector g = [x, y, z_grasp, yaw, pi, 0, w_grip]; z_grasp (tcp height above the table) and
@@ -28,17 +29,17 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from twin.camera import RGBDFrame
 from twin.config import RobocupPerceptionSettings, Settings
 from twin.perception.detection import Detection, Detector, SceneCloud, scene_cloud
-from twin.perception.geometry import pca, rot_z, trimmed_icp
+from twin.perception.geometry import NearestNeighbors, pca, rot_z, trimmed_icp
 from twin.perception.segmentation import footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.timing import stage
@@ -71,9 +72,10 @@ def wrap_half_turn(a: float) -> float:
 
 
 @lru_cache(maxsize=32)
-def _template(cls: str, n: int) -> tuple[np.ndarray, cKDTree]:
+def _template(cls: str, n: int) -> tuple[np.ndarray, NearestNeighbors]:
+    """The template points of `cls` and their nearest-neighbour index, built once per process."""
     pts = object_template_points(cls, n)
-    return pts, cKDTree(pts)
+    return pts, NearestNeighbors(pts)
 
 
 def object_template_points(cls: str, n: int = 2048, *, seed: int = 0) -> np.ndarray:
@@ -225,14 +227,40 @@ def _denoise(points: np.ndarray, params: RobocupPerceptionSettings) -> np.ndarra
     return np.asarray(pcd.points)
 
 
+def _selector(cloud: SceneCloud) -> Callable[[np.ndarray], np.ndarray]:
+    """`cloud.select` for many detections of one cloud: the same indices (into the cloud, in the order of
+    the given pixels, pixels without a point skipped), by binary search when the cloud's pixel indices
+    ascend, as `scene_cloud` makes them (row-major), instead of a lookup table over the image per call."""
+    cpx = cloud.pixels
+    if len(cpx) == 0 or not bool(np.all(cpx[1:] > cpx[:-1])):
+        return cloud.select
+
+    def select(pixels: np.ndarray) -> np.ndarray:
+        px = np.asarray(pixels, dtype=np.int64)
+        pos = np.searchsorted(cpx, px)
+        pos[pos == len(cpx)] = 0
+        return pos[cpx[pos] == px]
+
+    return select
+
+
 def estimate_object(det: Detection, cloud: SceneCloud, params: RobocupPerceptionSettings) -> ObjectEstimate | None:
     """Pose and grasp of one detection; None when fewer than 3 points remain above the table.
 
     Classes without a model in `twin.scene_layout.OBJECT_TEMPLATES` get the PCA estimate only.
     """
+    return _estimate(det, cloud, params, cloud.select)
+
+
+def _estimate(
+    det: Detection,
+    cloud: SceneCloud,
+    params: RobocupPerceptionSettings,
+    select: Callable[[np.ndarray], np.ndarray],
+) -> ObjectEstimate | None:
     timings: dict[str, float] = {}
     with stage("perception.pca") as pca_stage:
-        idx = cloud.select(det.pixels)
+        idx = select(det.pixels)
         idx = idx[cloud.height[idx] > params.table_threshold_m]
         if len(idx) < 3:
             log.debug("robocup: %s has %d points above the table, skipped", det.label, len(idx))
@@ -312,8 +340,9 @@ def estimate_objects(
 ) -> list[ObjectEstimate]:
     """`estimate_object` for every detection, dropping the ones without enough points."""
     out = []
+    select = _selector(cloud)
     for det in detections:
-        est = estimate_object(det, cloud, params)
+        est = _estimate(det, cloud, params, select)
         if est is not None:
             out.append(est)
     return out
@@ -350,8 +379,9 @@ def perceive_robocup(
     timings.update(getattr(detector, "last_timings_s", {}))  # e.g. the geometric detector's "dbscan"
     estimates = []
     timings["pca"] = timings["icp"] = 0.0
+    select = _selector(cloud)
     for det in detections:
-        est = estimate_object(det, cloud, params)
+        est = _estimate(det, cloud, params, select)
         if est is None:
             continue
         estimates.append(est)

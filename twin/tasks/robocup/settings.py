@@ -14,7 +14,17 @@ __all__ = ["GraspEntry", "IcpSettings", "RobocupPerceptionSettings", "RobocupTas
 
 
 class IcpSettings(ConfigModel):
-    """Seed 002 ICP template refinement (MATLAB pcregistericp parameters)."""
+    """Seed 002 ICP template refinement (MATLAB pcregistericp parameters).
+
+    `tolerance`: ICP stops once one iteration moves the pose by less than tolerance[0] (m) and turns it
+    by less than tolerance[1] (rad). Default (1e-4, 1e-3) since issue 15: a turn of 1e-3 rad moves a point
+    10 cm from the centre by the same 0.1 mm as the translation tolerance. The seed's (1e-4, 1e-6), the
+    default before, asks for a turn 1000x smaller than anything the translation tolerance can see: the
+    trimmed ICP then keeps iterating (median 25 iterations instead of 5, ~5x the ICP time) until its set of
+    kept pairs stops changing, and moves the estimate by less than a millimetre (on the bench's scenes
+    < 0.9 mm, grasp yaw < 1.6 deg, no class or orientation changes; accuracy against the truth the same or
+    better). `perception.robocup.icp.tolerance=[1e-4,1e-6]` reproduces the earlier results exactly.
+    """
 
     template_points: int = Field(2048, ge=100)
     denoise_neighbors: int = Field(10, ge=1)
@@ -22,7 +32,7 @@ class IcpSettings(ConfigModel):
     voxel_m: float = Field(0.003, ge=0)
     voxel_above_points: int = Field(500, ge=1)
     max_iterations: int = Field(60, ge=1)
-    tolerance: tuple[float, float] = (1e-4, 1e-6)  # translation (m), rotation (rad) change to stop
+    tolerance: tuple[float, float] = (1e-4, 1e-3)  # translation (m), rotation (rad) change to stop; seed: 1e-6 rad
     inlier_ratio: float = Field(0.7, gt=0, le=1)
     min_points: int = Field(20, ge=3)
     accept_rmse_m: float = Field(0.025, gt=0)

@@ -71,10 +71,13 @@ def perceive_warehouse(
     """Run the seed's cube_detector on one frame; `T_base_camera` (4, 4) from the ArUco calibration."""
     o3d = open3d()
     timings: dict[str, float] = {}
+    # Points are picked by index (np.take) rather than by boolean mask: the same rows in the same order,
+    # several times faster for (n, 3) arrays.
     with stage("perception.cloud") as cloud_stage:
         pts, rgb = point_cloud(frame)
-        ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
-        pts, rgb = pts[ok], rgb[ok]
+        pts, rgb = _rows(
+            np.flatnonzero((pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)), pts, rgb
+        )
     timings["cloud"] = cloud_stage.seconds
 
     with stage("perception.plane") as plane_stage:
@@ -88,14 +91,16 @@ def perceive_warehouse(
         )
         keep = np.ones(len(pts), dtype=bool)
         keep[np.asarray(inliers, dtype=np.int64)] = False
-        pts, rgb = pts[keep], rgb[keep]
+        pts, rgb = _rows(np.flatnonzero(keep), pts, rgb)
     timings["plane"] = plane_stage.seconds
 
     plane_base = plane_to_frame(plane_cam, T_base_camera)
     plane_base = plane_base.oriented(np.array([0.0, 0.0, 10.0]))  # normal up
     pts_base = transform_points(T_base_camera, pts)
-    roi = np.all((pts_base >= params.roi_min) & (pts_base <= params.roi_max), axis=1)
-    pts, rgb, pts_base = pts[roi], rgb[roi], pts_base[roi]
+    roi = np.ones(len(pts_base), dtype=bool)
+    for k in range(3):  # one axis at a time: the same test as np.all(lo <= p <= hi, axis=1), faster
+        roi &= (pts_base[:, k] >= params.roi_min[k]) & (pts_base[:, k] <= params.roi_max[k])
+    pts, rgb, pts_base = _rows(np.flatnonzero(roi), pts, rgb, pts_base)
 
     with stage("perception.dbscan") as dbscan_stage:
         clusters = cluster_points(
@@ -136,6 +141,11 @@ def perceive_warehouse(
     extended = obstacle.extended_y(params.box_extension_y_m) if obstacle is not None else None
     log.debug("warehouse: %d cubes, obstacle %s (%d points), %d rejected", len(cubes), obstacle, obstacle_n, rejected)
     return WarehouseResult(obstacle, extended, tuple(cubes), obstacle_n, rejected, plane_base, timings)
+
+
+def _rows(idx: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The rows `idx` of each array."""
+    return tuple(np.take(a, idx, axis=0) for a in arrays)
 
 
 def _table_height(plane_base: Plane) -> float:
