@@ -324,3 +324,27 @@ def test_speed_ups_keep_objects_classes_orientations_and_positions_within_1mm(ro
 def test_perception_is_deterministic(robocup_runs):
     for seed, runs in robocup_runs.items():
         assert runs["fast"].estimates == runs["fast again"].estimates, seed
+
+
+OLD_WAREHOUSE = ["perception.warehouse.plane_method=open3d", "perception.warehouse.voxel_m=0.004"]
+
+
+def test_warehouse_seeded_plane_is_repeatable_and_finds_the_cubes_open3d_found():
+    """The seeded RANSAC table plane (and the 5 mm DBSCAN grid) gives the same result for the same seed every
+    time, and the same cubes with the same colours, within 1 mm, as open3d's segment_plane did."""
+    pytest.importorskip("open3d")
+    from twin.perception.evaluate import run_perception
+
+    fast, old = load_config("warehouse"), load_config("warehouse", OLD_WAREHOUSE)
+    assert fast.perception.warehouse.plane_method == "ransac"
+    for seed in (0, 3):
+        runs = [run_perception(fast, seed=seed, renderer="tiny") for _ in range(3)]
+        assert runs[0].estimates == runs[1].estimates == runs[2].estimates, seed
+        before = run_perception(old, seed=seed, renderer="tiny")
+        key = lambda e: (e["color"], round(e["position"][0], 2), round(e["position"][1], 2))  # noqa: E731
+        new_cubes, old_cubes = sorted(runs[0].estimates, key=key), sorted(before.estimates, key=key)
+        assert len(new_cubes) == len(old_cubes) == 4, seed
+        for a, b in zip(new_cubes, old_cubes, strict=True):
+            assert a["color"] == b["color"], seed
+            assert float(np.linalg.norm(np.subtract(a["position"], b["position"]))) <= 0.001, (seed, a["color"])
+        assert all(o["class_est"] == o["class_true"] for o in runs[0].objects)

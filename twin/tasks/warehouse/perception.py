@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from twin.camera import RGBDFrame, point_cloud
 from twin.config import WarehousePerceptionSettings
 from twin.perception.colors import classify_color
-from twin.perception.geometry import Plane, transform_points
+from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
 from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
 from twin.timing import stage
 from twin.types import BoxBounds
@@ -65,6 +66,26 @@ class WarehouseResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
+def _table_plane(pts: np.ndarray, params: WarehousePerceptionSettings, seed: int, o3d: Any) -> tuple[Plane, np.ndarray]:
+    """The table plane in the camera frame (normal towards the camera) and the mask of its points."""
+    if params.plane_method == "ransac":
+        sub = pts[:: params.plane_every]
+        fit = fit_plane_ransac(
+            sub, params.plane_threshold_m, iterations=params.plane_iterations, rng=np.random.default_rng(seed)
+        )
+        plane = Plane(fit.normal, fit.offset, np.zeros(0, dtype=bool)).oriented(np.zeros(3))
+        return plane, np.abs(pts @ plane.normal - plane.offset) < params.plane_threshold_m
+    o3d.utility.random.seed(int(seed))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
+    a, b, c, d = model
+    n = np.array([a, b, c])
+    plane = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(np.zeros(3))
+    on_plane = np.zeros(len(pts), dtype=bool)
+    on_plane[np.asarray(inliers, dtype=np.int64)] = True
+    return plane, on_plane
+
+
 def perceive_warehouse(
     frame: RGBDFrame, T_base_camera: np.ndarray, params: WarehousePerceptionSettings, *, seed: int = 0
 ) -> WarehouseResult:
@@ -81,17 +102,8 @@ def perceive_warehouse(
     timings["cloud"] = cloud_stage.seconds
 
     with stage("perception.plane") as plane_stage:
-        o3d.utility.random.seed(int(seed))
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-        model, inliers = pcd.segment_plane(params.plane_threshold_m, 3, params.plane_iterations)
-        a, b, c, d = model
-        n = np.array([a, b, c])
-        plane_cam = Plane(n / np.linalg.norm(n), float(-d / np.linalg.norm(n)), np.zeros(0, dtype=bool)).oriented(
-            np.zeros(3)
-        )
-        keep = np.ones(len(pts), dtype=bool)
-        keep[np.asarray(inliers, dtype=np.int64)] = False
-        pts, rgb = _rows(np.flatnonzero(keep), pts, rgb)
+        plane_cam, on_plane = _table_plane(pts, params, seed, o3d)
+        pts, rgb = _rows(np.flatnonzero(~on_plane), pts, rgb)
     timings["plane"] = plane_stage.seconds
 
     plane_base = plane_to_frame(plane_cam, T_base_camera)
