@@ -142,7 +142,8 @@ def scene_cloud(
         v, u = np.nonzero(frame.depth_m > 0)
         pixels = v * W + u
         ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
-        pts, rgb, pixels = pts[ok], rgb[ok], pixels[ok]
+        keep = np.flatnonzero(ok)  # rows by index: the same rows as a boolean mask, several times faster
+        pts, rgb, pixels = np.take(pts, keep, axis=0), np.take(rgb, keep, axis=0), np.take(pixels, keep)
         base = transform_points(T_base_camera, pts)
         sub = base[::4]
     with stage("perception.plane") as plane_stage:
