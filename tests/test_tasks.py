@@ -284,3 +284,24 @@ def test_release_spots_keep_what_goes_into_a_bin_inside_its_walls_and_apart():
         for f in placed:
             assert np.any(np.abs(p - f.centre) >= f.half + r), (obj, p, f)
         placed.append(footprint)
+
+
+# the perception speed-ups of issue 15 and the settings that switch them off (the seed pipelines' values)
+SPEED_UPS_OFF = {
+    "robocup": ["perception.robocup.icp.tolerance=[1e-4,1e-6]", "perception.detector.params.voxel_m=0.004"],
+    "warehouse": ["perception.warehouse.plane_method=open3d", "perception.warehouse.voxel_m=0.004"],
+}
+
+
+@pytest.mark.parametrize(("config", "seed"), [("robocup", 2), ("warehouse", 2)])
+def test_a_run_with_the_speed_ups_does_what_the_run_without_them_does(config: str, seed: int) -> None:
+    """Same objects placed, each the same way, in the same simulated time. The speed-ups move perceived
+    positions by under a millimetre, so the motions differ by fractions of a millimetre and a trajectory's
+    duration by a few physics steps at most: the simulated time is compared to 1 %, not bit for bit."""
+    fast = run_task(load_config(config), seed=seed)
+    seed_pipeline = run_task(load_config(config, SPEED_UPS_OFF[config]), seed=seed)
+    assert [(o.id, o.placed, o.target_bin, o.error) for o in fast.objects] == [
+        (o.id, o.placed, o.target_bin, o.error) for o in seed_pipeline.objects
+    ]
+    assert fast.success_rate == 1.0
+    assert fast.sim_time_s == pytest.approx(seed_pipeline.sim_time_s, rel=0.01)
