@@ -26,6 +26,7 @@ __all__ = ["OTHER", "StageClock", "collect_timings", "format_breakdown", "proces
 
 OTHER = "other"  # wall time no stage claimed (bookkeeping, the task's own logic, Python between stages)
 
+_now = time.perf_counter  # the clock stages read (a module attribute, so tests can give a fake one)
 _CLOCK: ContextVar[StageClock | None] = ContextVar("twin_stage_clock", default=None)
 
 
@@ -58,11 +59,11 @@ class _Stage:
     def __enter__(self) -> _Stage:
         if self._clock is not None:
             self._clock._stack.append(self)
-        self._start = time.perf_counter()
+        self._start = _now()
         return self
 
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None, tb: TracebackType | None) -> None:
-        self.seconds = time.perf_counter() - self._start
+        self.seconds = _now() - self._start
         clock = self._clock
         if clock is None:
             return
