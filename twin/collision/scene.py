@@ -47,6 +47,8 @@ from twin.collision.geometry import fcl_transform as _tf
 from twin.collision.geometry import primitive_shapes
 from twin.collision.rules import HELD as _HELD
 from twin.collision.rules import CollisionRules, gripper_stroke_m
+from twin.collision.spheres import TOUCH_M as _TOUCH_M
+from twin.collision.spheres import EnvPrimitives, cover, env_primitives, primitive
 from twin.errors import ConfigError, InvalidRequestError
 from twin.types import BoxBounds
 from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
@@ -117,8 +119,10 @@ class PlanningScene:
         extra_excluded_pairs: Iterable[tuple[str, str]] = (),
         finger_opening_m: float | None = None,
         tcp_link: str = "tcp",
+        sphere_filter: bool = True,
     ):
         self.padding_m = _check_padding(padding_m)
+        self.sphere_filter = bool(sphere_filter)
         model = RobotModel.from_urdf(robot_urdf)
         self._init_robot(model, tcp_link=tcp_link, finger_opening_m=finger_opening_m)
         self._set_rules(
@@ -133,6 +137,8 @@ class PlanningScene:
             self._add_fixture(fx)
         self._env.setup()
         self._rebuild_robot()
+        if self.sphere_filter:  # load (or compile) the sphere kernel now, not inside a planner's time limit
+            self._flags(np.zeros((1, 6)))
 
     def _init_robot(self, model: RobotModel, *, tcp_link: str, finger_opening_m: float | None) -> None:
         """Robot part of the scene from a parsed model: compiled chain and persistent FCL shapes (the
@@ -158,6 +164,7 @@ class PlanningScene:
         order = sorted(range(6), key=lambda k: m.joint_order.index(m.joints[m.arm_joints[k]]))
         self._chain = [(k, self._frame_of[m.joints[m.arm_joints[k]].parent]) for k in order]
         self._revolute = np.array([m.joints[n].type != "prismatic" for n in m.arm_joints])
+        self._chain_arr = np.array(self._chain, dtype=np.int64)
         self._all_revolute = bool(self._revolute.all())
         self._F_list: list[np.ndarray] = [np.eye(4)] * 7
         self._gen = np.zeros((6, 4, 4))  # generator of each joint's motion (rotation K or translation)
@@ -181,6 +188,7 @@ class PlanningScene:
             self._shape_objects.append(fcl.CollisionObject(geom))
             self._geom_object[id(geom)] = self._shape_objects[-1]
         self._shape_radius = [_bounding_radius(s.kind, s.size) for s in self._shapes]
+        self._shape_covers = [cover(s.kind, s.size) for s in self._shapes]  # spheres in each shape's frame
         self._static_links = {ln for ln in m.link_names if self._frame_of[ln] == 0}
         self._attached: tuple[str, Any, np.ndarray, Any, float] | None = None  # name, obj, T_tcp_obj, geom, radius
         self._update_constants()
@@ -191,6 +199,7 @@ class PlanningScene:
         self._env_shapes: dict[str, list[tuple[str, tuple[float, ...], np.ndarray]]] = {}  # unpadded, for padded()
         self._boxes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._fixture_names: set[str] = set()
+        self._env_prims: EnvPrimitives | None = None  # the environment for the sphere check, built on use
 
     def padded(self, extra_m: float) -> PlanningScene:
         """A copy of this scene whose environment (fixtures and boxes) is inflated by `extra_m` more on
@@ -206,6 +215,7 @@ class PlanningScene:
             raise InvalidRequestError(f"extra_m must be finite, got {extra_m}")
         new = type(self).__new__(type(self))
         new.padding_m = _check_padding(self.padding_m + extra)
+        new.sphere_filter = self.sphere_filter
         new._init_robot(self.model, tcp_link=self.tcp_link, finger_opening_m=self._opening)
         new._set_rules(self._rules)
         new._init_env()
@@ -309,6 +319,20 @@ class PlanningScene:
         self._sel[np.arange(len(pairs)), self._pa] = 1.0
         self._sel[np.arange(len(pairs)), self._pb] = -1.0
         self._pair_objects = [(objects[i], objects[k]) for i, k in pairs]
+        covers = list(self._shape_covers)
+        if self._attached is not None:
+            covers.append(cover("box", self._attached_size))
+        self._covers = covers
+        self._sph_start = np.concatenate([[0], np.cumsum([c.shape[0] for c in covers])]).astype(np.int64)
+        self._sph_frame = np.repeat(self._object_frame, [c.shape[0] for c in covers]).astype(np.int64)
+        self._obj_frame = self._object_frame.astype(np.int64)
+        self._obj_radius = np.array(radius, dtype=float)
+        self._obj_env = self._object_frame != 0
+        prims = [primitive(s.kind, s.size) for s in self._shapes]
+        if self._attached is not None:
+            prims.append(primitive("box", self._attached_size))
+        self._obj_kind = np.array([k for k, _, _ in prims], dtype=np.int64)
+        self._obj_dims = np.array([d for _, d, _ in prims])
         self._refresh_constants()
         # transfer buffer: per object a (4, 3) block = [R^T ; t], i.e. R column-major then t (see _Vec)
         self._buf = np.zeros((len(objects), 4, 3))
@@ -343,6 +367,11 @@ class PlanningScene:
         if self._attached is not None:
             S.append(self._tcp_const @ self._attached[2])
         self._ST = np.ascontiguousarray(np.transpose(np.array(S), (0, 2, 1)))
+        if hasattr(self, "_covers"):  # sphere model: poses and sphere centres in the objects' frames
+            self._obj_const = np.ascontiguousarray(np.array(S))
+            self._sph = np.vstack(
+                [np.hstack([c[:, :3] @ T[:3, :3].T + T[:3, 3], c[:, 3:]]) for c, T in zip(self._covers, S, strict=True)]
+            )
 
     def _probe_fast_path(self) -> bool:
         """Check once that python-fcl reads the buffer views as intended (else use plain arrays)."""
@@ -380,6 +409,7 @@ class PlanningScene:
             objs.append((fcl.CollisionObject(geom, _tf(pose)), geom))
             self._geom_object[id(geom)] = objs[-1][0]
         self._env_objects[name] = objs
+        self._env_prims = None
         self._env_shapes[name] = [(kind, tuple(size), np.array(pose, dtype=float)) for kind, size, pose in shapes]
         if objs:
             self._env.registerObjects([o for o, _ in objs])
@@ -529,9 +559,56 @@ class PlanningScene:
             return DistanceResult(math.inf, "", "")
         return DistanceResult(float(best), pair[0], pair[1], self_collision=is_self)
 
+    # ---- the sphere check (twin.collision.spheres): clears configurations before FCL sees them -----------
+    def _flags(self, qs: np.ndarray) -> np.ndarray:
+        """(n,) bool: False where the sphere model proves qs[i] (n, 6) free, True where FCL must decide."""
+        from twin.collision.sphere_kernel import flag_configurations  # numba: loaded on first use
+
+        qs = np.ascontiguousarray(qs, dtype=float)
+        out = np.empty(qs.shape[0], dtype=bool)
+        if self._env_prims is None:
+            self._env_prims = env_primitives(
+                [sh for shapes in self._env_shapes.values() for sh in shapes], self.padding_m
+            )
+        env = self._env_prims
+        flag_configurations(
+            qs,
+            self._revolute,
+            self._A,
+            self._B,
+            self._C,
+            self._chain_arr,
+            self._obj_frame,
+            self._obj_const,
+            self._obj_kind,
+            self._obj_dims,
+            self._obj_radius,
+            self._obj_env,
+            self._sph_start,
+            self._sph_frame,
+            self._sph,
+            self._pa,
+            self._pb,
+            env.kind,
+            env.to_local,
+            env.dims,
+            env.bound,
+            _TOUCH_M,
+            out,
+        )
+        return out
+
+    def sphere_clear(self, qs: np.ndarray) -> np.ndarray:
+        """(n,) bool for (n, 6) configurations: True where the conservative sphere model alone proves the
+        configuration collision-free (then FCL agrees); False means "ask FCL", not "in collision"."""
+        return ~self._flags(self._as_qs(qs))
+
     def in_collision(self, q: np.ndarray) -> bool:
         """True when the arm at q (6,) hits the environment or itself, or the held object hits either."""
-        self._prepare(self._as_q(q))
+        q = self._as_q(q)
+        if self.sphere_filter and not self._flags(q[None])[0]:
+            return False
+        self._prepare(q)
         return self._collides_now()
 
     def min_distance(self, q: np.ndarray, *, include_self: bool = True) -> DistanceResult:
@@ -574,6 +651,11 @@ class PlanningScene:
         """(n,) bool for (n, 6) configurations (link poses computed vectorised)."""
         qs = self._as_qs(qs)
         out = np.zeros(qs.shape[0], dtype=bool)
+        if self.sphere_filter:
+            ask = np.flatnonzero(self._flags(qs))
+            for _, k in zip(self._iter_prepared(qs[ask]), ask.tolist(), strict=True):
+                out[k] = self._collides_now()
+            return out
         for i in self._iter_prepared(qs):
             out[i] = self._collides_now()
         return out
@@ -589,9 +671,22 @@ class PlanningScene:
     def first_collision(self, qs: np.ndarray) -> int | None:
         """Index of the first colliding configuration of (n, 6) qs, or None when all are free."""
         qs = self._as_qs(qs)
-        for i in self._iter_prepared(qs, chunk=32):
-            if self._collides_now():
-                return i
+        if not self.sphere_filter:
+            for i in self._iter_prepared(qs, chunk=32):
+                if self._collides_now():
+                    return i
+            return None
+        # chunks growing from 32: a collision near the start (bisection order) is found after little work
+        start, chunk = 0, 32
+        while start < qs.shape[0]:
+            part = qs[start : start + chunk]
+            ask = np.flatnonzero(self._flags(part))
+            if ask.size:
+                for _, k in zip(self._iter_prepared(part[ask], chunk=8), ask.tolist(), strict=True):
+                    if self._collides_now():
+                        return start + k
+            start += part.shape[0]
+            chunk *= 2
         return None
 
     def check_path(self, qs: np.ndarray, *, resolution_rad: float = 0.01) -> PathCheck:
@@ -679,6 +774,7 @@ class PlanningScene:
         objs = self._env_objects.pop(name, None)
         self._boxes.pop(name, None)
         self._env_shapes.pop(name, None)
+        self._env_prims = None
         if objs is None:
             raise InvalidRequestError(f"no object named {name!r} in the scene; present: {self.names()}")
         for o, geom in objs:

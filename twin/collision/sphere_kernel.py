@@ -1,0 +1,202 @@
+"""The compiled half of the sphere check (`twin.collision.spheres` explains the model): link frames,
+sphere placement and exact sphere-primitive distances in one numba loop per batch of configurations.
+
+A module of its own so that numba (its import and its cached machine code, ~0.3 s) is loaded only by a
+process that checks collisions. Arrays must be C-contiguous float64 (int64 for indices), as the scene
+passes them, or numba compiles another specialisation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["flag_configurations"]
+
+
+@njit(cache=True, nogil=True)
+def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float, z: float) -> float:
+    """Signed distance of the world point (x, y, z) from one primitive (negative inside)."""
+    px = M[0, 0] * x + M[0, 1] * y + M[0, 2] * z + M[0, 3]
+    py = M[1, 0] * x + M[1, 1] * y + M[1, 2] * z + M[1, 3]
+    pz = M[2, 0] * x + M[2, 1] * y + M[2, 2] * z + M[2, 3]
+    if kind == 0:  # box
+        qx, qy, qz = abs(px) - d[0], abs(py) - d[1], abs(pz) - d[2]
+        ox, oy, oz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+        return math.sqrt(ox * ox + oy * oy + oz * oz) + min(max(qx, qy, qz), 0.0)
+    if kind == 1:  # cylinder about local z
+        qr = math.sqrt(px * px + py * py) - d[0]
+        qz = abs(pz) - d[1]
+        o1, o2 = max(qr, 0.0), max(qz, 0.0)
+        return math.sqrt(o1 * o1 + o2 * o2) + min(max(qr, qz), 0.0)
+    if kind == 3:  # capsule about local z
+        cz = min(max(pz, -d[1]), d[1])
+        return math.sqrt(px * px + py * py + (pz - cz) ** 2) - d[0]
+    return math.sqrt(px * px + py * py + pz * pz) - d[0]
+
+
+@njit(cache=True, nogil=True)
+def flag_configurations(
+    qs: np.ndarray,
+    revolute: np.ndarray,
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    chain: np.ndarray,
+    obj_frame: np.ndarray,
+    obj_const: np.ndarray,
+    obj_kind: np.ndarray,
+    obj_dims: np.ndarray,
+    obj_radius: np.ndarray,
+    obj_env: np.ndarray,
+    sph_start: np.ndarray,
+    sph_frame: np.ndarray,
+    sph: np.ndarray,
+    pair_a: np.ndarray,
+    pair_b: np.ndarray,
+    env_kind: np.ndarray,
+    env_to_local: np.ndarray,
+    env_dims: np.ndarray,
+    env_bound: np.ndarray,
+    touch: float,
+    out: np.ndarray,
+) -> None:
+    """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring).
+
+    Frames: F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k] + v C[k]) for the joints in
+    chain order (chain[:, 0] = joint index), u = sin q, v = 1 - cos q (revolute) or u = q, v = 0.
+    Objects (robot shapes, then a held box): frame, pose in that frame (4, 4; its origin is the centre
+    of its bounding sphere), primitive kind and half dimensions (as `EnvPrimitives`), bounding radius,
+    whether it is tested against the environment, and its spheres sph[sph_start[o]:sph_start[o + 1]]
+    (x, y, z in the frame, r). Self pairs: objects pair_a[p] and pair_b[p]; a pair is clear when the
+    spheres of one miss the exact primitive of the other, tried both ways."""
+    n_obj = obj_frame.shape[0]
+    n_sph = sph.shape[0]
+    n_env = env_kind.shape[0]
+    F = np.empty((7, 4, 4))
+    L = np.empty((4, 4))
+    oc = np.empty((n_obj, 3))
+    inv = np.empty((n_obj, 3, 4))
+    sc = np.empty((n_sph, 3))
+    placed = np.zeros(n_obj, dtype=np.bool_)
+    posed = np.zeros(n_obj, dtype=np.bool_)
+    for i in range(qs.shape[0]):
+        F[0] = 0.0
+        for k in range(4):
+            F[0, k, k] = 1.0
+        for c in range(chain.shape[0]):
+            j = chain[c, 0]
+            f = chain[c, 1]
+            q = qs[i, j]
+            if revolute[j]:
+                u = math.sin(q)
+                v = 1.0 - math.cos(q)
+            else:
+                u = q
+                v = 0.0
+            for r in range(4):
+                for s in range(4):
+                    L[r, s] = A[j, r, s] + u * B[j, r, s] + v * C[j, r, s]
+            for r in range(4):
+                for s in range(4):
+                    F[j + 1, r, s] = (
+                        F[f, r, 0] * L[0, s] + F[f, r, 1] * L[1, s] + F[f, r, 2] * L[2, s] + F[f, r, 3] * L[3, s]
+                    )
+        for o in range(n_obj):
+            fr = obj_frame[o]
+            for r in range(3):
+                oc[o, r] = (
+                    F[fr, r, 0] * obj_const[o, 0, 3]
+                    + F[fr, r, 1] * obj_const[o, 1, 3]
+                    + F[fr, r, 2] * obj_const[o, 2, 3]
+                    + F[fr, r, 3]
+                )
+            placed[o] = False
+            posed[o] = False
+        flagged = False
+        # robot (and held box) against the environment: bounding spheres first, then the object's spheres
+        for o in range(n_obj):
+            if not obj_env[o]:
+                continue
+            for e in range(n_env):
+                dx = oc[o, 0] - env_bound[e, 0]
+                dy = oc[o, 1] - env_bound[e, 1]
+                dz = oc[o, 2] - env_bound[e, 2]
+                reach = obj_radius[o] + env_bound[e, 3] + touch
+                if dx * dx + dy * dy + dz * dz > reach * reach:
+                    continue
+                if _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2]) > (
+                    obj_radius[o] + touch
+                ):
+                    continue
+                if not placed[o]:
+                    _place(F, sph_start[o], sph_start[o + 1], sph_frame, sph, sc)
+                    placed[o] = True
+                if _spheres_touch(
+                    sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e], touch
+                ):
+                    flagged = True
+                    break
+            if flagged:
+                break
+        if not flagged:
+            for p in range(pair_a.shape[0]):
+                a = pair_a[p]
+                b = pair_b[p]
+                dx = oc[a, 0] - oc[b, 0]
+                dy = oc[a, 1] - oc[b, 1]
+                dz = oc[a, 2] - oc[b, 2]
+                reach = obj_radius[a] + obj_radius[b] + touch
+                if dx * dx + dy * dy + dz * dz > reach * reach:
+                    continue
+                for a2, b2 in ((a, b), (b, a)):
+                    if not placed[a2]:
+                        _place(F, sph_start[a2], sph_start[a2 + 1], sph_frame, sph, sc)
+                        placed[a2] = True
+                    if not posed[b2]:
+                        _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
+                        posed[b2] = True
+                    flagged = _spheres_touch(
+                        sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2], touch
+                    )
+                    if not flagged:
+                        break
+                if flagged:
+                    break
+        out[i] = flagged
+
+
+@njit(cache=True, nogil=True)
+def _spheres_touch(
+    sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M: np.ndarray, d: np.ndarray, touch: float
+) -> bool:
+    """True when one of the placed spheres lo..hi-1 comes within `touch` of the primitive (kind, M, d)."""
+    for s in range(lo, hi):  # noqa: SIM110 - a loop numba compiles; any() over a generator it does not
+        if _point_distance(kind, M, d, sc[s, 0], sc[s, 1], sc[s, 2]) < sph[s, 3] + touch:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray) -> None:
+    """World-to-local (3, 4) of the object at Ff @ const."""
+    P = np.empty((3, 4))
+    for r in range(3):
+        for s in range(4):
+            P[r, s] = Ff[r, 0] * const[0, s] + Ff[r, 1] * const[1, s] + Ff[r, 2] * const[2, s] + Ff[r, 3] * const[3, s]
+    for r in range(3):
+        for s in range(3):
+            out[r, s] = P[s, r]
+        out[r, 3] = -(P[0, r] * P[0, 3] + P[1, r] * P[1, 3] + P[2, r] * P[2, 3])
+
+
+@njit(cache=True, nogil=True)
+def _place(F: np.ndarray, lo: int, hi: int, sph_frame: np.ndarray, sph: np.ndarray, sc: np.ndarray) -> None:
+    """World centres of spheres lo..hi-1 into sc."""
+    for s in range(lo, hi):
+        fr = sph_frame[s]
+        x, y, z = sph[s, 0], sph[s, 1], sph[s, 2]
+        for r in range(3):
+            sc[s, r] = F[fr, r, 0] * x + F[fr, r, 1] * y + F[fr, r, 2] * z + F[fr, r, 3]
