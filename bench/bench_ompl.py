@@ -27,7 +27,13 @@ bench/.mplib-venv (created here on first use with `python -m venv` + `pip instal
 itself in git), and plans through bench/mplib_driver.py in a subprocess: same URDF, the self-collision
 pairs our scene excludes (as an SRDF), the cell's boxes, the held cube, the same start and goal
 configurations (a pose goal's collision-free IK solutions) and time limit. Its trajectories are checked
-with the same fine FCL check. Printed last: median planning time of ompl.rrtconnect / median of mplib.
+with the same fine FCL check. Printed last: median planning time of ompl.rrtconnect / median of mplib,
+and issue 14's goals (median <= 0.5x and p95 <= 1.0x mplib at range 1, no collision under the fine
+re-check, success >= mplib's).
+
+`--before` plans every query twice, with `collision.sphere_filter` off (FCL checks every configuration, as
+before issue 14) and on, and prints both side by side per planner with the speed-up and whether the plans
+are the same (they must be: the filter changes what a check costs, never its answer).
 """
 
 from __future__ import annotations
@@ -160,6 +166,7 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "fine_hits": int(sum(r["fine_hit"] for r in rows)),
         "failures": failures,
         "times": t.tolist(),
+        "durations": dur.tolist(),
     }
 
 
@@ -291,6 +298,12 @@ def main() -> None:
     ap.add_argument("--no-mplib", action="store_true", help="skip the mplib comparison")
     ap.add_argument("--no-limits", action="store_true", help="skip the fail-fast and timeout measurements")
     ap.add_argument("--seed", type=int, default=2024)
+    ap.add_argument(
+        "--before",
+        action="store_true",
+        help="also plan every query with the sphere filter off (collision.sphere_filter: false, FCL checks every "
+        "configuration, as before issue 14) and print both side by side",
+    )
     args = ap.parse_args()
 
     straight = "any" if args.all_queries else args.straight
@@ -321,9 +334,16 @@ def main() -> None:
     )
 
     results: dict[str, dict[str, Any]] = {}
+    before: dict[str, dict[str, Any]] = {}
     for cell in cells:
         print(f"\n{cell.name}:\n{header}")
         for label, block in blocks:
+            if args.before:
+                cell.scene.sphere_filter = False
+                b = run_ours(cell, block, queries[cell.name], args.time_limit)
+                cell.scene.sphere_filter = True
+                before.setdefault(label, {})[cell.name] = b
+                print_row(f"{label} [FCL only]", b)
             s = run_ours(cell, block, queries[cell.name], args.time_limit)
             results.setdefault(label, {})[cell.name] = s
             print_row(label, s)
@@ -336,6 +356,8 @@ def main() -> None:
             print_row(label, next(v for v in per.values() if isinstance(v, str)))
             continue
         print_row(label, merge(list(per.values())))
+    if args.before:
+        print_before_after(blocks, before, results)
 
     if args.no_mplib:
         return
@@ -374,6 +396,47 @@ def main() -> None:
         for mlabel, mp in mplib_runs.items():
             parts = ", ".join(f"{c.name}: {ours[c.name]['median_s'] / mp[c.name]['median_s']:.2f}" for c in cells)
             print(f"  {label:34s} / {mlabel:16s} {ours['all']['median_s'] / mp['all']['median_s']:.2f}  ({parts})")
+    label = "ompl.rrtconnect"
+    best = mplib_runs.get("mplib range 1")
+    if label in results and best is not None and not any(isinstance(v, str) for v in results[label].values()):
+        ours = merge([results[label][c.name] for c in cells])
+        mp = best["all"]
+        print("\nissue 14's goals for ompl.rrtconnect against mplib range 1 (same queries):")
+        goals = [
+            ("median planning time <= 0.5x", ours["median_s"] / mp["median_s"], 0.5),
+            ("p95 planning time <= 1.0x", ours["p95_s"] / mp["p95_s"], 1.0),
+        ]
+        for what, ratio, bound in goals:
+            print(f"  {what:32s} {ratio:5.2f}x  {'met' if ratio <= bound else 'NOT MET'}")
+        hits = ours["fine_hits"]
+        print(f"  {'0 collisions (fine re-check)':32s} {hits:5d}   {'met' if hits == 0 else 'NOT MET'}")
+        ok = ours["success"] >= mp["success"]
+        print(
+            f"  {'success >= mplib':32s} {ours['success'] * 100:5.1f}% vs {mp['success'] * 100:.1f}%  "
+            f"{'met' if ok else 'NOT MET'}"
+        )
+
+
+def print_before_after(
+    blocks: list[tuple[str, PlannerBlock]], before: dict[str, dict[str, Any]], after: dict[str, dict[str, Any]]
+) -> None:
+    """Per planner, both scenes pooled: FCL only (before) and sphere filter + FCL (after), the speed-up, and
+    whether the plans are the same (same successes, same trajectory durations)."""
+    print("\nbefore (FCL checks every configuration) and after (sphere filter, then FCL), both scenes:")
+    print(f"  {'planner':34s} {'succ':>13s}  {'median ms':>15s}  {'p95 ms':>15s}  {'speed-up':>8s}  same plans")
+    for label, _ in blocks:
+        b, a = before.get(label, {}), after.get(label, {})
+        if not b or any(isinstance(v, str) for v in (*b.values(), *a.values())):
+            continue
+        mb, ma = merge(list(b.values())), merge(list(a.values()))
+        db, da = np.array(mb["durations"]), np.array(ma["durations"])
+        same = db.shape == da.shape and bool(np.all((np.isnan(db) & np.isnan(da)) | (np.abs(db - da) <= 1e-9)))
+        print(
+            f"  {label:34s} {mb['success'] * 100:5.1f}/{ma['success'] * 100:5.1f}%  "
+            f"{mb['median_s'] * 1e3:7.1f}/{ma['median_s'] * 1e3:7.1f}  "
+            f"{mb['p95_s'] * 1e3:7.1f}/{ma['p95_s'] * 1e3:7.1f}"
+            f"  {mb['median_s'] / ma['median_s']:7.2f}x  {'yes' if same else 'no'}"
+        )
 
 
 def merge(summaries: list[dict[str, Any]]) -> dict[str, Any]:
@@ -394,6 +457,7 @@ def merge(summaries: list[dict[str, Any]]) -> dict[str, Any]:
         "fine_hits": sum(s["fine_hits"] for s in summaries),
         "failures": failures,
         "times": t.tolist(),
+        "durations": [d for s in summaries for d in s["durations"]],
     }
 
 

@@ -383,6 +383,8 @@ class CheckedPlanner:
         self._scene: PlanningScene | None = None
         self._fallback_steps = 0
         self._segments = 0
+        self._reset_time_s = 0.0  # wall time of the last reset(), s
+        self._check_time_s = 0.0  # wall time of our FCL check of the segments since reset(), s
 
     def __getattr__(self, attr: str) -> Any:
         if attr.startswith("__") or attr == "inner":
@@ -404,15 +406,20 @@ class CheckedPlanner:
             raise InvalidRequestError(cannot_reach(self.name, request.goal.kind, self.goal_kinds))
         self._request, self._scene = request, scene
         self._fallback_steps = self._segments = 0
+        self._check_time_s = 0.0
+        t0 = time.perf_counter()
         self.inner.reset(request, scene)
+        self._reset_time_s = time.perf_counter() - t0
 
     def step(self, q: np.ndarray) -> Segment | MotionResult:
         """The planner's next segment from measured `q`, FCL-checked; or a final MotionResult (judged)."""
         if self._request is None or self._scene is None:
             raise PlanningError(f"{self.name}.step() called before reset()")
         q = np.asarray(q, dtype=float)
+        t0 = time.perf_counter()
         out = self.inner.step(q)
-        info_extra = {"fallback_steps": self._fallback_steps}
+        elapsed = time.perf_counter() - t0
+        info_extra = {"fallback_steps": self._fallback_steps, "final_check_time_s": self._check_time_s}
         if isinstance(out, MotionResult):
             if out.success:
                 q_end = out.trajectory.q[-1] if out.trajectory is not None else q
@@ -432,7 +439,10 @@ class CheckedPlanner:
             raise PlanningError(
                 f"{self.name}: segment {self._segments + 1} starts {off:.2e} rad away from the measured state"
             )
+        # the step's time is the wall time of everything the planner did for it, whatever it reports itself
+        out = replace(out, solve_time_s=elapsed, info=dict(out.info, reported_solve_time_s=out.solve_time_s))
         col = self.context.settings.collision
+        t0 = time.perf_counter()
         hit = first_collision(
             traj,
             self._scene,
@@ -440,6 +450,7 @@ class CheckedPlanner:
             max_step_rad=col.check_resolution_rad,
             max_step_m=col.check_resolution_m,
         )
+        self._check_time_s += time.perf_counter() - t0
         self._segments += 1
         if hit is not None:
             qs = densify(
@@ -463,11 +474,17 @@ class CheckedPlanner:
         elapsed = time.perf_counter() - t0
         if not isinstance(result, MotionResult):
             raise PlanningError(f"{type(self.inner).__name__}.plan returned {type(result).__name__}, not MotionResult")
-        if not result.planning_time_s:
-            result = replace(result, planning_time_s=elapsed)
+        # planning time is the same for every planner: the wall time of everything plan() did, its own checks
+        # included; our final check is timed apart (info["final_check_time_s"])
+        info = dict(result.info)
+        if result.planning_time_s:
+            info["reported_planning_time_s"] = result.planning_time_s
+        result = replace(result, planning_time_s=elapsed, info=info)
         if not result.success:
             return result
-        return _checked(result, request, scene, self.context)
+        t0 = time.perf_counter()
+        checked = _checked(result, request, scene, self.context)
+        return replace(checked, info=dict(checked.info, final_check_time_s=time.perf_counter() - t0))
 
     # ---- the one loop ---------------------------------------------------------------------------
     def drive(
@@ -524,8 +541,14 @@ class CheckedPlanner:
                 f"no end after {max_segments} segments",
                 info={"fallback_steps": self._fallback_steps},
             )
-        info = dict(final.info, solve_times_s=solve_times, solves=len(solve_times))
-        planning_time = float(sum(solve_times)) or time.perf_counter() - t0
+        info = dict(
+            final.info,
+            solve_times_s=solve_times,
+            solves=len(solve_times),
+            reset_time_s=self._reset_time_s,
+            final_check_time_s=self._check_time_s,
+        )
+        planning_time = self._reset_time_s + float(sum(solve_times)) or time.perf_counter() - t0
         if final.success:
             traj = _concat(pieces) if pieces else _still(plant.measured_q())
             return replace(final, trajectory=traj, info=info, planning_time_s=planning_time)

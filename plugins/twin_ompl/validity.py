@@ -166,7 +166,14 @@ def _signature(scene: PlanningScene) -> tuple[Any, ...]:
     boxes = tuple((n, sz.tobytes(), T.tobytes()) for n, (sz, T) in sorted(scene.boxes().items()))
     held = scene.attached_box()
     held_sig = None if held is None else (held[0], held[1].tobytes(), held[2].tobytes())
-    return (tuple(scene.names()), boxes, held_sig, float(scene.gripper_opening), float(scene.padding_m))
+    return (
+        tuple(scene.names()),
+        boxes,
+        held_sig,
+        float(scene.gripper_opening),
+        float(scene.padding_m),
+        scene.sphere_filter,
+    )
 
 
 def padded_scene(scene: PlanningScene, clearance_m: float) -> PlanningScene | None:
@@ -176,7 +183,8 @@ def padded_scene(scene: PlanningScene, clearance_m: float) -> PlanningScene | No
     Why: discrete checks (any resolution) can pass a path that grazes an obstacle by a fraction of a
     millimetre between two checked states; a finer check then finds it, and execution in the world would
     touch it. Planning and the final check on the inflated scene keep that margin instead. The copy is
-    cached per scene and made again when the scene's boxes, held object, finger opening or padding change.
+    cached per scene and made again when the scene's boxes, held object, finger opening, padding or sphere filter
+    change.
     """
     if not isinstance(scene, PlanningScene):
         return None

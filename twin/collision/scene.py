@@ -237,7 +237,8 @@ class PlanningScene:
     @classmethod
     def from_settings(cls, settings: Settings) -> PlanningScene:
         """Robot from settings.robot.urdf (gripper fully open), fixtures from settings.world.fixtures,
-        padding from settings.collision.padding_m; the home posture is an exclusion reference.
+        padding from settings.collision.padding_m, the sphere filter from settings.collision.sphere_filter; the
+        home posture is an exclusion reference.
 
         Fixtures marked `known: false` (obstacles the robot has to perceive) are left out: a task adds
         what perception found with `add_box_bounds`.
@@ -252,6 +253,7 @@ class PlanningScene:
             fixtures=fixtures,
             padding_m=settings.collision.padding_m,
             reference_configs=[settings.robot.home],
+            sphere_filter=settings.collision.sphere_filter,
         )
 
     # =============================================================================================
