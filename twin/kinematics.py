@@ -62,28 +62,13 @@ _CA, _SA = np.cos(DH_ALPHA), np.sin(DH_ALPHA)
 
 
 def dh_frames(qs: np.ndarray) -> np.ndarray:
-    """(n, 7, 4, 4) DH frames 0..6 (6 = flange) in the base frame for (n, 6) configurations, vectorised."""
-    qs = np.atleast_2d(np.asarray(qs, dtype=float))
-    n = qs.shape[0]
-    ct, st = np.cos(qs), np.sin(qs)
-    A = np.zeros((n, 6, 4, 4))
-    A[..., 0, 0] = ct
-    A[..., 0, 1] = -st * _CA
-    A[..., 0, 2] = st * _SA
-    A[..., 0, 3] = DH_A * ct
-    A[..., 1, 0] = st
-    A[..., 1, 1] = ct * _CA
-    A[..., 1, 2] = -ct * _SA
-    A[..., 1, 3] = DH_A * st
-    A[..., 2, 1] = _SA
-    A[..., 2, 2] = _CA
-    A[..., 2, 3] = DH_D
-    A[..., 3, 3] = 1.0
-    F = np.empty((n, 7, 4, 4))
-    F[:, 0] = np.eye(4)
-    F[:, 1] = A[:, 0]
-    for i in range(1, 6):
-        F[:, i + 1] = F[:, i] @ A[:, i]
+    """(n, 7, 4, 4) DH frames 0..6 (6 = flange) in the base frame for (n, 6) configurations (compiled loop,
+    `twin.kinematics_kernel`, loaded on first use)."""
+    from twin.kinematics_kernel import dh_frames_into
+
+    qs = np.ascontiguousarray(np.atleast_2d(np.asarray(qs, dtype=float)))
+    F = np.empty((qs.shape[0], 7, 4, 4))
+    dh_frames_into(qs, DH_D, DH_A, _CA, _SA, F)
     return F
 
 

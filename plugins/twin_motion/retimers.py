@@ -22,6 +22,7 @@ into `Status.LIMIT_VIOLATION` with the reason.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import math
@@ -358,6 +359,19 @@ def _const_accel_samples(
     return t, s, sdot, u[idx], idx
 
 
+@functools.lru_cache(maxsize=64)
+def _limit_constraints(vlim: tuple[float, ...], alim: tuple[float, ...]) -> list[Any]:
+    """TOPP-RA's joint velocity and acceleration constraints for these limits, built once: a request's limits
+    repeat, and building them formats a description string per joint (~1 ms a retime). They hold only the
+    limits; TOPP-RA evaluates them on each path afresh."""
+    from toppra import constraint
+
+    return [
+        constraint.JointVelocityConstraint(np.array(vlim)),
+        constraint.JointAccelerationConstraint(np.array(alim)),
+    ]
+
+
 def toppra_time_spline(
     knots: np.ndarray,
     waypoints: np.ndarray,
@@ -387,7 +401,6 @@ def toppra_time_spline(
     with stage("imports"):  # the first call imports TOPP-RA (and the matplotlib it pulls in): not planning
         import toppra
         import toppra.algorithm as algo
-        from toppra import constraint
 
     knots = np.asarray(knots, dtype=float)
     W = np.asarray(waypoints, dtype=float)
@@ -418,7 +431,7 @@ def toppra_time_spline(
         return t, s, qd, qdd, r_v, r_a, seg
 
     path = toppra.SplineInterpolator(knots, W7, bc_type="not-a-knot")
-    constraints = [constraint.JointVelocityConstraint(vlim), constraint.JointAccelerationConstraint(alim)]
+    constraints = _limit_constraints(tuple(vlim.tolist()), tuple(alim.tolist()))
     grid = _grid(knots, max(min_gridpoints, 2 * (knots.shape[0] - 1)))
     for attempt in range(refinements + 1):
         inst = algo.TOPPRA(
