@@ -401,6 +401,11 @@ def toppra_time_spline(
     with stage("imports"):  # the first call imports TOPP-RA (and the matplotlib it pulls in): not planning
         import toppra
         import toppra.algorithm as algo
+        import toppra.solverwrapper as sw
+    if not hasattr(sw.available_solvers, "cache_info"):
+        # every TOPPRA instance asks importlib which optional QP solvers are installed (~0.25 ms, twice a
+        # retime); the answer cannot change within a process, so it is asked once
+        sw.available_solvers = functools.cache(sw.available_solvers)
 
     knots = np.asarray(knots, dtype=float)
     W = np.asarray(waypoints, dtype=float)
