@@ -342,7 +342,8 @@ def test_unreachable_goal_against_the_box_fails_after_at_most_40_solves_and_stay
     solved = [s for s in segs if not s.info.get("braking")]
     assert res.info["nmpc_solves"] <= 40 and len(solved) <= 40
     # the arm was still moving after the 40th solve: it brakes to rest (no solve) before the status
-    assert segs[len(solved) :] and all(s.info["braking"] and s.info["reported_solve_time_s"] == 0.0 for s in segs[len(solved) :])
+    tail = segs[len(solved) :]
+    assert tail and all(s.info["braking"] and s.info["reported_solve_time_s"] == 0.0 for s in tail)
     last = segs[-1].trajectory
     assert np.array_equal(last.q[-1], last.q[-2]) and np.allclose(last.qd[-1], 0.0)
     _assert_clear(segs, ts, nmpc, settings, ctx)
