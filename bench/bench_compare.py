@@ -6,14 +6,16 @@ config, side by side in one run; and whether both sweeps wrote the same rows apa
 `--against REV` (a git revision, e.g. HEAD~5 or a tag) checks that revision out into a temporary worktree
 and runs the same sweep there with this virtualenv (its packages and plugins first on the path). Without
 it only this checkout is timed. Prints: runs, wall time, runs per second, and for two sweeps the speed-up
-and the rows that differ (a row is its run id plus everything but `timing`; the optimising planners'
-rows depend on wall-clock time only through their time limits, so a differing row is worth a look).
+and the rows that differ (a row is its run id plus everything but `timing`, floats compared to 1e-9
+relative; the optimising planners' rows depend on wall-clock time only through their time limits, so a
+differing row is worth a look), counted by the first field that differs.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -45,15 +47,25 @@ def sweep(checkout: Path, config: str, workers: int, out: Path) -> tuple[float, 
     return wall, rows
 
 
-def _same(a: dict[str, Any], b: dict[str, Any]) -> bool:
-    """Whether two rows agree on every field both have (timings aside): a newer revision may add fields."""
-    for k in a.keys() & b.keys() - {"timing", "run_id"}:
+def _difference(a: dict[str, Any], b: dict[str, Any], at: str = "") -> str | None:
+    """The first field (dotted) on which two rows disagree among the fields both have, timings aside (a newer
+    revision may add fields), or None when they agree."""
+    for k in sorted(a.keys() & b.keys() - {"timing", "run_id"}):
         if isinstance(a[k], dict) and isinstance(b[k], dict):
-            if not _same(a[k], b[k]):
-                return False
-        elif a[k] != b[k]:
-            return False
-    return True
+            inner = _difference(a[k], b[k], f"{at}{k}.")
+            if inner is not None:
+                return inner
+        elif a[k] != b[k] and not _close(a[k], b[k]):
+            return f"{at}{k}: {a[k]!r} vs {b[k]!r}"
+    return None
+
+
+def _close(x: Any, y: Any) -> bool:
+    """Floats equal to 1e-9 relative: the compiled kinematics and the numpy they replaced round the last bit
+    differently, which a metric computed from thousands of samples may show."""
+    if isinstance(x, float) and isinstance(y, float):
+        return math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12)
+    return False
 
 
 def main() -> None:
@@ -83,9 +95,19 @@ def main() -> None:
         (_, w0, r0), (_, w1, r1) = results
         print(f"  speed-up: {w0 / w1:.2f}x")
         by_key = {(r["planner"], r["case"], r["seed"]): r for r in r0}
-        differ = [k for r in r1 if not _same(by_key.get(k := (r["planner"], r["case"], r["seed"])) or {}, r)]
-        example = f", e.g. {differ[:3]}" if differ else ""
-        print(f"  rows that differ apart from timings: {len(differ)} of {len(r1)}{example}")
+        differ = []
+        for r in r1:
+            k = (r["planner"], r["case"], r["seed"])
+            why = _difference(by_key.get(k) or {}, r)
+            if why is not None:
+                differ.append((k, why))
+        print(f"  rows that differ apart from timings: {len(differ)} of {len(r1)}")
+        fields: dict[str, int] = {}
+        for _, why in differ:
+            fields[why.split(":")[0]] = fields.get(why.split(":")[0], 0) + 1
+        for field, n in sorted(fields.items(), key=lambda kv: -kv[1]):
+            example = next(f"{k}: {why}" for k, why in differ if why.split(":")[0] == field)
+            print(f"    {field}: {n} rows, e.g. {example[:160]}")
 
 
 if __name__ == "__main__":
