@@ -589,3 +589,21 @@ def test_the_nlp_is_built_once_per_process_and_before_the_first_step(nmpc, ctx, 
     ts = scenes[0]
     c.reset(ts.request, build_scene(settings, ts))
     assert isinstance(c.step(ts.request.start), Segment)
+
+
+def test_a_shape_first_met_inside_a_step_is_built_mapped_and_plans_as_the_expanded_one(nmpc, scenes, settings, ctx):
+    """The shapes a planner expects are expanded into one SX graph at construction (fast solves); a shape it
+    meets first inside a step (here: the planner expects no box) is built from the mapped stage function
+    (cheap to build). Both are the same NLP: the same plan to solver precision, the same iterations."""
+    ts = scenes[2]
+    lazy = make_planner(PlannerBlock(name="nmpc", params=dict(SEED000, prebuild_boxes=[0])), ctx)
+    out = []
+    for planner in (nmpc, lazy):
+        planner.reset(ts.request, build_scene(settings, ts))
+        seg = planner.step(ts.request.start)
+        assert isinstance(seg, Segment), seg
+        out.append(seg)
+    shape = next(s for s in lazy.inner._problems if s.n_boxes == 1)
+    assert not lazy.inner._problems[shape].expanded and nmpc.inner._problems[shape].expanded
+    assert out[0].info["iterations"] == out[1].info["iterations"]
+    assert np.allclose(out[0].trajectory.q, out[1].trajectory.q, atol=1e-7)

@@ -11,10 +11,12 @@ acceleration limit x dt^2 per step and that change by at most its jerk limit x d
 declares the latter), and two spheres guard the wrist links.
 
 Why these choices:
-* Building an NLP costs ~1 s, a solve ~10 ms: NLPs are built once per process and problem shape (number of
-  boxes, number of held-object spheres) and shared by every planner instance with the same parameters
-  (`twin_nmpc.model.cached_problem`); the shapes a run expects (`prebuild_boxes`) are built when the
-  planner is constructed, not inside a timed step. Each solve only changes parameters and is
+* Building an NLP costs ~1.5 s expanded (fastest solves) or ~0.1 s mapped, a solve ~15 ms: NLPs are built
+  once per process and problem shape (number of boxes, number of held-object spheres) and shared by every
+  planner instance with the same parameters (`twin_nmpc.model.cached_problem`); the shapes a run expects
+  (`prebuild_boxes`) are built expanded when the planner is constructed, not inside a timed step, and a
+  shape first met inside a step is built mapped (a RoboCup run meets one per count of objects left on
+  the table: 57 s of building became 2 s). Each solve only changes parameters and is
   warm-started from the previous solution shifted by the executed steps, primal and dual.
 * The perceived box is extended over the whole workspace in y, so the only way is over it, and a straight
   initial guess through the box starts IPOPT where the box distance has zero gradient. The first solve is
@@ -128,7 +130,7 @@ class NMPCPlanner:
         if expected is None:  # perception reports one box per fixture the planners do not know
             expected = [sum(not f.known for f in context.settings.world.fixtures)]
         for nb in sorted(set(expected)):  # built here, not in the first (timed) step
-            self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps))
+            self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps), expand=True)
 
     @property
     def jerk_limited(self) -> bool:
@@ -137,8 +139,11 @@ class NMPCPlanner:
         return bool(self.params.limit_jerk)
 
     # ---- the NLPs ---------------------------------------------------------------------------------
-    def problem(self, shape: ProblemShape) -> NMPCProblem:
-        """The NLP for `shape`: from the process-wide cache (`cached_problem`), built there on first use."""
+    def problem(self, shape: ProblemShape, *, expand: bool = False) -> NMPCProblem:
+        """The NLP for `shape`: from the process-wide cache (`cached_problem`), built there on first use.
+        `expand`: expanded into one SX graph (slow to build, fast to solve: the shapes built at construction)
+        or kept as the stage function mapped over the horizon (~0.1 s to build, solves ~2x slower: a shape
+        first met inside a step, e.g. another count of perceived boxes or held-object spheres)."""
         prob = self._problems.get(shape)
         if prob is None:
             P = self.params
@@ -158,6 +163,7 @@ class NMPCPlanner:
                 facing_down_cos=math.cos(P.facing_down_tol_rad),
                 cold_options=self._ipopt_options(cold=True),
                 warm_options=self._ipopt_options(cold=False),
+                expand=expand,
             )
             self._problems[shape] = prob
         return prob
