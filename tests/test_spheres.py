@@ -227,3 +227,24 @@ def test_a_planner_plans_the_same_paths_with_the_filter_on_and_off_and_run_to_ru
     for other in runs[1:]:
         for (qa, sa, ca), (qb, sb, cb) in zip(runs[0], other, strict=True):
             assert np.array_equal(qa, qb) and (sa, ca) == (sb, cb)
+
+
+def test_the_kernels_compile_once_whatever_arrays_they_are_handed(cells: dict[str, PlanningScene]) -> None:
+    """numba compiles a new specialisation for every new argument layout (read-only, strided, float32), and
+    compiling takes seconds: inside a planner's time limit that is a timeout. The scene and the kinematics
+    hand the kernels one layout only, whatever the caller passes."""
+    from twin.collision.sphere_kernel import flag_configurations
+    from twin.kinematics import dh_frames
+    from twin.kinematics_kernel import dh_frames_into
+
+    scene = cells["robocup"]
+    qs = random_configs(scene, 12, seed=1)
+    frozen = qs.copy()
+    frozen.flags.writeable = False
+    for arg in (qs, frozen, qs[::2], np.asfortranarray(qs), qs.astype(np.float32)):
+        scene.in_collision_batch(arg)
+        scene.first_collision(arg)
+        scene.in_collision(arg[0])
+        dh_frames(arg)
+    assert len(flag_configurations.signatures) == 1
+    assert len(dh_frames_into.signatures) == 1

@@ -15,6 +15,7 @@ import numpy as np
 import ur_analytic_ik
 
 from twin.errors import InvalidRequestError
+from twin.timing import stage
 
 __all__ = [
     "DH_A",
@@ -66,7 +67,9 @@ def dh_frames(qs: np.ndarray) -> np.ndarray:
     `twin.kinematics_kernel`, loaded on first use)."""
     from twin.kinematics_kernel import dh_frames_into
 
-    qs = np.ascontiguousarray(np.atleast_2d(np.asarray(qs, dtype=float)))
+    qs = np.atleast_2d(np.asarray(qs, dtype=float))
+    if not (qs.flags.c_contiguous and qs.flags.writeable):
+        qs = np.array(qs, order="C")  # one compiled specialisation: writeable C float64
     F = np.empty((qs.shape[0], 7, 4, 4))
     dh_frames_into(qs, DH_D, DH_A, _CA, _SA, F)
     return F
@@ -156,6 +159,8 @@ class UR5e:
         self.joint_limits = np.array(JOINT_LIMITS if joint_limits is None else joint_limits, dtype=float)
         self._tool = {f: _tool(f, self.tcp_offset_m) for f in _FRAMES}
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
+        with stage("imports"):  # load (or, the first time on a machine, compile) the DH kernel now, not in a
+            dh_frames(np.zeros((1, 6)))  # planner's time limit
 
     # ---- forward kinematics -------------------------------------------------------------------
     def fk(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:

@@ -50,6 +50,7 @@ from twin.collision.rules import CollisionRules, gripper_stroke_m
 from twin.collision.spheres import TOUCH_M as _TOUCH_M
 from twin.collision.spheres import EnvPrimitives, cover, env_primitives, primitive
 from twin.errors import ConfigError, InvalidRequestError
+from twin.timing import stage
 from twin.types import BoxBounds
 from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 
@@ -137,8 +138,9 @@ class PlanningScene:
             self._add_fixture(fx)
         self._env.setup()
         self._rebuild_robot()
-        if self.sphere_filter:  # load (or compile) the sphere kernel now, not inside a planner's time limit
-            self._flags(np.zeros((1, 6)))
+        if self.sphere_filter:  # load (or, the first time on a machine, compile) the sphere kernel now, not
+            with stage("imports"):  # inside a planner's time limit
+                self._flags(np.zeros((1, 6)))
 
     def _init_robot(self, model: RobotModel, *, tcp_link: str, finger_opening_m: float | None) -> None:
         """Robot part of the scene from a parsed model: compiled chain and persistent FCL shapes (the
@@ -566,7 +568,8 @@ class PlanningScene:
         """(n,) bool: False where the sphere model proves qs[i] (n, 6) free, True where FCL must decide."""
         from twin.collision.sphere_kernel import flag_configurations  # numba: loaded on first use
 
-        qs = np.ascontiguousarray(qs, dtype=float)
+        if not (qs.flags.c_contiguous and qs.flags.writeable and qs.dtype == np.float64):
+            qs = np.array(qs, dtype=float, order="C")  # one compiled specialisation: writeable C float64
         out = np.empty(qs.shape[0], dtype=bool)
         if self._env_prims is None:
             self._env_prims = env_primitives(
