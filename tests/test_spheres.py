@@ -248,3 +248,56 @@ def test_the_kernels_compile_once_whatever_arrays_they_are_handed(cells: dict[st
         dh_frames(arg)
     assert len(flag_configurations.signatures) == 1
     assert len(dh_frames_into.signatures) == 1
+
+
+@pytest.mark.parametrize("step", [0.002, 0.02])
+@pytest.mark.parametrize("name", ["robocup", "warehouse", "mixed"])
+def test_dense_paths_into_contact_answer_as_fcl(cells: dict[str, PlanningScene], name: str, step: float) -> None:
+    """Conservative advancement (configurations close to a cleared one are cleared without evaluation) on
+    dense paths, as the final checks walk them: from free configurations into a contact a hair deep, 2 and
+    20 mrad apart. Every configuration's answer and the first hit are FCL's."""
+    scene = cells[name]
+    contacts = contact_configs(scene, 80, seed=21)
+    rng = np.random.default_rng(22)
+    free = random_configs(scene, 400, seed=23)
+    free = free[~fcl_only(scene, free)]
+    assert len(contacts) >= 10
+    for q1 in contacts[:20]:
+        q0 = free[rng.integers(len(free))]
+        n = int(np.ceil(np.abs(q1 - q0).max() / step))
+        path = q0 + np.linspace(0.0, 1.0, n + 1)[:, None] * (q1 - q0)
+        path[-1] = q1
+        ref = fcl_only(scene, path)
+        assert ref[-1]  # the path ends in the contact
+        assert np.array_equal(scene.in_collision_batch(path), ref)
+        assert scene.first_collision(path) == int(np.argmax(ref))
+
+
+@pytest.mark.parametrize("name", ["robocup", "warehouse", "mixed"])
+def test_no_point_of_the_robot_moves_farther_than_the_reach_bound(cells: dict[str, PlanningScene], name: str) -> None:
+    """The bound conservative advancement relies on: between two configurations no point of any part (here:
+    every cover sphere's centre and every box corner of every part) moves farther than sum_k |dq_k| reach_k."""
+    scene = cells[name]
+    rng = np.random.default_rng(31)
+    qs = random_configs(scene, 300, seed=32)
+    moved_q = qs + rng.normal(scale=0.05, size=qs.shape) * rng.uniform(0, 1, size=(300, 1))
+    worst = 0.0
+    for a, b in zip(qs, moved_q, strict=True):
+        pa, pb = (_part_points(scene, q) for q in (a, b))
+        ratio = np.linalg.norm(pa - pb, axis=1).max() / (np.abs(b - a) @ scene._reach)
+        worst = max(worst, float(ratio))
+    assert worst <= 1.0
+    assert worst > 0.3  # and the bound is not loose by orders of magnitude (it would skip nothing)
+
+
+def _part_points(scene: PlanningScene, q: np.ndarray) -> np.ndarray:
+    """World positions of every cover sphere centre and every bounding-box corner of every robot part at q."""
+    F = scene._frames_one(q)
+    out = []
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    for o, f in enumerate(scene._object_frame.tolist()):
+        T = F[f] @ scene._obj_const[o]
+        lo, hi = scene._sph_start[o], scene._sph_start[o + 1]
+        out.append(scene._sph[lo:hi, :3] @ F[f][:3, :3].T + F[f][:3, 3])
+        out.append((corners * scene._obj_dims[o]) @ T[:3, :3].T + T[:3, 3])
+    return np.vstack(out)

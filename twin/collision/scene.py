@@ -373,9 +373,29 @@ class PlanningScene:
         self._ST = np.ascontiguousarray(np.transpose(np.array(S), (0, 2, 1)))
         if hasattr(self, "_covers"):  # sphere model: poses and sphere centres in the objects' frames
             self._obj_const = np.ascontiguousarray(np.array(S))
+            self._reach = self._joint_reach()
             self._sph = np.vstack(
                 [np.hstack([c[:, :3] @ T[:3, :3].T + T[:3, 3], c[:, 3:]]) for c, T in zip(self._covers, S, strict=True)]
             )
+
+    def _joint_reach(self) -> np.ndarray:
+        """(6,) for each arm joint, how far any point of a part it moves can be from its axis, m (1 for a
+        prismatic joint): a joint motion dq moves no point farther than sum_k |dq_k| reach_k. Bounded by the
+        chain's link offsets from the joint's child frame (on its axis) to the part's frame, plus the
+        part's centre offset and bounding radius."""
+        parent = {k + 1: f for k, f in self._chain}  # frame -> parent frame
+        offset = {k + 1: float(np.linalg.norm(self._A[k][:3, 3])) for k in range(6)}  # frame origin from parent's
+        reach = np.zeros(6)
+        for o, f in enumerate(self._object_frame.tolist()):
+            extent = float(np.linalg.norm(self._obj_const[o][:3, 3])) + float(self._obj_radius[o])
+            g, path = f, 0.0
+            while g != 0:  # every joint whose child frame is g or an ancestor of g moves part o
+                k = g - 1
+                reach[k] = max(reach[k], path + extent)
+                path += offset[g]
+                g = parent[g]
+        reach[~self._revolute] = 1.0
+        return reach
 
     def _probe_fast_path(self) -> bool:
         """Check once that python-fcl reads the buffer views as intended (else use plain arrays)."""
@@ -599,6 +619,7 @@ class PlanningScene:
             env.dims,
             env.bound,
             _TOUCH_M,
+            self._reach,
             out,
         )
         return out

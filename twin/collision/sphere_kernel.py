@@ -15,6 +15,8 @@ from numba import njit
 
 __all__ = ["flag_configurations"]
 
+_MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost no square root), m
+
 
 @njit(cache=True, nogil=True)
 def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float, z: float) -> float:
@@ -61,6 +63,7 @@ def flag_configurations(
     env_dims: np.ndarray,
     env_bound: np.ndarray,
     touch: float,
+    reach: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring).
@@ -71,7 +74,13 @@ def flag_configurations(
     of its bounding sphere), primitive kind and half dimensions (as `EnvPrimitives`), bounding radius,
     whether it is tested against the environment, and its spheres sph[sph_start[o]:sph_start[o + 1]]
     (x, y, z in the frame, r). Self pairs: objects pair_a[p] and pair_b[p]; a pair is clear when the
-    spheres of one miss the exact primitive of the other, tried both ways."""
+    spheres of one miss the exact primitive of the other, tried both ways.
+
+    Conservative advancement: a cleared configuration also yields a margin m, a lower bound on every
+    robot-environment distance and on half of every self-pair distance (capped at `_MARGIN_CAP_M`). No point
+    of the robot moves farther than sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any
+    robot point can be from joint k's axis), so the configurations after it that lie closer than m in that
+    measure are clear too, without being evaluated."""
     n_obj = obj_frame.shape[0]
     n_sph = sph.shape[0]
     n_env = env_kind.shape[0]
@@ -82,7 +91,16 @@ def flag_configurations(
     sc = np.empty((n_sph, 3))
     placed = np.zeros(n_obj, dtype=np.bool_)
     posed = np.zeros(n_obj, dtype=np.bool_)
+    anchor = -1  # the last configuration evaluated and cleared, and its margin
+    anchor_margin = 0.0
     for i in range(qs.shape[0]):
+        if anchor >= 0:
+            moved = 0.0
+            for k in range(6):
+                moved += abs(qs[i, k] - qs[anchor, k]) * reach[k]
+            if moved < anchor_margin - touch:
+                out[i] = False
+                continue
         F[0] = 0.0
         for k in range(4):
             F[0, k, k] = 1.0
@@ -116,6 +134,7 @@ def flag_configurations(
             placed[o] = False
             posed[o] = False
         flagged = False
+        m = _MARGIN_CAP_M
         # robot (and held box) against the environment: bounding spheres first, then the object's spheres
         for o in range(n_obj):
             if not obj_env[o]:
@@ -124,33 +143,46 @@ def flag_configurations(
                 dx = oc[o, 0] - env_bound[e, 0]
                 dy = oc[o, 1] - env_bound[e, 1]
                 dz = oc[o, 2] - env_bound[e, 2]
-                reach = obj_radius[o] + env_bound[e, 3] + touch
-                if dx * dx + dy * dy + dz * dz > reach * reach:
+                far = obj_radius[o] + env_bound[e, 3] + m
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 > far * far:
+                    continue  # farther than the margin: changes nothing
+                gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
+                if gap > touch:
+                    m = min(m, gap)
                     continue
-                if _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2]) > (
-                    obj_radius[o] + touch
-                ):
+                gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
+                gap -= obj_radius[o]
+                if gap > touch:
+                    m = min(m, gap)
                     continue
                 if not placed[o]:
                     _place(F, sph_start[o], sph_start[o + 1], sph_frame, sph, sc)
                     placed[o] = True
-                if _spheres_touch(
-                    sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e], touch
-                ):
+                gap = _spheres_gap(sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e])
+                if gap < touch:
                     flagged = True
                     break
+                m = min(m, gap)
             if flagged:
                 break
         if not flagged:
+            # self pairs: both parts move, so half of a pair's distance bounds the motion
             for p in range(pair_a.shape[0]):
                 a = pair_a[p]
                 b = pair_b[p]
                 dx = oc[a, 0] - oc[b, 0]
                 dy = oc[a, 1] - oc[b, 1]
                 dz = oc[a, 2] - oc[b, 2]
-                reach = obj_radius[a] + obj_radius[b] + touch
-                if dx * dx + dy * dy + dz * dz > reach * reach:
+                far = obj_radius[a] + obj_radius[b] + 2.0 * m
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 > far * far:
                     continue
+                gap = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
+                if gap > touch:
+                    m = min(m, 0.5 * gap)
+                    continue
+                flagged = True
                 for a2, b2 in ((a, b), (b, a)):
                     if not placed[a2]:
                         _place(F, sph_start[a2], sph_start[a2 + 1], sph_frame, sph, sc)
@@ -158,25 +190,26 @@ def flag_configurations(
                     if not posed[b2]:
                         _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
                         posed[b2] = True
-                    flagged = _spheres_touch(
-                        sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2], touch
-                    )
-                    if not flagged:
+                    gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
+                    if gap >= touch:
+                        flagged = False
+                        m = min(m, 0.5 * gap)
                         break
                 if flagged:
                     break
+        if not flagged:
+            anchor = i
+            anchor_margin = m
         out[i] = flagged
 
 
 @njit(cache=True, nogil=True)
-def _spheres_touch(
-    sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M: np.ndarray, d: np.ndarray, touch: float
-) -> bool:
-    """True when one of the placed spheres lo..hi-1 comes within `touch` of the primitive (kind, M, d)."""
-    for s in range(lo, hi):  # noqa: SIM110 - a loop numba compiles; any() over a generator it does not
-        if _point_distance(kind, M, d, sc[s, 0], sc[s, 1], sc[s, 2]) < sph[s, 3] + touch:
-            return True
-    return False
+def _spheres_gap(sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M: np.ndarray, d: np.ndarray) -> float:
+    """Smallest distance between the placed spheres lo..hi-1 and the primitive (kind, M, d), negative inside."""
+    gap = np.inf
+    for s in range(lo, hi):
+        gap = min(gap, _point_distance(kind, M, d, sc[s, 0], sc[s, 1], sc[s, 2]) - sph[s, 3])
+    return gap
 
 
 @njit(cache=True, nogil=True)
