@@ -275,29 +275,48 @@ def test_dense_paths_into_contact_answer_as_fcl(cells: dict[str, PlanningScene],
 
 @pytest.mark.parametrize("name", ["robocup", "warehouse", "mixed"])
 def test_no_point_of_the_robot_moves_farther_than_the_reach_bound(cells: dict[str, PlanningScene], name: str) -> None:
-    """The bound conservative advancement relies on: between two configurations no point of any part (here:
-    every cover sphere's centre and every box corner of every part) moves farther than sum_k |dq_k| reach_k."""
+    """The bounds conservative advancement relies on: between two configurations no point of any part (here:
+    every cover sphere's centre and every box corner of every part) moves farther than sum_k |dq_k| reach_k,
+    and no point of a self pair's part moves, seen from the other part, farther than that sum over the joints
+    between the two."""
     scene = cells[name]
     rng = np.random.default_rng(31)
     qs = random_configs(scene, 300, seed=32)
     moved_q = qs + rng.normal(scale=0.05, size=qs.shape) * rng.uniform(0, 1, size=(300, 1))
-    worst = 0.0
+    worst, worst_pair = 0.0, 0.0
     for a, b in zip(qs, moved_q, strict=True):
         pa, pb = (_part_points(scene, q) for q in (a, b))
-        ratio = np.linalg.norm(pa - pb, axis=1).max() / (np.abs(b - a) @ scene._reach)
-        worst = max(worst, float(ratio))
+        w = np.abs(b - a) * scene._reach
+        moved = np.concatenate(pa) - np.concatenate(pb)
+        worst = max(worst, float(np.linalg.norm(moved, axis=1).max() / w.sum()))
+        # a self pair: the points of one part seen from the other's frame move only through the joints between
+        Fa, Fb = scene._frames_one(a), scene._frames_one(b)
+        for p, (i, k) in enumerate(zip(scene._pa.tolist(), scene._pb.tolist(), strict=True)):
+            bound = float(scene._pair_moves[p] @ w)
+            Ti = [F[scene._object_frame[i]] @ scene._obj_const[i] for F in (Fa, Fb)]
+            rel = [(P[k] - T[:3, 3]) @ T[:3, :3] for P, T in zip((pa, pb), Ti, strict=True)]
+            shift = float(np.linalg.norm(rel[0] - rel[1], axis=1).max())
+            assert shift <= bound + 1e-12, (p, shift, bound)
+            if bound > 0:
+                worst_pair = max(worst_pair, shift / bound)
     assert worst <= 1.0
-    assert worst > 0.3  # and the bound is not loose by orders of magnitude (it would skip nothing)
+    assert worst > 0.3 and worst_pair > 0.3  # and the bounds are not loose by orders of magnitude
 
 
-def _part_points(scene: PlanningScene, q: np.ndarray) -> np.ndarray:
-    """World positions of every cover sphere centre and every bounding-box corner of every robot part at q."""
+def _part_points(scene: PlanningScene, q: np.ndarray) -> list[np.ndarray]:
+    """Per robot part, the world positions of its cover spheres' centres and its bounding-box corners at q."""
     F = scene._frames_one(q)
     out = []
     corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
     for o, f in enumerate(scene._object_frame.tolist()):
         T = F[f] @ scene._obj_const[o]
         lo, hi = scene._sph_start[o], scene._sph_start[o + 1]
-        out.append(scene._sph[lo:hi, :3] @ F[f][:3, :3].T + F[f][:3, 3])
-        out.append((corners * scene._obj_dims[o]) @ T[:3, :3].T + T[:3, 3])
-    return np.vstack(out)
+        out.append(
+            np.vstack(
+                [
+                    scene._sph[lo:hi, :3] @ F[f][:3, :3].T + F[f][:3, 3],
+                    (corners * scene._obj_dims[o]) @ T[:3, :3].T + T[:3, 3],
+                ]
+            )
+        )
+    return out

@@ -374,6 +374,7 @@ class PlanningScene:
         if hasattr(self, "_covers"):  # sphere model: poses and sphere centres in the objects' frames
             self._obj_const = np.ascontiguousarray(np.array(S))
             self._reach = self._joint_reach()
+            self._pair_moves = self._joints_between_pairs()
             self._sph = np.vstack(
                 [np.hstack([c[:, :3] @ T[:3, :3].T + T[:3, 3], c[:, 3:]]) for c, T in zip(self._covers, S, strict=True)]
             )
@@ -396,6 +397,21 @@ class PlanningScene:
                 g = parent[g]
         reach[~self._revolute] = 1.0
         return reach
+
+    def _joints_between_pairs(self) -> np.ndarray:
+        """(pairs, 6) 1.0 where arm joint k moves exactly one part of self pair p (it changes their relative
+        pose), else 0.0: joints that move both (or neither) move the pair rigidly."""
+        parent = {k + 1: f for k, f in self._chain}
+
+        def moved_by(frame: int) -> np.ndarray:
+            out = np.zeros(6)
+            while frame != 0:
+                out[frame - 1] = 1.0
+                frame = parent[frame]
+            return out
+
+        moves = np.array([moved_by(f) for f in self._object_frame.tolist()]).reshape(-1, 6)
+        return np.ascontiguousarray(np.abs(moves[self._pa] - moves[self._pb]).reshape(-1, 6))
 
     def _probe_fast_path(self) -> bool:
         """Check once that python-fcl reads the buffer views as intended (else use plain arrays)."""
@@ -620,6 +636,7 @@ class PlanningScene:
             env.bound,
             _TOUCH_M,
             self._reach,
+            self._pair_moves,
             out,
         )
         return out

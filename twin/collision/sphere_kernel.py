@@ -64,6 +64,7 @@ def flag_configurations(
     env_bound: np.ndarray,
     touch: float,
     reach: np.ndarray,
+    pair_moves: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring).
@@ -76,11 +77,12 @@ def flag_configurations(
     (x, y, z in the frame, r). Self pairs: objects pair_a[p] and pair_b[p]; a pair is clear when the
     spheres of one miss the exact primitive of the other, tried both ways.
 
-    Conservative advancement: a cleared configuration also yields a margin m, a lower bound on every
-    robot-environment distance and on half of every self-pair distance (capped at `_MARGIN_CAP_M`). No point
-    of the robot moves farther than sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any
-    robot point can be from joint k's axis), so the configurations after it that lie closer than m in that
-    measure are clear too, without being evaluated."""
+    Conservative advancement: a cleared configuration also yields a lower bound on every robot-environment
+    distance (capped at `_MARGIN_CAP_M`) and one per self pair. No point of the robot moves farther than
+    sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any robot point can be from joint
+    k's axis), and the parts of a self pair move relative to each other only through the joints between
+    them (pair_moves[p, k] = 1), so the configurations after it that stay within all those bounds are clear
+    too, without being evaluated."""
     n_obj = obj_frame.shape[0]
     n_sph = sph.shape[0]
     n_env = env_kind.shape[0]
@@ -91,14 +93,27 @@ def flag_configurations(
     sc = np.empty((n_sph, 3))
     placed = np.zeros(n_obj, dtype=np.bool_)
     posed = np.zeros(n_obj, dtype=np.bool_)
-    anchor = -1  # the last configuration evaluated and cleared, and its margin
-    anchor_margin = 0.0
+    n_pairs = pair_a.shape[0]
+    anchor = -1  # the last configuration evaluated and cleared, and its clearance bounds
+    anchor_env = 0.0
+    anchor_gap = np.zeros(n_pairs)
+    gap_now = np.zeros(n_pairs)
+    w = np.zeros(6)
     for i in range(qs.shape[0]):
         if anchor >= 0:
             moved = 0.0
             for k in range(6):
-                moved += abs(qs[i, k] - qs[anchor, k]) * reach[k]
-            if moved < anchor_margin - touch:
+                w[k] = abs(qs[i, k] - qs[anchor, k]) * reach[k]
+                moved += w[k]
+            clear = moved < anchor_env - touch
+            p = 0
+            while clear and p < n_pairs:
+                rel = 0.0
+                for k in range(6):
+                    rel += pair_moves[p, k] * w[k]
+                clear = rel < anchor_gap[p] - touch
+                p += 1
+            if clear:
                 out[i] = False
                 continue
         F[0] = 0.0
@@ -167,20 +182,21 @@ def flag_configurations(
             if flagged:
                 break
         if not flagged:
-            # self pairs: both parts move, so half of a pair's distance bounds the motion
-            for p in range(pair_a.shape[0]):
+            # self pairs, each with its own bound (the joints between its parts move them apart)
+            for p in range(n_pairs):
                 a = pair_a[p]
                 b = pair_b[p]
                 dx = oc[a, 0] - oc[b, 0]
                 dy = oc[a, 1] - oc[b, 1]
                 dz = oc[a, 2] - oc[b, 2]
-                far = obj_radius[a] + obj_radius[b] + 2.0 * m
+                far = obj_radius[a] + obj_radius[b] + _MARGIN_CAP_M
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 > far * far:
+                    gap_now[p] = _MARGIN_CAP_M
                     continue
                 gap = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
                 if gap > touch:
-                    m = min(m, 0.5 * gap)
+                    gap_now[p] = gap
                     continue
                 flagged = True
                 for a2, b2 in ((a, b), (b, a)):
@@ -193,13 +209,14 @@ def flag_configurations(
                     gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
                     if gap >= touch:
                         flagged = False
-                        m = min(m, 0.5 * gap)
+                        gap_now[p] = gap
                         break
                 if flagged:
                     break
         if not flagged:
             anchor = i
-            anchor_margin = m
+            anchor_env = m
+            anchor_gap[:] = gap_now
         out[i] = flagged
 
 
