@@ -167,6 +167,7 @@ class PlanningScene:
         self._chain = [(k, self._frame_of[m.joints[m.arm_joints[k]].parent]) for k in order]
         self._revolute = np.array([m.joints[n].type != "prismatic" for n in m.arm_joints])
         self._chain_arr = np.array(self._chain, dtype=np.int64)
+        self._frame_parent = {k + 1: f for k, f in self._chain}  # frame -> its parent frame (0: the root)
         self._all_revolute = bool(self._revolute.all())
         self._F_list: list[np.ndarray] = [np.eye(4)] * 7
         self._gen = np.zeros((6, 4, 4))  # generator of each joint's motion (rotation K or translation)
@@ -380,11 +381,14 @@ class PlanningScene:
             )
 
     def _joint_reach(self) -> np.ndarray:
-        """(6,) for each arm joint, how far any point of a part it moves can be from its axis, m (1 for a
-        prismatic joint): a joint motion dq moves no point farther than sum_k |dq_k| reach_k. Bounded by the
-        chain's link offsets from the joint's child frame (on its axis) to the part's frame, plus the
-        part's centre offset and bounding radius."""
-        parent = {k + 1: f for k, f in self._chain}  # frame -> parent frame
+        """(6,) for each arm joint, how far any point of a part it moves can be from its axis, m: a joint
+        motion dq moves no point farther than sum_k |dq_k| reach_k. Bounded by the chain's link offsets from
+        the joint's child frame (on its axis) to the part's frame, plus the part's centre offset and bounding
+        radius. A chain with a prismatic joint gets no bound (inf: nothing is cleared by advancement), as its
+        link offsets change with the joint."""
+        if not self._all_revolute:
+            return np.full(6, np.inf)
+        parent = self._frame_parent
         offset = {k + 1: float(np.linalg.norm(self._A[k][:3, 3])) for k in range(6)}  # frame origin from parent's
         reach = np.zeros(6)
         for o, f in enumerate(self._object_frame.tolist()):
@@ -395,13 +399,12 @@ class PlanningScene:
                 reach[k] = max(reach[k], path + extent)
                 path += offset[g]
                 g = parent[g]
-        reach[~self._revolute] = 1.0
         return reach
 
     def _joints_between_pairs(self) -> np.ndarray:
         """(pairs, 6) 1.0 where arm joint k moves exactly one part of self pair p (it changes their relative
         pose), else 0.0: joints that move both (or neither) move the pair rigidly."""
-        parent = {k + 1: f for k, f in self._chain}
+        parent = self._frame_parent
 
         def moved_by(frame: int) -> np.ndarray:
             out = np.zeros(6)
