@@ -324,7 +324,6 @@ class NMPCProblem:
         quiet: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "expand": expand}
         self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
         self._warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, dict(quiet, **warm_options))
-        self.fk = fk
         self.build_time_s = time.perf_counter() - t0
         log.debug("nmpc: built NLP %s (%d vars, %d constraints) in %.2f s", shape, self.nx, self.ng, self.build_time_s)
 

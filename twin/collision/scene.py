@@ -309,7 +309,7 @@ class PlanningScene:
             radius.append(self._attached[4])
         self._objects = objects
         self._warm = None
-        self._object_frame = np.array(frames, dtype=int)
+        self._object_frame = np.array(frames, dtype=np.int64)  # int64: the sphere kernel's index type
         self._moving = [i for i, f in enumerate(frames) if f != 0]
         self._moving_objects = [objects[i] for i in self._moving]
         # self pairs at shape level, with their bounding-sphere radius sums
@@ -329,8 +329,7 @@ class PlanningScene:
             covers.append(cover("box", self._attached_size))
         self._covers = covers
         self._sph_start = np.concatenate([[0], np.cumsum([c.shape[0] for c in covers])]).astype(np.int64)
-        self._sph_frame = np.repeat(self._object_frame, [c.shape[0] for c in covers]).astype(np.int64)
-        self._obj_frame = self._object_frame.astype(np.int64)
+        self._sph_frame = np.repeat(self._object_frame, [c.shape[0] for c in covers])
         self._obj_radius = np.array(radius, dtype=float)
         self._obj_env = self._object_frame != 0
         prims = [primitive(s.kind, s.size) for s in self._shapes]
@@ -622,7 +621,7 @@ class PlanningScene:
             self._B,
             self._C,
             self._chain_arr,
-            self._obj_frame,
+            self._object_frame,
             self._obj_const,
             self._obj_kind,
             self._obj_dims,
