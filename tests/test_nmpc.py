@@ -607,3 +607,57 @@ def test_a_shape_first_met_inside_a_step_is_built_mapped_and_plans_as_the_expand
     assert not lazy.inner._problems[shape].expanded and nmpc.inner._problems[shape].expanded
     assert out[0].info["iterations"] == out[1].info["iterations"]
     assert np.allclose(out[0].trajectory.q, out[1].trajectory.q, atol=1e-7)
+
+
+def _solve_log(result: MotionResult) -> list[dict]:
+    return list(result.info.get("nmpc_solve_log", []))
+
+
+def test_boxes_far_from_the_plan_are_left_out_of_the_nlp_and_the_plan_is_the_same(scenes, settings, ctx):
+    """A box the arm never comes near (1 m behind the base) is left out of the NLP (`box_screen_m`): its rows
+    would be inactive, so the plan is the full problem's plan, to solver precision; with `box_screen_m: null`
+    every box is in every NLP."""
+    ts = scenes[1]
+    plans = {}
+    for screen in (0.1, None):
+        planner = make_planner(PlannerBlock(name="nmpc", params=dict(SEED000, box_screen_m=screen)), ctx)
+        scene = build_scene(settings, ts)
+        scene.add_box_bounds("far_away", [-1.3, -0.2, 0.0], [-1.1, 0.2, 0.3])
+        res = plan_with(planner, ts.request, scene, ctx)
+        assert res.status is Status.SUCCESS, res.reason
+        log = _solve_log(res)
+        assert {e["boxes"] for e in log} == ({1} if screen else {2})
+        plans[screen] = res.trajectory.q
+    diff = np.abs(plans[0.1][:2] - plans[None][:2]).max()  # the first solve's executed step
+    assert diff < 1e-3
+
+
+def test_a_solution_that_comes_near_a_box_left_out_is_solved_again_with_it(scenes, settings, ctx):
+    """With a screening distance of 1 mm no box is near the over-the-box initial guess, so the first NLP has
+    none; its solution cuts through the box, and the step solves again with the box: the executed plan keeps
+    every proxy sphere out of the box, as without screening."""
+    ts = scenes[0]
+    planner = make_planner(PlannerBlock(name="nmpc", params=dict(SEED000, box_screen_m=0.001)), ctx)
+    res = plan_with(planner, ts.request, build_scene(settings, ts), ctx)
+    assert res.status is Status.SUCCESS, res.reason
+    log = _solve_log(res)
+    assert log[0]["rounds"] >= 2 and log[0]["boxes"] == 1
+    chk = check_trajectory(
+        res.trajectory, ts, planner.inner.proxy_spheres, build_scene(settings, ts, with_fixtures=False), ctx.kinematics
+    )
+    assert chk.ok and chk.min_sphere_box_m >= 0.0
+
+
+def test_a_box_keeps_its_nlp_slot_while_it_is_in_the_scene(ctx):
+    """Slots are stable (warm-start multipliers stay with their box): a near box takes a free slot, else the
+    slot of a box no longer near, else a new one; a box removed from the scene frees its slot."""
+    planner = NMPCPlanner(NMPCParams(**SEED000, prebuild_boxes=[0]), ctx)
+    box = {n: (n, np.zeros(3), np.ones(3)) for n in "abcd"}
+    slotted, moved = planner._fill_slots([box["a"], box["b"]], [box["a"], box["b"], box["c"]])
+    assert [b[0] for b in slotted] == ["a", "b"] and moved == [0, 1]
+    slotted, moved = planner._fill_slots([box["b"], box["c"]], [box["a"], box["b"], box["c"]])
+    assert [b[0] for b in slotted] == ["c", "b"] and moved == [0]
+    slotted, moved = planner._fill_slots([box["d"]], [box["b"], box["d"]])  # c removed: its slot is free
+    assert [b[0] for b in slotted] == ["d", "b"] and moved == [0]
+    planner._start_goal()
+    assert planner._fill_slots([], [box["a"]]) == ([], [])

@@ -278,8 +278,9 @@ class NMPCProblem:
         for p_, r in seq[-1]:
             rows.append(p_[2] - r + sb - table_z)
         e = pj + ca.mtimes(Rj, track) - goal
-        cost = wpos * ca.dot(e, e) + weights.step * ca.dot(dq, dq) + weights.table_slack * sb * sb
-        stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos], [ca.vertcat(*rows), cost, ca.reshape(Rj, 9, 1)])
+        # the cost is a sum of squares, sum(res^2): its Gauss-Newton Hessian 2 J_res^T J_res is cheap and positive
+        res = ca.vertcat(ca.sqrt(wpos) * e, math.sqrt(weights.step) * dq, math.sqrt(weights.table_slack) * sb)
+        stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos], [ca.vertcat(*rows), res, ca.reshape(Rj, 9, 1)])
         mapped = stage.map(N, "serial")
 
         # ---- the NLP over the horizon, stage-major as before --------------------------------------
@@ -292,7 +293,7 @@ class NMPCProblem:
         QA = ca.horzcat(q0, Q[:, : N - 1]) if N > 1 else q0
         wvec = np.full(N, weights.position)
         wvec[-1] *= weights.terminal_factor
-        stage_rows, stage_cost, stage_R = mapped(QA, Q, S, ca.repmat(p, 1, N), ca.DM(wvec).T)
+        stage_rows, stage_res, stage_R = mapped(QA, Q, S, ca.repmat(p, 1, N), ca.DM(wvec).T)
         g: list[ca.MX] = []
         lbg: list[np.ndarray] = []
         ubg: list[np.ndarray] = []
@@ -309,12 +310,14 @@ class NMPCProblem:
         g.append(-stage_R[8, N - 1] + s_down)  # -R_N[2, 2] (column-major reshape: element 8 is (2, 2))
         lbg.append(np.full(1, facing_down_cos))
         ubg.append(np.full(1, np.inf))
-        J = ca.sum2(stage_cost) + weights.facing_down_slack * s_down * s_down
+        residuals = ca.vertcat(ca.vec(stage_res), math.sqrt(weights.facing_down_slack) * s_down)
+        J = ca.sumsqr(residuals)
 
         self.block_g = sum(int(a.size) for a in lbg[:-1]) // N
         self.ng = sum(int(a.size) for a in lbg)
         self.lbg = np.concatenate(lbg)
         self.ubg = np.concatenate(ubg)
+        self._box_rows_per_box = len(spheres_local) * ns_sub
         self._stage_rows_dq = np.concatenate([np.arange(6) + j * self.block_g for j in range(N)])
         self._stage_rows_ddq = self._stage_rows_dq + 6
         self._stage_rows_dddq = self._stage_rows_dq + 12
@@ -338,6 +341,12 @@ class NMPCProblem:
             blocks[:, 6] = slack
         x[-1] = s_down
         return x
+
+    def box_rows(self, slots: list[int]) -> np.ndarray:
+        """Indices into g of the rows of box slots `slots`, every stage."""
+        per, N = self._box_rows_per_box, self.shape.horizon
+        within = np.concatenate([18 + b * per + np.arange(per) for b in slots]) if slots else np.zeros(0, int)
+        return (np.arange(N)[:, None] * self.block_g + within[None, :]).reshape(-1).astype(int)
 
     def knots(self, x: np.ndarray) -> np.ndarray:
         """(N, 6) q_1..q_N of a decision vector."""

@@ -78,6 +78,13 @@ class NMPCParams(BaseModel):
         " the config has fixtures that perception reports (`known: false`; warehouse: the wall). Another count is"
         " built on first use, inside that (slower) step",
     )
+    box_screen_m: float | None = Field(
+        0.1,
+        gt=0,
+        description="boxes farther than this from every proxy sphere along the plan a solve starts from (the shifted"
+        " last plan or the initial guess) are left out of its NLP; a solution that comes within half of it of a box"
+        " left out is solved again with that box. None: every box in every NLP",
+    )
     constraint_substeps: int = Field(2, ge=1, le=8, description="box constraint points per step (1 = knots only)")
     table_z_m: float = Field(0.0, description="table top height")
     table_clearance_m: float = Field(0.0, ge=0, description="sphere bottoms above the table (soft)")

@@ -18,6 +18,14 @@ Why these choices:
   shape first met inside a step is built mapped (a RoboCup run meets one per count of objects left on
   the table: 57 s of building became 2 s). Each solve only changes parameters and is
   warm-started from the previous solution shifted by the executed steps, primal and dual.
+* An NLP holds only the boxes a proxy sphere comes within `box_screen_m` (0.1 m) of along the plan the solve
+  starts from (the shifted last plan, or the initial guess): rows of a box far away are inactive at the
+  solution and only cost evaluations (a RoboCup table holds up to 7 boxes: x 11 spheres x 2 check points x
+  30 stages). A solution that comes within half that distance of a box left out is solved again with the box,
+  so every accepted plan is a solution of the problem with every box, and the numpy check below checks it
+  against every box. The boxes sit in a fixed number of slots (unused ones hold a box far away; a box keeps
+  its slot while it is in the scene) so a change of which boxes are near keeps the NLP's shape and the warm
+  start.
 * The perceived box is extended over the whole workspace in y, so the only way is over it, and a straight
   initial guess through the box starts IPOPT where the box distance has zero gradient. The first solve is
   therefore seeded over the box: lift, transfer, lower, through IK waypoints (measured on the bench
@@ -87,6 +95,7 @@ from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, Weights, cac
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.spheres import (
     Box,
+    box_gaps,
     clearance,
     drop_covered,
     object_spheres,
@@ -102,6 +111,9 @@ if TYPE_CHECKING:
 __all__ = ["NMPCPlanner"]
 
 log = logging.getLogger("twin")
+
+# what fills an NLP's unused box slots: a 2 cm box 100 m below the base, whose rows are never near active
+_FAR_BOX: Box = ("", np.array([0.0, 0.0, -100.0]), np.array([0.0, 0.0, -100.0]))
 
 # the last plan beyond a segment is checked joint-linearly at this resolution (rad): a coarse early warning
 # (the segment itself is checked at the configured resolution), for the knots the arm needs to stop
@@ -124,11 +136,12 @@ class NMPCPlanner:
         self._problems: dict[ProblemShape, NMPCProblem] = {}
         self._request: MotionRequest | None = None
         self._scene: PlanningScene | None = None
-        self._start_goal()
         P = self.params
         expected = P.prebuild_boxes
         if expected is None:  # perception reports one box per fixture the planners do not know
             expected = [sum(not f.known for f in context.settings.world.fixtures)]
+        self._expected_slots = max(expected, default=0)
+        self._start_goal()
         for nb in sorted(set(expected)):  # built here, not in the first (timed) step
             self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps), expand=True)
 
@@ -247,6 +260,10 @@ class NMPCPlanner:
         self._plan_idx = 0  # index of the knot the robot should be at now
         self._ws: tuple[ProblemShape, SolveOutput] | None = None  # last converged solve, for warm start
         self._ws_offset = 0
+        # the box in each NLP box slot ("" = free), kept from solve to solve of a goal; a goal starts with the
+        # slots of the shape the planner expects (`prebuild_boxes`), so its plans do not depend on earlier goals
+        self._slots: list[str] = []
+        self._box_slots = self._expected_slots
         self._dq_prev = np.zeros(6)  # the last executed step (knot to knot): the start is at rest
         self._dq_prev2 = np.zeros(6)  # the step before it
         self._started = False  # whether step() has seen the measured start
@@ -382,33 +399,62 @@ class NMPCPlanner:
             why = f"a proxy sphere is {-clear.min():.3f} m inside an obstacle box {when}"
             return self._end(Status.INVALID_START, why, q)
 
-        shape = ProblemShape(P.horizon, len(boxes), obj.shape[0], P.constraint_substeps)
-        if shape not in self._problems:
-            log.info("nmpc: building the NLP for %s inside a step (not prebuilt: `prebuild_boxes`)", shape)
-        prob = self.problem(shape)
-        p = self._parameters(q, boxes, obj)
-        lim = self.kin.joint_limits
-        bounds = prob.bounds(lim[:, 0], lim[:, 1], step, dstep, jstep, facing_down=P.facing_down)
-        if self._ws is not None and self._ws[0] == shape:
-            prev = self._ws[1]
-            k = self._ws_offset
-            x0 = prob.shift(prev.x, prob.block_x, k)
-            lam_x0 = prob.shift(prev.lam_x, prob.block_x, k)
-            lam_g0 = prob.shift(prev.lam_g, prob.block_g, k)
-            sol = prob.solve(x0, p, bounds, lam_x0=lam_x0, lam_g0=lam_g0)
+        # the NLP holds the boxes near the plan the solve starts from (`box_screen_m`), in a fixed number of slots
+        # (unused ones hold a far-away box) so that the shape, and with it the warm start, survives a change of
+        # which boxes are near; a solution that comes close to a box left out is solved again with it
+        guess: np.ndarray | None = None
+        if self._ws is not None:
+            last = self._problems[self._ws[0]]
+            ref = last.knots(last.shift(self._ws[1].x, last.block_x, self._ws_offset))
         else:
             guess, self._guess_kind = initial_guess(
                 self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
             )
-            x0 = prob.pack_x(guess, guess_slack(self.kin, guess, sph, P))
-            sol = prob.solve(x0, p, bounds)
+            ref = guess
+        near = self._near_boxes(np.vstack([q[None], ref]), sph, boxes, P.box_screen_m)
+        lim = self.kin.joint_limits
+        spent, iterations, rounds = 0.0, 0, 0
+        while True:
+            rounds += 1
+            slotted, moved = self._fill_slots(near, boxes)
+            shape = ProblemShape(P.horizon, len(slotted), obj.shape[0], P.constraint_substeps)
+            if shape not in self._problems:
+                log.info("nmpc: building the NLP for %s inside a step (not prebuilt: `prebuild_boxes`)", shape)
+            prob = self.problem(shape)
+            p = self._parameters(q, slotted, obj)
+            bounds = prob.bounds(lim[:, 0], lim[:, 1], step, dstep, jstep, facing_down=P.facing_down)
+            if self._ws is not None and self._ws[0] == shape:
+                prev = self._ws[1]
+                k = self._ws_offset
+                x0 = prob.shift(prev.x, prob.block_x, k)
+                lam_x0 = prob.shift(prev.lam_x, prob.block_x, k)
+                lam_g0 = prob.shift(prev.lam_g, prob.block_g, k)
+                lam_g0[prob.box_rows(moved)] = 0.0  # a slot that now holds another box starts without multipliers
+                sol = prob.solve(x0, p, bounds, lam_x0=lam_x0, lam_g0=lam_g0)
+            else:
+                if guess is None:
+                    guess, self._guess_kind = initial_guess(
+                        self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
+                    )
+                x0 = prob.pack_x(guess, guess_slack(self.kin, guess, sph, P))
+                sol = prob.solve(x0, p, bounds)
+            spent += sol.solve_time_s
+            iterations += max(sol.iterations, 0)
+            left = [b for b in boxes if all(b[0] != n[0] for n in near)]
+            missed = self._near_boxes(sol.q, sph, left, None if P.box_screen_m is None else P.box_screen_m / 2)
+            if not sol.converged or not missed:
+                break
+            names = {b[0] for b in near + missed}
+            near = [b for b in boxes if b[0] in names]
         self._solves += 1
         entry = {
             "solve": self._solves,
             "warm": sol.warm,
-            "time_s": sol.solve_time_s,
+            "time_s": spent,
             "status": sol.status,
-            "iterations": sol.iterations,
+            "iterations": iterations,
+            "boxes": len(near),
+            "rounds": rounds,
         }
         self._solve_log.append(entry)
 
@@ -424,7 +470,7 @@ class NMPCPlanner:
         else:
             entry["rejected"] = problem
             log.info("nmpc: solve %d rejected (%s)", self._solves, problem)
-            if self._plan is None and not sol.warm:
+            if self._plan is None and not sol.warm and guess is not None:
                 # the first solve of a goal failed: its initial guess is itself a plan over the box, at
                 # reduced speed; it is followed (as the "last feasible plan") only if it passes the same check
                 path = np.vstack([q[None], guess])
@@ -439,7 +485,7 @@ class NMPCPlanner:
             self._fallbacks += 1
         knots[0] = q
         entry["fallback"] = fallback
-        return self._execute(knots, dict(entry, cost=sol.cost), sol.solve_time_s, err)
+        return self._execute(knots, dict(entry, cost=sol.cost), spent, err)
 
     # ---- executing, checked -------------------------------------------------------------------------
     def _execute(
@@ -550,6 +596,36 @@ class NMPCPlanner:
         for s in obj:
             parts += [s[:3], [s[3]]]
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1) for a in parts])
+
+    def _fill_slots(self, near: list[Box], boxes: list[Box]) -> tuple[list[Box], list[int]]:
+        """The boxes of the NLP's slots, and which slots changed box: a box keeps its slot while it is in the
+        scene (its multipliers stay where they were); a near box without one takes a free slot, or the slot of
+        a box no longer near, or a new slot (the planner's slot count only grows: one NLP shape, warm starts)."""
+        by_name = {b[0]: b for b in boxes}
+        near_names = {b[0] for b in near}
+        old = list(self._slots) + [""] * (self._box_slots - len(self._slots))
+        slots = [n if n in by_name else "" for n in old]
+        for name in (b[0] for b in near):
+            if name in slots:
+                continue
+            free = [i for i, n in enumerate(slots) if n == ""] or [
+                i for i, n in enumerate(slots) if n not in near_names
+            ]
+            if free:
+                slots[free[0]] = name
+            else:
+                slots.append(name)
+        self._slots, self._box_slots = slots, len(slots)
+        moved = [i for i, n in enumerate(slots) if i >= len(old) or n != old[i]]
+        return [by_name[n] if n else _FAR_BOX for n in slots], moved
+
+    def _near_boxes(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], within: float | None) -> list[Box]:
+        """The boxes the spheres come within `within` m of along the knot path (all of them when None), in order."""
+        if within is None or not boxes:
+            return list(boxes)
+        P = self.params
+        gaps = box_gaps(self.kin, knots, sph, boxes, box_margin_m=P.box_margin_m, substeps=P.constraint_substeps)
+        return [b for b, g in zip(boxes, gaps, strict=True) if g < within]
 
     def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
         """Why the knot path (m+1, 6) (knots[0] = the current state) breaks a hard constraint, or None."""

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CHECK_TOL_M",
     "Box",
+    "box_gaps",
     "clearance",
     "drop_covered",
     "object_spheres",
@@ -158,3 +159,16 @@ def violation(
         if dense.min() < 0.0:
             return f"a proxy sphere enters an obstacle box by {-dense.min():.4f} m between knots"
     return None
+
+
+def box_gaps(
+    kin: UR5e, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
+) -> np.ndarray:
+    """(n_boxes,) the smallest guaranteed clearance (m) of the spheres from each box (grown by the margin) along
+    the knot path (m+1, 6) at `substeps` check points per step: the NLP's box rows (`pair_clearance`), per box."""
+    if not boxes:
+        return np.zeros(0)
+    m = box_margin_m
+    seq = np.vstack([knots[:1], subdivide(knots, substeps)])
+    centres = sphere_positions(kin, seq, sph)
+    return np.array([float(pair_clearance(centres, sph[:, 4], lo - m, hi + m).min()) for _, lo, hi in boxes])
