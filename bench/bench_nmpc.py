@@ -14,7 +14,9 @@ then the FCL re-check of the whole arm against the full scene). Prints, per conf
 - the independent FCL check of every executed trajectory: smallest proxy-sphere distance to the perceived
   box and smallest robot/cube distance to the table, and how many trajectories violate either;
 - braking steps at the goal and the peak joint acceleration at the knots,
-- the first solve from the over-the-box guess vs the straight guess (`--guesses N` scenes).
+- the first solve from the over-the-box guess vs the straight guess (`--guesses N` scenes),
+- the planner's IPOPT and other solvers side by side on the same recorded solves (`--alternatives N`
+  transfers; see bench/nmpc_alternatives.py for what each alternative is).
 """
 
 from __future__ import annotations
@@ -163,12 +165,19 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--config", choices=[*CONFIGS, "both"], default="both")
     ap.add_argument("--guesses", type=int, default=20, help="scenes for the initial-guess comparison (0: skip)")
+    ap.add_argument("--alternatives", type=int, default=10, help="transfers replayed through other solvers (0: skip)")
     args = ap.parse_args()
     names = list(CONFIGS) if args.config == "both" else [args.config]
     for name in names:
         run(name, CONFIGS[name], args.scenes, args.seed)
     if args.guesses:
         guess_comparison(args.guesses, args.seed)
+    if args.alternatives:
+        from nmpc_alternatives import compare  # beside this script
+
+        compare(
+            load_config(PROJECT_ROOT / "configs" / "warehouse.yaml"), CONFIGS["seed000"], args.alternatives, args.seed
+        )
 
 
 if __name__ == "__main__":

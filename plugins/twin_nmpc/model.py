@@ -281,6 +281,9 @@ class NMPCProblem:
         # the cost is a sum of squares, sum(res^2): its Gauss-Newton Hessian 2 J_res^T J_res is cheap and positive
         res = ca.vertcat(ca.sqrt(wpos) * e, math.sqrt(weights.step) * dq, math.sqrt(weights.table_slack) * sb)
         stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos], [ca.vertcat(*rows), res, ca.reshape(Rj, 9, 1)])
+        # (qa, qb, s, p, w) -> (box and table rows, cost residuals, R(qb) column-major): kept for other forms of
+        # the same problem (bench/nmpc_alternatives.py)
+        self.stage_function = stage
         mapped = stage.map(N, "serial")
 
         # ---- the NLP over the horizon, stage-major as before --------------------------------------
