@@ -402,15 +402,18 @@ class NMPCPlanner:
         # the NLP holds the boxes near the plan the solve starts from (`box_screen_m`), in a fixed number of slots
         # (unused ones hold a far-away box) so that the shape, and with it the warm start, survives a change of
         # which boxes are near; a solution that comes close to a box left out is solved again with it
+        def cold_guess() -> np.ndarray:
+            guess, self._guess_kind = initial_guess(
+                self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
+            )
+            return guess
+
         guess: np.ndarray | None = None
         if self._ws is not None:
             last = self._problems[self._ws[0]]
             ref = last.knots(last.shift(self._ws[1].x, last.block_x, self._ws_offset))
         else:
-            guess, self._guess_kind = initial_guess(
-                self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
-            )
-            ref = guess
+            ref = guess = cold_guess()
         near = self._near_boxes(np.vstack([q[None], ref]), sph, boxes, P.box_screen_m)
         lim = self.kin.joint_limits
         spent, iterations, rounds = 0.0, 0, 0
@@ -433,15 +436,14 @@ class NMPCPlanner:
                 sol = prob.solve(x0, p, bounds, lam_x0=lam_x0, lam_g0=lam_g0)
             else:
                 if guess is None:
-                    guess, self._guess_kind = initial_guess(
-                        self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
-                    )
+                    guess = cold_guess()
                 x0 = prob.pack_x(guess, guess_slack(self.kin, guess, sph, P))
                 sol = prob.solve(x0, p, bounds)
             spent += sol.solve_time_s
             iterations += max(sol.iterations, 0)
+            # every round adds a box left out, so this ends after at most len(boxes) + 1 rounds
             left = [b for b in boxes if all(b[0] != n[0] for n in near)]
-            missed = self._near_boxes(sol.q, sph, left, None if P.box_screen_m is None else P.box_screen_m / 2)
+            missed = [] if P.box_screen_m is None else self._near_boxes(sol.q, sph, left, P.box_screen_m / 2)
             if not sol.converged or not missed:
                 break
             names = {b[0] for b in near + missed}
