@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from twin.config import CameraSettings
+from twin.config.schema import ExtrinsicErrorSettings
 
 __all__ = [
     "Intrinsics",
@@ -22,7 +23,9 @@ __all__ = [
     "gl_projection_matrix",
     "gl_view_matrix",
     "look_at",
+    "mount_error",
     "point_cloud",
+    "true_camera_pose",
 ]
 
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -146,6 +149,28 @@ def camera_pose(cam: CameraSettings, T_world_tool0: np.ndarray | None = None) ->
     T = np.eye(4)
     T[:3, 3] = cam.wrist_offset_m
     return np.asarray(T_world_tool0) @ T
+
+
+def mount_error(err: ExtrinsicErrorSettings, seed: int) -> np.ndarray:
+    """(4, 4) the camera's real pose in its configured one: a translation of `err.translation_m` along, and a
+    rotation of `err.rotation_deg` about, unit directions drawn from `seed` (exactly the identity when both
+    are 0, so a run without the fault is the nominal run)."""
+    T = np.eye(4)
+    if err.translation_m == 0.0 and err.rotation_deg == 0.0:
+        return T
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng([int(seed), 0xCA3E])
+    t_dir, axis = rng.normal(size=3), rng.normal(size=3)
+    T[:3, 3] = err.translation_m * t_dir / np.linalg.norm(t_dir)
+    T[:3, :3] = Rotation.from_rotvec(np.deg2rad(err.rotation_deg) * axis / np.linalg.norm(axis)).as_matrix()
+    return T
+
+
+def true_camera_pose(cam: CameraSettings, seed: int, T_world_tool0: np.ndarray | None = None) -> np.ndarray:
+    """(4, 4) where the camera really is: the configured pose (`camera_pose`) times its mount error for scene
+    `seed` (`camera.extrinsic_error`). Rendering and judging use this; perception never does."""
+    return camera_pose(cam, T_world_tool0) @ mount_error(cam.extrinsic_error, seed)
 
 
 OVERVIEW_EYE = np.array([-1.45, -1.35, 1.15])

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.camera import OVERVIEW_EYE, OVERVIEW_TARGET, Intrinsics, camera_pose, look_at
+from twin.camera import OVERVIEW_EYE, OVERVIEW_TARGET, Intrinsics, look_at, true_camera_pose
 from twin.config import Settings
 from twin.errors import ConfigError
 
@@ -21,7 +21,7 @@ def render_views(settings: Settings, *, settle_s: float = 0.5) -> dict[str, np.n
     intr = Intrinsics.from_settings(cam)
     with World(settings, seed=settings.seed, gui=False) as world:
         world.step(int(round(settle_s * settings.world.physics_hz)))
-        T_cam = camera_pose(cam, world.link_matrix("tool0"))
+        T_cam = true_camera_pose(cam, world.seed, world.link_matrix("tool0"))
         views = {"camera": world.render(T_cam, intr, near_m=cam.near_m, far_m=cam.far_m).rgb}
         wide = Intrinsics(
             cam.width, cam.height, cam.width / 2.0 / np.tan(np.radians(30)), cam.width / 2.0 / np.tan(np.radians(30))

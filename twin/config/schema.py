@@ -172,6 +172,20 @@ class DepthNoiseSettings(ConfigModel):
     rgb_noise_std: float = Field(2.0, ge=0)
 
 
+class ExtrinsicErrorSettings(ConfigModel):
+    """A camera that is not mounted where the config says (a fault model; off by default).
+
+    The fixed camera's pose, or the wrist camera's hand-eye transform, is off by a translation of
+    `translation_m` along, and a rotation of `rotation_deg` about, directions drawn from the scene seed (in
+    the camera frame). Rendering uses the real pose; perception is not told: what it assumes is the config's
+    pose, unless an ArUco calibration measures the real one (a fixed camera with `perception.extrinsics`
+    auto or aruco).
+    """
+
+    translation_m: float = Field(0.0, ge=0, le=0.2)
+    rotation_deg: float = Field(0.0, ge=0, le=20.0)
+
+
 class CameraSettings(ConfigModel):
     """RGB-D camera: D435i-like intrinsics at 640x480.
 
@@ -190,6 +204,7 @@ class CameraSettings(ConfigModel):
     target: Vec3 = (-0.30, 0.0, 0.0)
     wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
     noise: DepthNoiseSettings = Field(default_factory=DepthNoiseSettings)
+    extrinsic_error: ExtrinsicErrorSettings = Field(default_factory=ExtrinsicErrorSettings)
     # wrist mount: joint angles where the camera looks straight down from ~0.72 m above the table centre
     # (image x along base +y), and the settling pause before a frame is taken there (seed 002: 3 s)
     capture_pose: Q6 = (-0.2518, -1.2366, 0.4574, -0.7916, -1.5708, -0.2518)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from twin.camera import Intrinsics, RGBDFrame, camera_pose
+from twin.camera import Intrinsics, RGBDFrame, camera_pose, true_camera_pose
 from twin.config import Settings
 from twin.perception.noise import apply_sensor_noise
 from twin.timing import stage
@@ -88,10 +88,10 @@ def capture_frame(
     q = world.joint_positions()
     if cam.mount == "wrist":
         T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
-        T_render = world.link_matrix("tool0") @ wrist_camera_offset(settings)
+        T_render = true_camera_pose(cam, world.seed, world.link_matrix("tool0"))
     else:
         T_nominal = camera_pose(cam)
-        T_render = T_nominal
+        T_render = true_camera_pose(cam, world.seed)
     intr = Intrinsics.from_settings(cam)
     t2 = time.perf_counter()
     clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)

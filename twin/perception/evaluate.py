@@ -25,10 +25,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from twin.camera import camera_pose
+from twin.camera import true_camera_pose
 from twin.config import Settings
 from twin.perception.aruco import Calibration, calibrate, transform_error
-from twin.perception.capture import Capture, capture_frame, noise_rng, wrist_camera_offset
+from twin.perception.capture import Capture, capture_frame, noise_rng
 from twin.perception.detection import detection_label, with_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.tasks.robocup.perception import CYLINDERS
@@ -127,9 +127,8 @@ def _box_dict(b: BoxBounds | None) -> dict[str, float] | None:
 
 
 def _true_camera(world: World, settings: Settings) -> np.ndarray:
-    if settings.camera.mount == "wrist":
-        return world.link_matrix("tool0") @ wrist_camera_offset(settings)
-    return camera_pose(settings.camera)
+    tool0 = world.link_matrix("tool0") if settings.camera.mount == "wrist" else None
+    return true_camera_pose(settings.camera, world.seed, tool0)
 
 
 @dataclass(frozen=True)
