@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twin.camera import camera_pose, mount_error, true_camera_pose
+from twin.camera import Intrinsics, RGBDFrame, camera_pose, mount_error, true_camera_pose
 from twin.config import load_config
 from twin.errors import ConfigError
 from twin.perception.capture import capture_frame
+from twin.perception.noise import apply_sensor_noise, depth_noise_rms
 from twin.tasks.warehouse.perception import perceive_warehouse
 from twin.world import World
 
@@ -60,3 +61,20 @@ def test_a_1cm_camera_extrinsic_error_moves_perceived_positions_by_1cm():
 def test_a_mount_error_beyond_its_range_is_a_config_error():
     with pytest.raises(ConfigError, match="translation_m"):
         _warehouse(translation_m=-0.01)
+
+
+def test_the_noise_scale_multiplies_the_measured_depth_rms_on_a_flat_patch():
+    """A flat wall 1 m away: the measured RMS is the model's (~3.8 mm) at scale 1 and three times it at 3;
+    scale 1 is bit-for-bit the model without the knob."""
+    noise = load_config("warehouse").camera.noise
+    flat = RGBDFrame(np.zeros((120, 160, 3), np.uint8), np.full((120, 160), 1.0), Intrinsics(160, 120, 150.0, 150.0))
+    rms = {}
+    for scale in (1.0, 3.0):
+        n = noise.model_copy(update={"scale": scale, "dropout_fraction": 0.0})
+        d = apply_sensor_noise(flat, n, np.random.default_rng(7)).depth_m
+        rms[scale] = float(np.sqrt(np.mean((d[d > 0] - 1.0) ** 2)))
+    assert rms[1.0] == pytest.approx(float(depth_noise_rms(1.0, noise)), rel=0.05)
+    assert rms[3.0] / rms[1.0] == pytest.approx(3.0, rel=0.03)
+    z = np.linspace(0.3, 2.0, 7)
+    plain = z * z * noise.subpixel / (noise.focal_px * noise.baseline_m)
+    assert np.array_equal(depth_noise_rms(z, noise), plain)

@@ -160,6 +160,12 @@ class DepthNoiseSettings(ConfigModel):
     """
 
     enabled: bool = True
+    scale: float = Field(
+        1.0,
+        ge=0,
+        description="multiplies the depth noise RMS (a fault-model knob: 2 is a sensor twice as noisy as this"
+        " model's best case, as on matte, textureless objects)",
+    )
     subpixel: float = Field(0.08, ge=0)
     baseline_m: float = Field(0.05, gt=0)
     focal_px: float = Field(424.0, gt=0)

@@ -18,9 +18,9 @@ __all__ = ["apply_sensor_noise", "depth_noise_rms"]
 
 
 def depth_noise_rms(z_m: np.ndarray | float, noise: DepthNoiseSettings) -> np.ndarray:
-    """RMS depth error (m) at depth z (m): z^2 * subpixel / (focal_px * baseline_m)."""
+    """RMS depth error (m) at depth z (m): z^2 * subpixel / (focal_px * baseline_m), times `noise.scale`."""
     z = np.asarray(z_m, dtype=float)
-    return z * z * noise.subpixel / (noise.focal_px * noise.baseline_m)
+    return z * z * (noise.subpixel * noise.scale) / (noise.focal_px * noise.baseline_m)
 
 
 def _depth_edges(depth: np.ndarray, threshold_m: float) -> np.ndarray:
