@@ -78,3 +78,45 @@ def test_the_noise_scale_multiplies_the_measured_depth_rms_on_a_flat_patch():
     z = np.linspace(0.3, 2.0, 7)
     plain = z * z * noise.subpixel / (noise.focal_px * noise.baseline_m)
     assert np.array_equal(depth_noise_rms(z, noise), plain)
+
+
+def _dynamics(world) -> dict[str, tuple[float, float]]:
+    import pybullet as pb
+
+    out = {}
+    for o in world.objects():
+        info = pb.getDynamicsInfo(o.id, -1, physicsClientId=world.client_id)
+        out[o.name] = (info[0], info[1])
+    return out
+
+
+def test_object_mass_and_friction_scales_are_drawn_per_object_from_the_seed():
+    """Each object's mass and friction are its catalogue values times a factor from the configured range,
+    drawn per object from the scene seed, one stream per knob; at [1, 1] nothing changes."""
+    with World(load_config("robocup"), 3, renderer=RENDERER) as w:
+        nominal = _dynamics(w)
+        assert all(not v for v in w.object_scales.values())
+    fixed = load_config(
+        "robocup", overrides=["world.objects.mass_scale=[1.5, 1.5]", "world.objects.friction_scale=[0.7, 0.7]"]
+    )
+    with World(fixed, 3, renderer=RENDERER) as w:
+        for name, (m, f) in _dynamics(w).items():
+            assert m == pytest.approx(1.5 * nominal[name][0]) and f == pytest.approx(0.7 * nominal[name][1])
+    ranged = load_config("robocup", overrides=["world.objects.mass_scale=[0.5, 2.0]"])
+    both = load_config(
+        "robocup", overrides=["world.objects.mass_scale=[0.5, 2.0]", "world.objects.friction_scale=[0.5, 1.0]"]
+    )
+    scales = []
+    for settings in (ranged, ranged, both):
+        with World(settings, 3, renderer=RENDERER) as w:
+            scales.append({n: v.get("mass") for n, v in w.object_scales.items()})
+    masses = list(scales[0].values())
+    assert all(0.5 <= m <= 2.0 for m in masses) and len(set(masses)) == len(masses) > 1
+    assert scales[0] == scales[1] == scales[2]  # same seed, same draws; the friction knob leaves them alone
+
+
+def test_a_scale_range_must_be_positive_and_ordered():
+    with pytest.raises(ConfigError, match="mass_scale"):
+        load_config("robocup", overrides=["world.objects.mass_scale=[2.0, 1.0]"])
+    with pytest.raises(ConfigError, match="friction_scale"):
+        load_config("robocup", overrides=["world.objects.friction_scale=[0, 1]"])

@@ -240,6 +240,7 @@ class World:
         boxes = self._obstacle_boxes() if any(spec.count for spec in objects.items) else []
         for sp in sample_layout(objects, self.seed, boxes):
             self._load_object(sp)
+        self._vary_object_physics()
         self._apply_initial_commands()
         self._steps = 0
 
@@ -371,6 +372,27 @@ class World:
             pb.changeVisualShape(bid, -1, rgbaColor=list(color_rgba(sp.color)), physicsClientId=c)
         self._objects[bid] = sp
         self._bodies[sp.name] = bid
+
+    def _vary_object_physics(self) -> None:
+        """Each object's mass (and inertia) and friction times a factor drawn uniformly from
+        `world.objects.mass_scale` / `friction_scale`, per object in config order, from the scene seed (one
+        stream per knob, so switching one on leaves the other's draws alone). A fault model: the catalogue
+        the task knows is unchanged, and at [1, 1] nothing is drawn or changed. `object_scales` keeps them."""
+        cfg, c = self.settings.world.objects, self._cid
+        self.object_scales: dict[str, dict[str, float]] = {sp.name: {} for sp in self._objects.values()}
+        for stream, (lo, hi), knob in ((1, cfg.mass_scale, "mass"), (2, cfg.friction_scale, "friction")):
+            if lo == hi == 1.0:
+                continue
+            rng = np.random.default_rng([self.seed, 0x0B1E, stream])
+            for bid, sp in self._objects.items():
+                f = float(rng.uniform(lo, hi))
+                info = pb.getDynamicsInfo(bid, -1, physicsClientId=c)
+                if knob == "mass":
+                    inertia = [f * v for v in info[2]]
+                    pb.changeDynamics(bid, -1, mass=f * info[0], localInertiaDiagonal=inertia, physicsClientId=c)
+                else:
+                    pb.changeDynamics(bid, -1, lateralFriction=f * info[1], physicsClientId=c)
+                self.object_scales[sp.name][knob] = f
 
     def _apply_initial_commands(self) -> None:
         """Robot at home, motors holding home, gripper open: the state `reset()` returns to."""

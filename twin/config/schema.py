@@ -102,12 +102,24 @@ class ObjectSettings(ConfigModel):
     lying_probability: float = Field(0.0, ge=0, le=1)
     random_yaw: bool = True
     items: list[ObjectSpec] = Field(default_factory=list)
+    # fault models (off at [1, 1]): each object's mass and friction are its catalogue values times a factor
+    # drawn uniformly from this range, per object, from the scene seed; what the task and the planners are
+    # told (the catalogue) does not change
+    mass_scale: tuple[float, float] = (1.0, 1.0)
+    friction_scale: tuple[float, float] = (1.0, 1.0)
 
     @field_validator("region_x", "region_y")
     @classmethod
     def _ordered(cls, v: tuple[float, float]) -> tuple[float, float]:
         if v[0] >= v[1]:
             raise ValueError(f"range must be [min, max] with min < max, got {list(v)}")
+        return v
+
+    @field_validator("mass_scale", "friction_scale")
+    @classmethod
+    def _scale_range(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 < v[0] <= v[1]:
+            raise ValueError(f"a scale range must be [min, max] with 0 < min <= max, got {list(v)}")
         return v
 
 
