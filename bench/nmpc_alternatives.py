@@ -201,9 +201,10 @@ def _hpipm_options(form: OCPForm) -> dict[str, Any]:
     return dict(form.structure, error_on_fail=False, hpipm=hpipm)
 
 
-def _solvers(planner: Any, shape: model.ProblemShape) -> dict[str, tuple[OCPForm, Any, Any, bool]]:
-    """name -> (its form, cold solver, warm solver, takes dual warm start)."""
-    form, fform = OCPForm(planner, shape), OCPForm(planner, shape, state_rows_first=True)
+def _solvers(planner: Any, form: OCPForm) -> dict[str, tuple[OCPForm, Any, Any, bool]]:
+    """name -> (its form, cold solver, warm solver, takes dual warm start); `form` has the [gap_k, path_k]
+    order, fatrop gets its own."""
+    fform = OCPForm(planner, form.prob.shape, state_rows_first=True)
     quiet = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"}
     cold_o, warm_o = planner._ipopt_options(cold=True), planner._ipopt_options(cold=False)
     out: dict[str, tuple[OCPForm, Any, Any, bool]] = {
@@ -269,25 +270,25 @@ def compare(settings: Settings, params: dict[str, Any], n: int, seed: int) -> No
         0,
     )
     k = int(params.get("execute_steps", 1))
-    for name, (form, cold, warm, duals) in _solvers(planner, shape).items():
+    for name, (solver_form, cold, warm, duals) in _solvers(planner, form).items():
         tw, tc, its, dev, fails, prev = [], [], [], [], 0, None
         for r in recs:
-            p = form.parameters(r)
+            p = solver_form.parameters(r)
             use_warm = r.warm and prev is not None
-            args: dict[str, Any] = {"p": p, "lbg": form.lbg, "ubg": form.ubg}  # no variable bounds
+            args: dict[str, Any] = {"p": p, "lbg": solver_form.lbg, "ubg": solver_form.ubg}  # no variable bounds
             if use_warm:
                 z0 = prev[0]
                 for _ in range(k):
-                    z0 = form.shift_z(z0)
+                    z0 = solver_form.shift_z(z0)
                 args["x0"] = z0
                 if duals:
                     lam = prev[1]
                     for _ in range(k):
-                        lam = form.shift_g(lam)
+                        lam = solver_form.shift_g(lam)
                     args["lam_g0"] = lam
             else:
-                args["x0"] = form.pack(r)
-            args["x0"][:18] = form.start_state(r.p)
+                args["x0"] = solver_form.pack(r)
+            args["x0"][:18] = solver_form.start_state(r.p)
             solver = warm if use_warm else cold
             t0 = time.perf_counter()
             sol = solver(**args)
@@ -299,7 +300,7 @@ def compare(settings: Settings, params: dict[str, Any], n: int, seed: int) -> No
             its.append(int(st.get("iter_count", -1)))
             z = np.asarray(sol["x"]).reshape(-1)
             prev = (z, np.asarray(sol["lam_g"]).reshape(-1)) if ok else None
-            dev.append(float(np.abs(form.knots(z)[1] - r.q[1]).max()))
+            dev.append(float(np.abs(solver_form.knots(z)[1] - r.q[1]).max()))
         line(name, tw or [math.nan], tc or [math.nan], its, dev, fails)
     # one QP alone: the floor of a real-time iteration with these tools
     qp_times = []

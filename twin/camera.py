@@ -12,8 +12,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 
-from twin.config import CameraSettings
-from twin.config.schema import ExtrinsicErrorSettings
+from twin.config import CameraSettings, ExtrinsicErrorSettings
 
 __all__ = [
     "Intrinsics",

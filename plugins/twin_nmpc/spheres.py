@@ -147,13 +147,10 @@ def violation(
     if np.any(knots < lim[:, 0] - 1e-9) or np.any(knots > lim[:, 1] + 1e-9):
         return "a knot leaves the joint limits"
     if boxes:
-        m = box_margin_m
-        seq = np.vstack([knots[:1], subdivide(knots, substeps)])
-        centres = sphere_positions(kin, seq, sph)
-        for name, lo, hi in boxes:
-            c = pair_clearance(centres, sph[:, 4], lo - m, hi + m)
-            if c.min() < -CHECK_TOL_M:
-                return f"proxy spheres may come {-c.min():.4f} m into box {name!r} (incl. margin) between check points"
+        gaps = box_gaps(kin, knots, sph, boxes, box_margin_m=box_margin_m, substeps=substeps)
+        for (name, _, _), gap in zip(boxes, gaps, strict=True):
+            if gap < -CHECK_TOL_M:
+                return f"proxy spheres may come {-gap:.4f} m into box {name!r} (incl. margin) between check points"
         # belt and braces: the joint-linear path, densely, against the boxes themselves
         dense = clearance(kin, subdivide(knots, 8), sph, boxes, margin=0.0)
         if dense.min() < 0.0:
