@@ -26,7 +26,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from twin.config import PROJECT_ROOT, load_config
 from twin.perception.evaluate import run_perception
 
-STAGES = ("render", "noise", "calibration", "cloud", "plane", "dbscan", "classify", "detect", "label", "pca", "icp")
+STAGES = (
+    "render",
+    "noise",
+    "depth_filter",
+    "calibration",
+    "cloud",
+    "plane",
+    "dbscan",
+    "classify",
+    "detect",
+    "label",
+    "pca",
+    "icp",
+)
 
 
 def perception_seconds(timings: dict[str, float]) -> float:

@@ -3,7 +3,11 @@ runs it: `twin run CONFIG --seed N --json` in a fresh process per seed (process 
 real-time factor is simulated time / wall time of the whole command. Prints per config the median of each
 stage of the run's time breakdown (`timings` in the --json file; twin.timing) beside the median total.
 
-    python bench/bench_tasks.py [--seeds 10] [--planner NAME] [--config robocup ...]
+    python bench/bench_tasks.py [--seeds 10] [--planner NAME] [--config robocup ...] [--set KEY=VALUE ...]
+        [--jobs N]
+
+`--set` passes overrides to every run (fault models, e.g. `--set camera.noise.scale=3`); `--jobs` runs
+that many seeds at once (for success rates: wall times then share the cores).
 
 The seed-002 report: 100 % bottle/can/spam, 0/5 marker, mean cycle ~21.5 s simulated (~51 s wall).
 """
@@ -18,19 +22,22 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def run_once(config: str, seed: int, planner: str | None) -> dict[str, Any]:
+def run_once(config: str, seed: int, planner: str | None, overrides: tuple[str, ...] = ()) -> dict[str, Any]:
     """One `twin run` in its own process; its --json summary."""
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "run.json"
         cmd = [sys.executable, "-m", "twin", "run", config, "--seed", str(seed), "--json", str(out)]
         if planner:
             cmd += ["--planner", planner]
+        for o in overrides:
+            cmd += ["--set", o]
         r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
         if r.returncode != 0:
             raise SystemExit(f"{' '.join(cmd)} failed: {r.stderr.strip().splitlines()[-3:]}")
@@ -43,6 +50,8 @@ def main() -> None:
     ap.add_argument("--config", action="append", default=None, help="config(s) to run (default: robocup, warehouse)")
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--planner", default=None, help="transfer planner (default: the config's)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a setting")
+    ap.add_argument("--jobs", type=int, default=1, help="seeds run at once")
     args = ap.parse_args()
     for cfg in args.config or ["robocup", "warehouse"]:
         per_class: dict[str, list[bool]] = defaultdict(list)
@@ -50,8 +59,10 @@ def main() -> None:
         stages: dict[str, list[float]] = defaultdict(list)
         t0 = time.perf_counter()
         planner = "?"
-        for seed in range(args.seeds):
-            r = run_once(cfg, seed, args.planner)
+        with ThreadPoolExecutor(max(1, args.jobs)) as pool:
+            jobs = [pool.submit(run_once, cfg, seed, args.planner, tuple(args.set)) for seed in range(args.seeds)]
+            runs = [j.result() for j in jobs]
+        for seed, r in enumerate(runs):
             planner = r["planner"]
             wall = r["command_wall_time_s"]
             walls.append(wall)
@@ -70,7 +81,8 @@ def main() -> None:
                 flush=True,
             )
         allp = [p for v in per_class.values() for p in v]
-        print(f"\n{cfg} ({args.seeds} seeds, transfer planner {planner}):")
+        faults = ", " + " ".join(args.set) if args.set else ""
+        print(f"\n{cfg} ({args.seeds} seeds, transfer planner {planner}{faults}):")
         print(f"  success rate {sum(allp) / len(allp):.1%} ({sum(allp)}/{len(allp)} objects)")
         for cls, v in sorted(per_class.items()):
             print(f"    {cls:15s} {sum(v)}/{len(v)}")

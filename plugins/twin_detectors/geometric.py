@@ -127,7 +127,7 @@ class GeometricDetector:
         p = self.params
         rc = self.settings.perception.robocup
         cloud = cloud if cloud is not None else scene_cloud(frame, T_base_camera, rc)
-        keep = self._search_region(cloud.points, np.flatnonzero(cloud.height > rc.table_threshold_m))
+        keep = self._search_region(cloud.points, np.flatnonzero(cloud.height > cloud.table_threshold_m))
         with stage("perception.dbscan") as dbscan:
             clusters = cluster_points(
                 np.take(cloud.points, keep, axis=0),

@@ -49,7 +49,7 @@ class OracleDetector:
             raise InvalidRequestError("the oracle detector needs ground_truth (World.objects()) from the caller")
         rc = self.settings.perception.robocup
         cloud = cloud if cloud is not None else scene_cloud(frame, T_base_camera, rc)
-        above = cloud.height > rc.table_threshold_m
+        above = cloud.height > cloud.table_threshold_m
         W = frame.depth_m.shape[1]
         out = []
         for obj in ground_truth:

@@ -22,6 +22,7 @@ __all__ = [
     "ArucoSettings",
     "CameraSettings",
     "CollisionSettings",
+    "DepthFilterSettings",
     "DepthNoiseSettings",
     "DetectorBlock",
     "FixtureSettings",
@@ -178,6 +179,13 @@ class DepthNoiseSettings(ConfigModel):
         description="multiplies the depth noise RMS (a fault-model knob: 2 is a sensor twice as noisy as this"
         " model's best case, as on matte, textureless objects)",
     )
+    static_fraction: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="share of the depth noise variance that is the same in every frame of one capture (a stereo"
+        " matcher's error is partly fixed by the scene's texture): averaging frames cannot remove it",
+    )
     subpixel: float = Field(0.08, ge=0)
     baseline_m: float = Field(0.05, gt=0)
     focal_px: float = Field(424.0, gt=0)
@@ -268,18 +276,60 @@ class DetectorBlock(ConfigModel):
     params: dict[str, Any] = Field(default_factory=dict)
 
 
+class DepthFilterSettings(ConfigModel):
+    """Depth post-processing before perception (`twin.perception.depth_filter`), as the RealSense SDK's
+    temporal and spatial filters do it.
+
+    `temporal_frames`: frames from the end of the settling pause (30 fps) averaged per pixel; 1 is the
+    single frame the reference systems took. A pixel valid in fewer than `min_valid_fraction` of them is a
+    hole. `spatial`: an edge-preserving filter over `spatial_radius_px`, its range sigma
+    `spatial_range_sigmas` times the noise measured in the frame.
+    """
+
+    temporal_frames: int = Field(8, ge=1, le=90)
+    min_valid_fraction: float = Field(0.5, gt=0, le=1)
+    spatial: bool = True
+    spatial_radius_px: int = Field(3, ge=1, le=7)
+    spatial_range_sigmas: float = Field(2.0, gt=0, le=10)
+
+
+# what `perception.preset: seed` changes from the defaults: the reference systems' single raw frame and fixed
+# thresholds (keys a config sets itself win)
+_SEED_PERCEPTION: dict[str, dict[str, Any]] = {
+    "depth_filter": {"temporal_frames": 1, "spatial": False},
+    "robocup": {"table_threshold_sigmas": None},
+}
+
+
 class PerceptionSettings(ConfigModel):
     """What `twin perceive` runs: the warehouse pipeline (seeds 000/001) or the RoboCup one (seed 002).
 
-    `extrinsics`: how the camera-to-base transform is obtained; "auto" uses the ArUco marker for a fixed
+    `preset`: "robust" (default) filters the depth and sets thresholds from the noise it measures;
+    "seed" is the reference systems' single raw frame and fixed thresholds (what a config sets itself
+    still wins). `extrinsics`: how the camera-to-base transform is obtained; "auto" uses the ArUco marker for a fixed
     camera and forward kinematics of the measured joints plus `camera.wrist_offset_m` for a wrist camera.
     """
 
     pipeline: Literal["robocup", "warehouse"] = "robocup"
+    preset: Literal["robust", "seed"] = "robust"
     extrinsics: Literal["auto", "aruco", "kinematics"] = "auto"
     detector: DetectorBlock = Field(default_factory=DetectorBlock)
+    depth_filter: DepthFilterSettings = Field(default_factory=DepthFilterSettings)
     warehouse: WarehousePerceptionSettings = Field(default_factory=WarehousePerceptionSettings)
     robocup: RobocupPerceptionSettings = Field(default_factory=RobocupPerceptionSettings)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _preset(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or data.get("preset") != "seed":
+            return data
+        out = dict(data)
+        for section, values in _SEED_PERCEPTION.items():
+            given = out.get(section)
+            if given is not None and not isinstance(given, dict):
+                continue  # a model instance or a wrong type: validated as it is
+            out[section] = {**values, **(given or {})}
+        return out
 
 
 class TaskSettings(ConfigModel):

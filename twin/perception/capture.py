@@ -21,7 +21,8 @@ import numpy as np
 
 from twin.camera import Intrinsics, RGBDFrame, camera_pose, true_camera_pose
 from twin.config import Settings
-from twin.perception.noise import apply_sensor_noise
+from twin.perception.depth_filter import filter_frames
+from twin.perception.noise import sensor_burst
 from twin.timing import stage
 
 if TYPE_CHECKING:
@@ -96,7 +97,14 @@ def capture_frame(
     t2 = time.perf_counter()
     clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)
     t3 = time.perf_counter()
+    depth_filter = settings.perception.depth_filter
+    rng = rng if rng is not None else noise_rng(world.seed)
     with stage("perception.noise") as noise:
-        frame = apply_sensor_noise(clean, cam.noise, rng if rng is not None else noise_rng(world.seed))
+        # the burst the depth filter averages: the last frames of the settling pause, one render (the scene
+        # is at rest), each with its own sensor noise; the colour image is the first frame's
+        frames = sensor_burst(clean, cam.noise, rng, depth_filter.temporal_frames)
+    with stage("perception.depth_filter") as filtering:
+        frame = filter_frames(frames, depth_filter)
     log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)
-    return Capture(frame, q, T_nominal, cam.mount, pose, {"settle": t1 - t0, "render": t3 - t2, "noise": noise.seconds})
+    timings = {"settle": t1 - t0, "render": t3 - t2, "noise": noise.seconds, "depth_filter": filtering.seconds}
+    return Capture(frame, q, T_nominal, cam.mount, pose, timings)

@@ -28,6 +28,8 @@ __all__ = [
     "detection_label",
     "needs_ground_truth",
     "scene_cloud",
+    "table_noise",
+    "table_threshold_for",
     "with_ground_truth",
 ]
 
@@ -110,6 +112,8 @@ def with_ground_truth(detector: Detector, ground_truth: Any) -> Detector:
 class SceneCloud:
     """Every valid pixel of a frame as a base-frame point, with its colour and pixel index, plus the
     table plane (normal up) fitted to them. `height` is each point's signed height above the table.
+    `table_noise_m`: the spread of the table's points about the plane (robust RMS; 0 when not measured);
+    `table_threshold_m`: the height above which a point is not table (`table_threshold_for`).
     `timings_s`: seconds for back-projection ("cloud") and the table plane ("plane")."""
 
     points: np.ndarray
@@ -119,6 +123,8 @@ class SceneCloud:
     height: np.ndarray
     image_shape: tuple[int, int]
     timings_s: dict[str, float] = field(default_factory=dict)
+    table_noise_m: float = 0.0
+    table_threshold_m: float = 0.008
 
     def select(self, pixels: np.ndarray) -> np.ndarray:
         """Indices into `points` of the given flat pixel indices (pixels without depth are skipped)."""
@@ -133,8 +139,9 @@ def scene_cloud(
 ) -> SceneCloud:
     """Back-project the frame within the depth limits, map it to the base frame, fit the table plane.
 
-    The plane is fitted by RANSAC on every 4th point (threshold: the table removal threshold), then
+    The plane is fitted by RANSAC on every 4th point (threshold: half the table removal threshold), then
     refitted on its inliers; it is the largest plane in view, which from the capture pose is the table.
+    Then the table's noise is measured and the table threshold set from it (`table_threshold_for`).
     """
     with stage("perception.cloud") as cloud_stage:
         H, W = frame.depth_m.shape
@@ -151,5 +158,23 @@ def scene_cloud(
         plane = plane.oriented(np.array([0.0, 0.0, 10.0]))  # normal up: towards a point high above the table
         plane = Plane(plane.normal, plane.offset, np.zeros(0, dtype=bool))
         height = plane.distance(base)
+        noise = table_noise(height[::4])
     timings = {"cloud": cloud_stage.seconds, "plane": plane_stage.seconds}
-    return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings)
+    threshold = table_threshold_for(noise, params)
+    return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings, noise, threshold)
+
+
+def table_noise(height: np.ndarray, band_m: float = 0.05) -> float:
+    """Robust RMS of the table's points about its plane, from the points below it (within `band_m`):
+    nothing but the table's own noise lies there, while objects and their edges lie above. 0.0 if none."""
+    below = height[(height <= 0.0) & (height > -band_m)]
+    return float(1.4826 * np.median(-below)) if len(below) else 0.0
+
+
+def table_threshold_for(noise_m: float, params: RobocupPerceptionSettings) -> float:
+    """The height above the table plane from which a point belongs to an object: `table_threshold_m`, or
+    `table_threshold_sigmas` times the measured table noise when that is larger (a noisier sensor, or a
+    farther table, spreads the table's points higher)."""
+    if params.table_threshold_sigmas is None:
+        return params.table_threshold_m
+    return max(params.table_threshold_m, params.table_threshold_sigmas * noise_m)

@@ -14,7 +14,7 @@ import numpy as np
 from twin.camera import RGBDFrame
 from twin.config import DepthNoiseSettings
 
-__all__ = ["apply_sensor_noise", "depth_noise_rms"]
+__all__ = ["apply_sensor_noise", "depth_noise_rms", "sensor_burst"]
 
 
 def depth_noise_rms(z_m: np.ndarray | float, noise: DepthNoiseSettings) -> np.ndarray:
@@ -36,8 +36,20 @@ def _depth_edges(depth: np.ndarray, threshold_m: float) -> np.ndarray:
     return edge
 
 
-def apply_sensor_noise(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.random.Generator) -> RGBDFrame:
-    """A copy of `frame` with D435i-like depth noise, dropouts and colour noise; unchanged when disabled."""
+def apply_sensor_noise(
+    frame: RGBDFrame,
+    noise: DepthNoiseSettings,
+    rng: np.random.Generator,
+    *,
+    rgb_noise: bool = True,
+    static: np.ndarray | None = None,
+) -> RGBDFrame:
+    """A copy of `frame` with D435i-like depth noise, dropouts and colour noise; unchanged when disabled.
+
+    `rgb_noise` False leaves the colour image as rendered and draws nothing for it (the extra frames of a
+    burst, whose colour nobody uses). `static`: the capture's standard-normal field (H, W) behind the
+    `static_fraction` of the noise variance that repeats in every frame (drawn here when None and needed).
+    """
     if not noise.enabled:
         return frame
     # The same draws in the same order and the same arithmetic as the plain formulas; what is saved is
@@ -49,7 +61,13 @@ def apply_sensor_noise(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.rand
     if not all_valid:
         edges &= valid
     n_valid = depth.size if all_valid else int(np.count_nonzero(valid))
-    if all_valid:
+    s = noise.static_fraction
+    if s > 0:  # a share of the variance fixed for the capture, the rest new in every frame
+        if static is None:
+            static = rng.standard_normal(depth.shape)
+        e = rng.standard_normal(depth.shape) * np.sqrt(1.0 - s) + static * np.sqrt(s)
+        depth[valid] += (e * depth_noise_rms(depth, noise))[valid]
+    elif all_valid:
         depth += rng.standard_normal(n_valid).reshape(depth.shape) * depth_noise_rms(depth, noise)
     else:
         depth[valid] += rng.standard_normal(n_valid) * depth_noise_rms(depth[valid], noise)
@@ -65,7 +83,7 @@ def apply_sensor_noise(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.rand
         drop |= ~valid
     depth[drop] = 0.0
     rgb = frame.rgb
-    if noise.rgb_noise_std > 0:
+    if rgb_noise and noise.rgb_noise_std > 0:
         noisy = rng.standard_normal(rgb.shape).astype(np.float32)
         noisy *= noise.rgb_noise_std
         noisy += rgb  # uint8 + float32 -> float32: the same sum as rgb.astype(float32) + noise
@@ -73,3 +91,12 @@ def apply_sensor_noise(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.rand
         np.clip(noisy, 0, 255, out=noisy)
         rgb = noisy.astype(np.uint8)
     return RGBDFrame(rgb, depth, frame.intrinsics)
+
+
+def sensor_burst(frame: RGBDFrame, noise: DepthNoiseSettings, rng: np.random.Generator, n: int) -> list[RGBDFrame]:
+    """`n` frames of a scene at rest (one rendered `frame`), each with its own sensor noise, sharing the
+    capture's static share of it; colour noise on the first only. n = 1 is `apply_sensor_noise` itself."""
+    static = rng.standard_normal(frame.depth_m.shape) if noise.enabled and noise.static_fraction > 0 else None
+    out = [apply_sensor_noise(frame, noise, rng, static=static)]
+    out += [apply_sensor_noise(frame, noise, rng, rgb_noise=False, static=static) for _ in range(n - 1)]
+    return out

@@ -261,7 +261,7 @@ def _estimate(
     timings: dict[str, float] = {}
     with stage("perception.pca") as pca_stage:
         idx = select(det.pixels)
-        idx = idx[cloud.height[idx] > params.table_threshold_m]
+        idx = idx[cloud.height[idx] > cloud.table_threshold_m]
         if len(idx) < 3:
             log.debug("robocup: %s has %d points above the table, skipped", det.label, len(idx))
             return None

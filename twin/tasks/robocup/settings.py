@@ -77,6 +77,9 @@ class RobocupPerceptionSettings(ConfigModel):
     min_depth_m: float = Field(0.20, ge=0)
     max_depth_m: float = Field(1.5, gt=0)
     table_threshold_m: float = Field(0.008, gt=0)
+    # noise-aware table removal: the threshold is at least this many times the depth noise measured on the
+    # table (the spread of its points about the fitted plane); None: `table_threshold_m` alone (the seed)
+    table_threshold_sigmas: float | None = Field(3.0, gt=0, le=10)
     alpha1_vertical_deg: float = Field(30.0, gt=0, lt=90)
     elongation_horizontal: float = Field(3.0, gt=1)
     alpha1_horizontal_deg: float = Field(45.0, gt=0, lt=90)
