@@ -775,6 +775,11 @@ class World:
             out.add((link_name.get(p.link_a, str(p.link_a)), name))
         return sorted(out)
 
+    def touched_objects(self) -> tuple[int, ...]:
+        """Loose objects the robot touches in the last step (body ids, ascending): what a safety monitor
+        lets a retreat after a protective stop push away from (see `Cell.recover`)."""
+        return tuple(sorted({p.body_b for p in self.contacts(self.robot_id) if p.body_b in self._objects}))
+
     def closest_points(
         self, body_a: int, body_b: int, max_distance_m: float, *, link_a: int | None = None, link_b: int | None = None
     ) -> list[ContactPoint]:

@@ -27,6 +27,8 @@ from twin.plugin import (
     Status,
     Trajectory,
     UR5e,
+    colliding_pair,
+    densify,
     first_collision,
     wrap_to_pi,
 )
@@ -180,9 +182,10 @@ class MotionPlannerBase:
         """SUCCESS with `traj`, unless it collides somewhere (checked at the configured resolution)."""
         hit = first_collision(traj, scene, self.kin, max_step_rad=self.check_rad, max_step_m=self.check_m)
         if hit is not None:
+            q_hit = densify(traj, self.kin, max_step_rad=self.check_rad, max_step_m=self.check_m)[hit]
             return MotionResult(
                 Status.COLLISION,
-                f"the trajectory collides (densified sample {hit}, "
+                f"the trajectory collides ({colliding_pair(scene, q_hit)}, densified sample {hit}, "
                 f"checked every {self.check_rad:g} rad / {self.check_m:g} m)",
                 path=path,
                 info=dict(info or {}),

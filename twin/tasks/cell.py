@@ -168,9 +168,14 @@ class Cell:
         return self.planners[group]
 
     # ---- motion ---------------------------------------------------------------------------------
-    def move(self, stage: str, goal: JointGoal | PoseGoal, *, time_limit_s: float = 2.0) -> MotionResult:
+    def move(
+        self, stage: str, goal: JointGoal | PoseGoal, *, time_limit_s: float = 2.0, retreat: bool = False
+    ) -> MotionResult:
         """Plan from the measured joints to `goal` with the stage's planner and execute it through the
-        checked loop; StageFailed (with the planner's or the safety stop's reason) if it does not get there."""
+        checked loop; StageFailed (with the planner's or the safety stop's reason) if it does not get there.
+
+        `retreat`: a move away after a protective stop; the safety monitor does not stop it for touching
+        the loose objects the robot touches as it starts (it is moving off them), only for anything new."""
         if self.on_stage:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
@@ -178,7 +183,9 @@ class Cell:
         request = MotionRequest(
             self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
         )
-        ignore = (self.held_body,) if self.held_body is not None else ()
+        ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
+        if retreat:
+            ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
         result, record = plan_and_execute(
             self.world,
             self.planner(group),
@@ -324,12 +331,13 @@ class Cell:
         self.grasp = None
 
     def recover(self) -> None:
-        """After a failed stage: let go, forget the held model, rise straight up to 0.3 m if a planner can."""
+        """After a failed stage: let go, forget the held model, rise straight up to 0.3 m if a planner can
+        (a retreat: off whatever the gripper was stopped against)."""
         self.release()
         T = self.kin.fk(self.world.joint_positions())
         T[2, 3] = max(T[2, 3], 0.30)
         try:
-            self.move_pose("ascent", T)
+            self.move_pose("ascent", T, retreat=True)
         except StageFailed:
             log.info("recovery: could not rise from %s", np.round(T[:3, 3], 3).tolist())
 

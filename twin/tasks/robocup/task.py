@@ -28,7 +28,7 @@ from twin.perception.pipeline import camera_extrinsics, make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, top_down
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
-from twin.tasks.robocup.perception import ObjectEstimate
+from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
 from twin.urdf_model import RobotModel, read_fixture_shapes
@@ -42,6 +42,7 @@ __all__ = [
     "bin_for",
     "bin_geometries",
     "feasible_cube_yaw",
+    "grasp_yaw_symmetry",
     "grip_width",
     "read_bin_geometry",
     "run_robocup",
@@ -56,6 +57,7 @@ _RELEASE_OPEN_M = 0.01  # in the bin the fingers open only this much wider than 
 _WALL_MARGIN_M = 0.005  # a placed object's footprint keeps this from the inner walls and from the others
 _SPOT_STEP_M = 0.005  # the grid of candidate release points in a bin
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
+_GRASP_CLEARANCE_M = 0.01  # a grasp yaw is turned away from neighbours only when the gripper comes closer
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +175,66 @@ def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> 
     return yaw - math.pi / 4 if side * math.sqrt(2.0) > max_opening_m else yaw
 
 
+def grasp_yaw_symmetry(est: ObjectEstimate) -> float | None:
+    """The turn (rad) about the vertical that maps this object's grasp onto an equal one: 0 for any turn
+    (a standing cylinder), a quarter turn for a cube; None when only the perceived yaw (or its half turn,
+    the same for a parallel gripper) grips it."""
+    if est.cls in ("bottle", "can", "marker") and est.orientation == "vertical":
+        return 0.0
+    if est.cls == "cube":
+        return math.pi / 2
+    return None
+
+
+def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, float], yaw: float) -> float:
+    """The grasp yaw to use. An object that can be gripped at other yaws too (`grasp_yaw_symmetry`) is
+    gripped at the one of them the wrist reaches with the least turn after the base-first alignment (a
+    standing cylinder's perceived yaw says nothing: any yaw grips it), unless the gripper there comes
+    closer than `_GRASP_CLEARANCE_M` to something in the planning scene; then at the next one that does not,
+    or the one with the most clearance (a standing can beside a standing marker is gripped with the
+    fingers turned away from it). Clearance from FCL at the configuration IK gives nearest the joints."""
+    turn = grasp_yaw_symmetry(est)
+    if turn is None:
+        return yaw
+    q_ref = _aligned(cell.world.joint_positions(), xyz[0], xyz[1])
+    R = cell.kin.fk(q_ref)[:3, :3]
+    yaw_ref = math.atan2(float(R[1, 0]), float(R[0, 0]))  # the fingers' closing direction if the wrist stays
+    if turn == 0.0:
+        step, n = math.pi / 12, 12  # every 15 deg of the half turn (a parallel gripper repeats after it)
+        base = yaw_ref
+    else:
+        step, n = turn, max(1, round(math.pi / turn))
+        base = yaw + round((yaw_ref - yaw) / turn) * turn
+    candidates = sorted(
+        (yaw_ref + wrap_half_turn(base + k * step - yaw_ref) for k in range(n)),
+        key=lambda a: abs(a - yaw_ref),
+    )
+
+    def clearance(a: float) -> float:
+        sols = cell.kin.ik(top_down(xyz, a))
+        if len(sols) == 0:
+            return -math.inf
+        q = sols[int(np.argmin(np.abs(sols - q_ref).sum(axis=1)))]
+        return float(cell.scene.min_distance(q, include_self=False).distance)
+
+    best, best_c = candidates[0], -math.inf
+    for a in candidates:
+        c = clearance(a)
+        if c >= _GRASP_CLEARANCE_M:
+            best, best_c = a, c
+            break
+        if c > best_c + 1e-4:
+            best, best_c = a, c
+    if best != candidates[0]:
+        log.info(
+            "robocup: %s gripped at yaw %.0f deg, %.0f mm clear of the planning scene",
+            est.label,
+            math.degrees(best),
+            1e3 * best_c,
+        )
+    return best
+
+
 def grip_width(est: ObjectEstimate, max_opening_m: float) -> float:
     """The width the fingers should stop at on this object, from its perceived class and orientation: the
     grasp closes across the short side of its footprint (cubes: a face, or the diagonal where it fits)."""
@@ -215,6 +277,14 @@ def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray
             T = T_inv @ poses[name][0] @ shape.origin
             h = np.abs(T[:3, :3]) @ half
             out.append((T[:3, 3] - h, T[:3, 3] + h))
+    return out
+
+
+def _aligned(q: np.ndarray, x: float, y: float) -> np.ndarray:
+    """`q` with the shoulder pan turned (the short way) to face (x, y): the base-first alignment."""
+    out = np.array(q, dtype=float)
+    pan = _pan_towards(x, y)
+    out[0] = out[0] + (pan - out[0] + math.pi) % (2 * math.pi) - math.pi
     return out
 
 
@@ -282,11 +352,9 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     max_opening = cell.settings.gripper.max_opening_m
     x, y, z_grasp, yaw, _, _, w_grip = (float(v) for v in est.grasp)
     yaw = feasible_cube_yaw(est, yaw, max_opening)
+    yaw = _clear_grasp_yaw(cell, est, (x, y, z_grasp), yaw)
     # (1) base-first alignment
-    q = cell.world.joint_positions().copy()
-    pan = _pan_towards(x, y)
-    q[0] = q[0] + (pan - q[0] + math.pi) % (2 * math.pi) - math.pi
-    cell.move_joints("align", q)
+    cell.move_joints("align", _aligned(cell.world.joint_positions(), x, y))
     # (2) pre-grasp hover, gripper opened to the lookup width
     cell.open_gripper(min(w_grip, max_opening))
     hover = top_down((x, y, z_grasp + task.hover_m), yaw)
@@ -362,6 +430,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     most_seen = 0  # the most objects perception saw on the table in one capture: sizes the budget
     captures = 0
     stopped: str | None = None
+    hand_eye = _calibrate_hand_eye(cell)
     while True:
         budget = min(task.max_captures, (task.retries + 2) * most_seen + 3)
         if captures >= budget:
@@ -381,7 +450,12 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             break
         cap = capture_frame(world, settings, move=False)
         captures += 1
-        T_bc = camera_extrinsics(settings, cap, None)
+        if hand_eye is not None:
+            T_bc = camera_extrinsics(settings, cap, *hand_eye)
+        elif cap.mount == "wrist":  # forward kinematics and the configured hand-eye transform
+            T_bc = cap.T_base_camera_nominal
+        else:
+            T_bc = camera_extrinsics(settings, cap, None)
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector)  # an oracle detector gets the truth
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
@@ -403,6 +477,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         except StageFailed as e:
             tgt.error = str(e)
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
+            _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
             cell.recover()
         tgt.cycle_time_s += world.sim_time - t0
         try:
@@ -413,6 +488,30 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     return referee.outcomes(targets, stopped=stopped)
 
 
+def _calibrate_hand_eye(cell: Cell) -> tuple[np.ndarray, np.ndarray] | None:
+    """With `perception.extrinsics: aruco` and a wrist camera: view the base marker from
+    `camera.calibration_pose` once, at the start of the run, and return (T_base_camera there, the joints
+    there), from which every capture's camera pose follows by forward kinematics. A camera knocked off its
+    configured hand-eye transform is then measured instead of trusted. None when not asked for; when the
+    marker is not seen the run goes on with the configured hand-eye transform and says so."""
+    from twin.perception.aruco import MarkerNotFound, calibrate
+
+    settings = cell.settings
+    cam = settings.camera
+    if settings.perception.extrinsics != "aruco" or cam.mount != "wrist":
+        return None
+    cell.current = "hand-eye"
+    q = np.asarray(cam.calibration_pose if cam.calibration_pose is not None else cam.capture_pose, dtype=float)
+    try:
+        _reach_capture_pose(cell, q)
+        cap = capture_frame(cell.world, settings, pose="calibration", move=False)
+        cal = calibrate(cap.frame, settings)
+    except (StageFailed, MarkerNotFound) as e:
+        log.warning("robocup: no hand-eye calibration (%s); using the configured camera.wrist_offset_m", e)
+        return None
+    return cal.T_base_camera, cap.q
+
+
 def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
     """Move to the capture pose; when the move is stopped on the way (an object still stuck to a finger
     touches something), let go, rise and try once more before the run gives up."""
@@ -420,6 +519,7 @@ def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
         cell.move_joints("capture", q)
     except StageFailed as e:
         log.info("robocup: capture move failed (%s); recovering and trying again", e)
+        _clear_seen(cell)
         cell.recover()
         cell.move_joints("capture", q)
 
@@ -429,8 +529,7 @@ def _update_obstacles(
 ) -> None:
     """Every other perceived object on the table becomes a box in the planning scene (the target is left
     out: the fingers close around it)."""
-    for name in [n for n in cell.scene.boxes() if n.startswith("seen_")]:
-        cell.scene.remove(name)
+    _clear_seen(cell)
     for i, est in enumerate(estimates):
         if est is target or _in_any_bin(est.position, bins):
             continue
@@ -444,6 +543,12 @@ def _update_obstacles(
         )
         T[:3, 3] = [est.position[0], est.position[1], ext[2] / 2 + 0.002]
         cell.scene.add_box(f"seen_{i}_{est.label}", np.array([short, long_, ext[2]]), T)
+
+
+def _clear_seen(cell: Cell) -> None:
+    """Remove the perceived objects' boxes from the planning scene."""
+    for name in [n for n in cell.scene.boxes() if n.startswith("seen_")]:
+        cell.scene.remove(name)
 
 
 def _choose(
