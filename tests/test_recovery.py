@@ -103,3 +103,25 @@ def test_after_a_protective_stop_a_retreat_backs_off_the_object_it_touches_and_a
             else:
                 with pytest.raises(StageFailed, match="unexpected contact: left_finger with cube"):
                     cell.move_pose("hover", up)
+
+
+def test_a_warehouse_cube_lost_on_the_way_is_seen_again_where_it_fell_and_placed():
+    """Snatch the first carried cube (test setup, ground truth) and put it down elsewhere on the table: the
+    task notices the loss from the finger opening, looks again from home and places it from where it is."""
+    from twin.tasks.warehouse import run_warehouse
+
+    s = load_config("warehouse")
+    snatched: list[str] = []
+
+    def snatch(w: World) -> None:
+        held = w.grasped_object()
+        if not snatched and held is not None and w.link_pose("tcp")[0][2] > 0.2:
+            snatched.append(w.object_state(held).name)
+            w.set_object_pose(held, [-0.62, -0.05, 0.026], [0, 0, 0, 1])  # on the table, away from the others
+
+    with World(s, seed=3, renderer=RENDERER) as world:
+        world.observe(snatch, every_s=0.05)
+        outcomes = {o.id: o for o in run_warehouse(Cell(s, world))}
+    assert len(snatched) == 1
+    assert outcomes[snatched[0]].placed, outcomes[snatched[0]].error
+    assert all(o.placed for o in outcomes.values()), [(o.id, o.error) for o in outcomes.values()]

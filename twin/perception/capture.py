@@ -15,7 +15,8 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+import weakref
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -63,6 +64,11 @@ def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
     return np.random.default_rng([int(seed), 0x5EED, int(stream)])
 
 
+# captures taken so far per world: each capture's noise is drawn from its own stream (a real sensor's noise
+# is new in every frame), the first from stream 0, and a run stays repeatable
+_captures_taken: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
+
+
 def capture_frame(
     world: World,
     settings: Settings,
@@ -74,7 +80,8 @@ def capture_frame(
 ) -> Capture:
     """Settle, render and add sensor noise; for a wrist camera first go to the capture/calibration pose.
 
-    `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed)`.
+    `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed, n)`
+    for the world's n-th capture (n = 0, 1, ...).
     """
     from twin.kinematics import UR5e
 
@@ -98,7 +105,10 @@ def capture_frame(
     clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)
     t3 = time.perf_counter()
     depth_filter = settings.perception.depth_filter
-    rng = rng if rng is not None else noise_rng(world.seed)
+    if rng is None:
+        n = _captures_taken.get(world, 0)
+        _captures_taken[world] = n + 1
+        rng = noise_rng(world.seed, n)
     with stage("perception.noise") as noise:
         # the burst the depth filter averages: the last frames of the settling pause, one render (the scene
         # is at rest), each with its own sensor noise; the colour image is the first frame's

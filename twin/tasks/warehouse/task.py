@@ -19,7 +19,7 @@ from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
 from twin.tasks.judge import WarehouseReferee
-from twin.tasks.warehouse.perception import LabeledCube, perceive_warehouse
+from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
 from twin.types import ObjectOutcome
 
 if TYPE_CHECKING:
@@ -102,6 +102,29 @@ def _square_grasp(cell: Cell, c: np.ndarray) -> tuple[GraspCheck, float]:
     return grasp, yaw
 
 
+def _perceive(cell: Cell) -> WarehouseResult:
+    """Capture a frame from the fixed camera, calibrate it on the base marker, perceive the table."""
+    settings, world = cell.settings, cell.world
+    capture = capture_frame(world, settings)
+    calib = calibrate(capture.frame, settings)
+    return perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+
+
+def _perceive_again(cell: Cell, cube: LabeledCube) -> LabeledCube | None:
+    """After a failed attempt: go home (out of the camera's view), look again and return the cube of the
+    same colour nearest to where it was (a slipped or dropped cube has moved); None when none is seen."""
+    try:
+        cell.move_joints("home", np.array(cell.settings.robot.home))
+        seen = _perceive(cell)
+    except (StageFailed, MarkerNotFound) as e:
+        log.info("warehouse: could not look again: %s", e)
+        return None
+    same = [c for c in seen.cubes if c.color_label == cube.color_label]
+    if not same:
+        return None
+    return min(same, key=lambda c: float(np.linalg.norm(c.centroid[:2] - cube.centroid[:2])))
+
+
 def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     """Sort every cube the camera sees; one outcome per true cube, judged by physics at the end."""
     settings, world = cell.settings, cell.world
@@ -109,10 +132,8 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     referee = WarehouseReferee(world, settings)  # ground truth: metrics along the way, the verdicts at the end
     cubes: tuple[LabeledCube, ...] = ()
     global_error: str | None = None
-    capture = capture_frame(world, settings)
     try:
-        calib = calibrate(capture.frame, settings)
-        seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+        seen = _perceive(cell)
         cubes = seen.cubes
         if seen.obstacle_extended is not None:
             b = seen.obstacle_extended
@@ -150,6 +171,12 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
                 att.error = str(e)
                 log.info("warehouse: %s cube, attempt %d failed: %s", att.cube.color_label, k + 1, e)
                 cell.recover()
+                if k < task.retries:
+                    again = _perceive_again(cell, att.cube)
+                    if again is None:
+                        att.error = f"{att.error}; then not seen again on the table"
+                        break
+                    att.cube = again
         att.cycle_time_s = world.sim_time - t0
     try:
         cell.move_joints("home", np.array(settings.robot.home))
