@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -136,3 +138,112 @@ def test_at_three_times_the_depth_noise_the_robust_preset_still_classifies_every
 
     assert correct("robust") == 8
     assert correct("seed") <= 4
+
+
+def _joint_after(settings, seconds: float, step_rad: float = 0.2) -> np.ndarray:
+    """Command a step of `step_rad` on the shoulder pan from home and return the joints after `seconds`."""
+    with World(settings, 0, renderer=RENDERER) as world:
+        q0 = world.joint_positions()
+        world.set_joint_targets(q0 + np.array([step_rad, 0, 0, 0, 0, 0]))
+        world.step(round(seconds / world.dt))
+        return world.joint_positions() - q0
+
+
+def test_a_sluggish_controller_lags_behind_its_targets_and_catches_up_and_is_exact_when_off():
+    nominal = load_config("robocup")
+    assert np.array_equal(
+        _joint_after(nominal, 0.25), _joint_after(load_config("robocup", ["robot.tracking_time_constant_s=0"]), 0.25)
+    )
+    slow = load_config("robocup", ["robot.tracking_time_constant_s=0.2"])
+    early_nominal, early_slow = _joint_after(nominal, 0.1)[0], _joint_after(slow, 0.1)[0]
+    assert early_slow < 0.6 * early_nominal, (early_slow, early_nominal)  # behind where it should be
+    assert _joint_after(slow, 2.0)[0] == pytest.approx(0.2, abs=2e-3)  # and there in the end
+
+
+def test_tracking_noise_shakes_a_held_arm_by_about_its_rms():
+    def jitter(settings) -> float:
+        with World(settings, 0, renderer=RENDERER) as world:
+            qs = []
+            for _ in range(240):
+                world.step()
+                qs.append(world.joint_positions())
+        return float(np.std(np.diff(np.array(qs)[:, 0])))
+
+    assert jitter(load_config("robocup")) < 1e-5
+    assert jitter(load_config("robocup", ["robot.tracking_noise_rad=0.002"])) > 1e-4
+
+
+def test_a_worn_gripper_squeezes_with_its_force_scale():
+    def effort(overrides: list[str]) -> float:
+        s = load_config("robocup", ["world.objects.items=[{class: cube, color: red}]", *overrides])
+        with World(s, 1, renderer=RENDERER) as world:
+            from twin.tasks.cell import Cell, top_down
+
+            cell = Cell(s, world)
+            cube = world.objects()[0]
+            x, y, _ = cube.position
+            qx, qy, qz, qw = cube.orientation_xyzw
+            yaw = math.atan2(2 * (qx * qy + qz * qw), 1 - 2 * (qy * qy + qz * qz))  # across two faces
+            sols = cell.kin.ik(top_down((x, y, 0.0375), yaw))
+            world.reset_joints(sols[int(np.argmin(np.abs(sols - world.joint_positions()).sum(axis=1)))])
+            world.close_gripper(force_n=25.0)  # below what the contact settles at on its own (~29 N a finger)
+            world.step(480)
+            return world.gripper_effort()
+
+    assert effort([]) == pytest.approx(25.0, rel=0.02)
+    assert effort(["gripper.force_scale=0.5"]) == pytest.approx(12.5, rel=0.02)
+
+
+def test_a_late_frame_shows_the_world_as_it_was_latency_ago():
+    """A cube let go 0.3 m above the table: after a 0.25 s pause it lies on the table, but a frame 0.25 s
+    late still shows it where it was let go (closer to the camera)."""
+    from twin.camera import Intrinsics as Intr
+
+    def depth_at_start(latency: float) -> float:
+        s = load_config("warehouse", [f"camera.latency_s={latency}", "perception.depth_filter.spatial=false"])
+        s = s.model_copy(
+            update={
+                "camera": s.camera.model_copy(update={"noise": s.camera.noise.model_copy(update={"enabled": False})})
+            }
+        )
+        with World(s, 0, renderer=RENDERER) as world:
+            cube = world.objects()[0]
+            p = np.array([cube.position[0], cube.position[1], 0.3])
+            world.set_object_pose(cube.id, p, [0, 0, 0, 1])
+            cap = capture_frame(world, s, settle_s=0.25)
+            T = camera_pose(s.camera)
+            pc = np.linalg.inv(T) @ np.append(p, 1.0)
+            K = Intr.from_settings(s.camera).matrix()
+            u, v = (K @ (pc[:3] / pc[2]))[:2]
+            return float(cap.frame.depth_m[round(v), round(u)]), float(pc[2])
+
+    late, z_start = depth_at_start(0.25)
+    now, _ = depth_at_start(0.0)
+    assert late == pytest.approx(z_start - 0.025, abs=0.02)  # the cube's near face, 0.3 m up
+    assert now > late + 0.1  # it has fallen out of that ray
+
+
+# every fault model's key at its "off" value (the defaults)
+FAULTS_OFF = [
+    "camera.noise.scale=1",
+    "camera.noise.static_fraction=0",
+    "camera.extrinsic_error.translation_m=0",
+    "camera.extrinsic_error.rotation_deg=0",
+    "camera.latency_s=0",
+    "robot.tracking_time_constant_s=0",
+    "robot.tracking_noise_rad=0",
+    "gripper.force_scale=1",
+    "world.objects.mass_scale=[1,1]",
+    "world.objects.friction_scale=[1,1]",
+]
+
+
+def test_a_run_with_every_fault_model_set_to_off_is_the_nominal_run_bit_for_bit():
+    from twin.tasks import run_task
+
+    nominal = run_task(load_config("robocup"), seed=1)
+    off = run_task(load_config("robocup", FAULTS_OFF), seed=1)
+    assert off.sim_time_s == nominal.sim_time_s
+    assert [(o.id, o.placed, o.error, o.cycle_time_s, o.pose_error_m) for o in off.objects] == [
+        (o.id, o.placed, o.error, o.cycle_time_s, o.pose_error_m) for o in nominal.objects
+    ]

@@ -25,7 +25,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -153,6 +153,26 @@ def _quiet_stdout(active: bool = True) -> Iterator[None]:
         os.close(saved)
 
 
+@dataclass
+class _FaultyTracking:
+    """The state of a sluggish, noisy joint controller (`robot.tracking_*`, a fault model)."""
+
+    alpha: float  # the share of the remaining gap the lagged target closes per physics step
+    noise_rad: float
+    rng: np.random.Generator
+    commanded: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    lagged: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+    @classmethod
+    def from_settings(cls, settings: Settings, seed: int, dt: float) -> _FaultyTracking | None:
+        r = settings.robot
+        if r.tracking_time_constant_s == 0 and r.tracking_noise_rad == 0:
+            return None  # the ideal controller: targets go to the motors as commanded
+        tau = r.tracking_time_constant_s
+        alpha = 1.0 if tau == 0 else 1.0 - math.exp(-dt / tau)
+        return cls(alpha, r.tracking_noise_rad, np.random.default_rng([seed, 0x7AC]))
+
+
 class World:
     """A PyBullet world built from `settings` and `seed`; see the module docstring.
 
@@ -241,6 +261,7 @@ class World:
         for sp in sample_layout(objects, self.seed, boxes):
             self._load_object(sp)
         self._vary_object_physics()
+        self._tracking = _FaultyTracking.from_settings(self.settings, self.seed, self.dt)
         self._apply_initial_commands()
         self._steps = 0
 
@@ -403,8 +424,16 @@ class World:
         half = self.settings.gripper.max_opening_m / 2.0
         for j in self._fingers:
             pb.resetJointState(self.robot_id, j, half, 0.0, physicsClientId=c)
-        self.set_joint_targets(home)
+        self._hold(home)
         self.open_gripper()
+
+    def _hold(self, q: np.ndarray) -> None:
+        """Targets at q, the arm having been put there: a faulty controller starts from it, without lag."""
+        if self._tracking is not None:
+            self._tracking.lagged, self._tracking.commanded = q.copy(), q.copy()
+            self._send_joint_targets(q, np.zeros(6))
+        else:
+            self.set_joint_targets(q)
 
     # ---- lifecycle ------------------------------------------------------------------------------
     @property
@@ -434,12 +463,24 @@ class World:
             raise InvalidRequestError(f"cannot step a negative number of times ({n})")
         with stage("physics"):
             for _ in range(int(n)):
+                if self._tracking is not None:
+                    self._track()
                 pb.stepSimulation(physicsClientId=c)
                 self._steps += 1
                 if self._observers:
                     for every, fn in self._observers:
                         if self._steps % every == 0:
                             fn(self)
+
+    def _track(self) -> None:
+        """One physics step of the faulty controller (`robot.tracking_*`): the target it sends follows the
+        commanded one through a first-order lag, plus noise; the velocity feed-forward is its rate."""
+        t = self._tracking
+        assert t is not None
+        previous = t.lagged.copy()
+        t.lagged += t.alpha * (t.commanded - t.lagged)
+        target = t.lagged + (t.rng.normal(0.0, t.noise_rad, 6) if t.noise_rad > 0 else 0.0)
+        self._send_joint_targets(target, (t.lagged - previous) / self.dt)
 
     def observe(self, fn: Callable[[World], None], *, every_s: float) -> None:
         """Call `fn(world)` every `every_s` simulated seconds while stepping (recorders, GUI pacing)."""
@@ -489,9 +530,16 @@ class World:
         Force-limited by robot.max_joint_force, position gain robot.position_gain, velocity capped at
         robot.max_joint_vel. `q`, `qd`: (6,) rad, rad/s.
         """
-        c = self._check()
+        self._check()
         q = _as_vec(q, 6, "q")
         qd = np.zeros(6) if qd is None else _as_vec(qd, 6, "qd")
+        if self._tracking is not None:  # the faulty controller passes them on step by step (`_track`)
+            self._tracking.commanded = q.copy()
+            return
+        self._send_joint_targets(q, qd)
+
+    def _send_joint_targets(self, q: np.ndarray, qd: np.ndarray) -> None:
+        c = self._cid
         r = self.settings.robot
         for k, j in enumerate(self._arm):
             pb.setJointMotorControl2(
@@ -513,7 +561,7 @@ class World:
         q = _as_vec(q, 6, "q")
         for k, j in enumerate(self._arm):
             pb.resetJointState(self.robot_id, j, float(q[k]), 0.0, physicsClientId=c)
-        self.set_joint_targets(q)
+        self._hold(q)
 
     def joint_positions(self) -> np.ndarray:
         """(6,) arm joint angles, rad."""
@@ -554,11 +602,12 @@ class World:
         """Close at a speed (default gripper.speed_m_s) until blocked, then squeeze with force_n per finger.
 
         Each finger is a velocity motor limited to `force_n` (default gripper.force_n), so on an object
-        the grip force settles at that value, as on a Robotiq gripper.
+        the grip force settles at that value, as on a Robotiq gripper (times `gripper.force_scale`, a
+        fault model: a worn gripper squeezes less than it is told).
         """
         c = self._check()
         g = self.settings.gripper
-        f = g.force_n if force_n is None else float(force_n)
+        f = (g.force_n if force_n is None else float(force_n)) * g.force_scale
         v = (g.speed_m_s if speed_m_s is None else float(speed_m_s)) / 2.0
         for j in self._fingers:
             pb.setJointMotorControl2(

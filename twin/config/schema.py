@@ -48,6 +48,11 @@ class RobotSettings(ConfigModel):
     max_joint_jerk: float = Field(100.0, gt=0)
     position_gain: float = Field(0.3, gt=0, le=1)
     max_joint_force: Q6 = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
+    # fault models (off at 0): a sluggish controller follows the commanded joint targets through a
+    # first-order lag with this time constant, and a noisy one adds this RMS (rad) to every physics step's
+    # target; the planners and the task are not told
+    tracking_time_constant_s: float = Field(0.0, ge=0, le=1.0)
+    tracking_noise_rad: float = Field(0.0, ge=0, le=0.05)
 
 
 class GripperSettings(ConfigModel):
@@ -56,6 +61,8 @@ class GripperSettings(ConfigModel):
     max_opening_m: float = Field(0.085, gt=0, le=0.085)
     force_n: float = Field(100.0, ge=20, le=235)
     speed_m_s: float = Field(0.1, gt=0, le=0.15)
+    # a fault model (off at 1): the fingers squeeze with this times the commanded force (a worn gripper)
+    force_scale: float = Field(1.0, ge=0.1, le=2.0)
     finger_friction: float = Field(1.5, gt=0)
     # "Object detected", as the 2F-85 reports it: the fingers stopped closing above this opening. Closed on
     # nothing, the force-limited pads meet at 0 mm (the joint limits) and contact softness leaves well under
@@ -235,6 +242,9 @@ class CameraSettings(ConfigModel):
     # (image x along base +y), and the settling pause before a frame is taken there (seed 002: 3 s)
     capture_pose: Q6 = (-0.2518, -1.2366, 0.4574, -0.7916, -1.5708, -0.2518)
     settle_s: float = Field(3.0, ge=0)
+    # a fault model (off at 0): the frame perception gets was taken this long before it arrives, while the
+    # joint angles read with it are current (at most the settling pause: the frame is from within it)
+    latency_s: float = Field(0.0, ge=0, le=1.0)
     # wrist mount: joint angles where the camera sees the base marker for `twin calibrate` (None: capture_pose)
     calibration_pose: Q6 | None = None
 

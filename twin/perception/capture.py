@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
 import weakref
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -90,8 +90,10 @@ def capture_frame(
         q_target = cam.capture_pose if pose == "capture" or cam.calibration_pose is None else cam.calibration_pose
         world.reset_joints(np.asarray(q_target, dtype=float))
     settle = cam.settle_s if settle_s is None else float(settle_s)
+    steps = int(round(settle * settings.world.physics_hz))
+    late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
     t0 = time.perf_counter()
-    world.step(int(round(settle * settings.world.physics_hz)))
+    world.step(steps - late)
     t1 = time.perf_counter()
     q = world.joint_positions()
     if cam.mount == "wrist":
@@ -104,6 +106,12 @@ def capture_frame(
     t2 = time.perf_counter()
     clean = world.render(T_render, intr, near_m=cam.near_m, far_m=cam.far_m)
     t3 = time.perf_counter()
+    if late:  # a late frame: the world goes on while it is on its way, and the joints are read on arrival
+        world.step(late)
+        q = world.joint_positions()
+        if cam.mount == "wrist":
+            T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
+        t1 += time.perf_counter() - t3
     depth_filter = settings.perception.depth_filter
     if rng is None:
         n = _captures_taken.get(world, 0)
