@@ -247,3 +247,18 @@ def test_a_run_with_every_fault_model_set_to_off_is_the_nominal_run_bit_for_bit(
     assert [(o.id, o.placed, o.error, o.cycle_time_s, o.pose_error_m) for o in off.objects] == [
         (o.id, o.placed, o.error, o.cycle_time_s, o.pose_error_m) for o in nominal.objects
     ]
+
+
+@pytest.mark.parametrize(
+    "override",
+    [
+        "world.unmodelled_obstacle={size_m: [0.04, 0, 0.15]}",
+        "robot.tracking_time_constant_s=-0.1",
+        "gripper.force_scale=0",
+        "camera.latency_s=2",
+        "camera.noise.static_fraction=1.5",
+    ],
+)
+def test_a_fault_model_out_of_its_range_is_a_config_error(override):
+    with pytest.raises(ConfigError):
+        load_config("robocup", [override])

@@ -125,3 +125,39 @@ def test_a_warehouse_cube_lost_on_the_way_is_seen_again_where_it_fell_and_placed
     assert len(snatched) == 1
     assert outcomes[snatched[0]].placed, outcomes[snatched[0]].error
     assert all(o.placed for o in outcomes.values()), [(o.id, o.error) for o in outcomes.values()]
+
+
+def _unknown_boxes(overrides: list[str], seed: int):
+    from twin.perception.pipeline import make_detector
+    from twin.tasks.robocup.perception import perceive_robocup
+    from twin.tasks.robocup.task import _fixture_boxes
+
+    s = load_config("robocup", overrides)
+    with World(s, seed, renderer=RENDERER) as world:
+        cap = capture_frame(world, s)
+        res = perceive_robocup(
+            cap.frame,
+            cap.T_base_camera_nominal,
+            s,
+            make_detector(s),
+            seed=seed,
+            known_boxes=_fixture_boxes(Cell(s, world)),
+        )
+        truth = None if world.unmodelled_obstacle_centre is None else np.array(world.unmodelled_obstacle_centre)
+        return res, truth, [o.position for o in world.objects()]
+
+
+def test_an_unmodelled_box_on_the_table_is_seen_as_an_unknown_obstacle_and_nothing_else_is():
+    """The fault model puts a 4 x 4 x 15 cm box among the objects (drawn from the seed, the objects where
+    they were); perception names the 8 objects and reports the box as unknown, where it is; without it,
+    nothing is unknown."""
+    box = "world.unmodelled_obstacle={size_m: [0.04, 0.04, 0.15]}"
+    res, truth, objects = _unknown_boxes([box], seed=4)
+    nominal, none, objects_nominal = _unknown_boxes([], seed=4)
+    assert none is None and nominal.unknown == ()
+    assert np.array_equal(np.array(objects), np.array(objects_nominal))
+    assert len(res.objects) == 8 and len(res.unknown) == 1
+    lo, hi = res.unknown[0]
+    assert np.linalg.norm((lo + hi)[:2] / 2 - truth[:2]) < 0.01
+    np.testing.assert_allclose(hi - lo, [0.04, 0.04, 0.15], atol=0.01)
+    assert min(np.linalg.norm(np.array(p[:2]) - truth[:2]) for p in objects) > 0.05  # placed clear of them

@@ -27,7 +27,7 @@ from typing import Literal
 
 import numpy as np
 
-from twin.config import FixtureSettings, ObjectSettings, Settings
+from twin.config import FixtureSettings, ObjectSettings, Settings, WorldSettings
 from twin.errors import ConfigError, WorldError
 from twin.transforms import pose_from_xyz_rpy
 
@@ -48,6 +48,7 @@ __all__ = [
     "marker_corners_in_base",
     "marker_pose_in_base",
     "marker_quad_size_m",
+    "place_unmodelled_obstacle",
     "sample_layout",
 ]
 
@@ -201,6 +202,34 @@ def keepout_rects(boxes: Sequence[Aabb], gap: float) -> list[Rect]:
         if hi[2] > KEEPOUT_MIN_TOP_M:
             rects.append((lo[0] - gap, lo[1] - gap, hi[0] + gap, hi[1] + gap))
     return rects
+
+
+def place_unmodelled_obstacle(
+    world: WorldSettings, seed: int, placements: Sequence[Placement], obstacles: Sequence[Aabb] = ()
+) -> tuple[float, float, float] | None:
+    """The centre of `world.unmodelled_obstacle` (None when off): drawn from its own stream of the scene
+    seed (the objects' placements are the same with or without it), its footprint circle clear of every
+    object's and of the fixtures (`obstacles`, as for `sample_layout`). WorldError when it does not fit."""
+    cfg = world.unmodelled_obstacle
+    if cfg is None:
+        return None
+    objs = world.objects
+    (x0, x1), (y0, y1) = cfg.region_x or objs.region_x, cfg.region_y or objs.region_y
+    gap = objs.min_gap_m if cfg.min_gap_m is None else cfg.min_gap_m
+    r = math.hypot(cfg.size_m[0], cfg.size_m[1]) / 2.0
+    keepouts = keepout_rects(obstacles, gap)
+    circles = [(p.position[0], p.position[1], p.template.footprint_radius(p.lying)) for p in placements]
+    rng = np.random.default_rng([seed, 0x0B57])
+    for _ in range(TRIES_PER_OBJECT * LAYOUT_ATTEMPTS):
+        x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
+        if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
+            continue
+        if all(math.hypot(x - px, y - py) >= r + pr + gap for px, py, pr in circles):
+            return (x, y, cfg.size_m[2] / 2.0)
+    raise WorldError(
+        f"cannot place world.unmodelled_obstacle (size {list(cfg.size_m)}) clear of the objects in region "
+        f"x={[x0, x1]} y={[y0, y1]} with a gap of {gap} m; make it smaller or give it a region"
+    )
 
 
 def sample_layout(objects: ObjectSettings, seed: int, obstacles: Sequence[Aabb] = ()) -> list[Placement]:

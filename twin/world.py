@@ -48,6 +48,7 @@ from twin.scene_layout import (
     is_marker_plate,
     marker_pose_in_base,
     marker_quad_size_m,
+    place_unmodelled_obstacle,
     sample_layout,
 )
 from twin.timing import stage
@@ -257,9 +258,16 @@ class World:
                 self._add_marker_quad()
         self._objects: dict[int, Placement] = {}
         objects = self.settings.world.objects
-        boxes = self._obstacle_boxes() if any(spec.count for spec in objects.items) else []
-        for sp in sample_layout(objects, self.seed, boxes):
+        wants_boxes = any(spec.count for spec in objects.items) or self.settings.world.unmodelled_obstacle is not None
+        boxes = self._obstacle_boxes() if wants_boxes else []
+        placements = sample_layout(objects, self.seed, boxes)
+        for sp in placements:
             self._load_object(sp)
+        self.unmodelled_obstacle_id: int | None = None
+        self.unmodelled_obstacle_centre: tuple[float, float, float] | None = None  # ground truth; it is static
+        centre = place_unmodelled_obstacle(self.settings.world, self.seed, placements, boxes)
+        if centre is not None:
+            self._add_unmodelled_obstacle(centre)
         self._vary_object_physics()
         self._tracking = _FaultyTracking.from_settings(self.settings, self.seed, self.dt)
         self._apply_initial_commands()
@@ -337,6 +345,18 @@ class World:
             raise ConfigError(f"fixture name {name!r} clashes with another body name")
         self._fixtures[name] = bid
         self._bodies[name] = bid
+
+    def _add_unmodelled_obstacle(self, centre: tuple[float, float, float]) -> None:
+        """`world.unmodelled_obstacle`: a static grey box at `centre`, body name "unmodelled_obstacle"."""
+        c = self._cid
+        cfg = self.settings.world.unmodelled_obstacle
+        assert cfg is not None
+        half = [v / 2.0 for v in cfg.size_m]
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=[0.45, 0.45, 0.5, 1.0], physicsClientId=c)
+        bid = pb.createMultiBody(0.0, col, vis, list(centre), physicsClientId=c)
+        self._bodies["unmodelled_obstacle"] = bid
+        self.unmodelled_obstacle_id, self.unmodelled_obstacle_centre = bid, centre
 
     def _add_marker_quad(self) -> None:
         """The marker: a visual-only textured quad on the plate's top face (pose: scene_layout)."""

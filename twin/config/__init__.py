@@ -37,6 +37,7 @@ from twin.config.schema import (
     RobotSettings,
     Settings,
     TaskSettings,
+    UnmodelledObstacleSettings,
     WorldSettings,
 )
 from twin.tasks.robocup.settings import GraspEntry, IcpSettings, RobocupPerceptionSettings, RobocupTaskSettings
@@ -63,6 +64,7 @@ __all__ = [
     "RobotSettings",
     "Settings",
     "TaskSettings",
+    "UnmodelledObstacleSettings",
     "WarehousePerceptionSettings",
     "WarehouseTaskSettings",
     "WorldSettings",

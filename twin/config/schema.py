@@ -34,6 +34,7 @@ __all__ = [
     "RobotSettings",
     "Settings",
     "TaskSettings",
+    "UnmodelledObstacleSettings",
     "WorldSettings",
 ]
 
@@ -131,6 +132,25 @@ class ObjectSettings(ConfigModel):
         return v
 
 
+class UnmodelledObstacleSettings(ConfigModel):
+    """A fault model: a box on the table that no config fixture, planning scene or catalogue describes (a
+    tool left behind, a cable duct). Centred at a position drawn from the scene seed in `region_x` x
+    `region_y` (None: the objects' spawn region), `min_gap_m` (None: the objects' gap) clear of every
+    object's footprint and every fixture; only what a camera sees of it can tell anyone it is there."""
+
+    size_m: Vec3 = (0.04, 0.04, 0.15)
+    region_x: tuple[float, float] | None = None
+    region_y: tuple[float, float] | None = None
+    min_gap_m: float | None = Field(None, ge=0)
+
+    @field_validator("size_m")
+    @classmethod
+    def _positive(cls, v: Vec3) -> Vec3:
+        if min(v) <= 0:
+            raise ValueError(f"every side must be > 0, got {list(v)}")
+        return v
+
+
 class WorldSettings(ConfigModel):
     """The PyBullet world: rate, gravity, fixtures and objects.
 
@@ -147,6 +167,7 @@ class WorldSettings(ConfigModel):
         ]
     )
     objects: ObjectSettings = Field(default_factory=ObjectSettings)
+    unmodelled_obstacle: UnmodelledObstacleSettings | None = None  # a fault model: off when None
 
     @model_validator(mode="after")
     def _unique_names(self) -> WorldSettings:

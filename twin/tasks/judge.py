@@ -326,11 +326,17 @@ def oracle_ground_truth(world: World, detector: object) -> list[ObjectState] | N
 
 
 def perceive_robocup_scene(
-    world: World, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector
+    world: World,
+    frame: RGBDFrame,
+    T_base_camera: np.ndarray,
+    settings: Settings,
+    detector: Detector,
+    *,
+    known_boxes: list[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> RobocupResult:
     """The RoboCup perception of one frame (`twin.tasks.robocup.perception.perceive_robocup`), with the ORACLE
     hand-off: only a detector labelled as needing ground truth is given the simulator's objects."""
     from twin.tasks.robocup.perception import perceive_robocup
 
     fed = with_ground_truth(detector, oracle_ground_truth(world, detector))
-    return perceive_robocup(frame, T_base_camera, settings, fed, seed=world.seed)
+    return perceive_robocup(frame, T_base_camera, settings, fed, seed=world.seed, known_boxes=known_boxes)

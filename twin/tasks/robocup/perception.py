@@ -57,6 +57,7 @@ __all__ = [
     "pca_features",
     "pca_yaw",
     "perceive_robocup",
+    "unexplained_clusters",
     "wrap_half_turn",
 ]
 
@@ -312,7 +313,7 @@ def _estimate(
 
     yaw = wrap_half_turn(yaw)
     entry = params.grasp.get(f"{det.cls}_{orient}")
-    table_z = float((cloud.table.offset - n[0] * position[0] - n[1] * position[1]) / n[2]) if abs(n[2]) > 1e-6 else 0.0
+    table_z = _table_z(cloud, float(position[0]), float(position[1]))
     z_grasp = table_z + (entry.z_grasp_m if entry else top / 2.0)
     w_grip = entry.w_grip_m if entry else 0.085
     grasp = np.array([position[0], position[1], z_grasp, yaw, math.pi, 0.0, w_grip])
@@ -335,6 +336,12 @@ def _estimate(
     )
 
 
+def _table_z(cloud: SceneCloud, x: float, y: float) -> float:
+    """Height (base z) of the fitted table plane at (x, y); 0 for a plane seen edge-on."""
+    n = cloud.table.normal
+    return float((cloud.table.offset - n[0] * x - n[1] * y) / n[2]) if abs(n[2]) > 1e-6 else 0.0
+
+
 def estimate_objects(
     detections: list[Detection], cloud: SceneCloud, params: RobocupPerceptionSettings
 ) -> list[ObjectEstimate]:
@@ -352,11 +359,67 @@ def estimate_objects(
 class RobocupResult:
     """Estimates (base frame) for every detection that kept enough points, the detections themselves,
     and seconds per stage: cloud (back-projection), plane (table), detect (the whole detector, with its
-    own stages such as dbscan when it reports them), pca and icp (summed over objects)."""
+    own stages such as dbscan when it reports them), pca and icp (summed over objects). `unknown`: (lo,
+    hi) boxes around what stands on the table that no detection and no known fixture explains (computed
+    when the caller passes the known fixtures' boxes)."""
 
     objects: tuple[ObjectEstimate, ...]
     detections: tuple[Detection, ...]
     timings_s: dict[str, float] = field(default_factory=dict)
+    unknown: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+
+
+# what makes a cluster of unexplained points an obstacle: DBSCAN as the geometric detector's, at least this
+# many full-resolution points, and none of it within this distance of a detected object's points (the
+# fringe a detection's mask leaves out is the object's, not something else)
+_UNKNOWN_EPS_M = 0.015
+_UNKNOWN_MIN_POINTS = 60
+_UNKNOWN_CLEAR_OF_DETECTIONS_M = 0.02
+
+
+def unexplained_clusters(
+    cloud: SceneCloud,
+    detections: tuple[Detection, ...] | list[Detection],
+    known_boxes: list[tuple[np.ndarray, np.ndarray]],
+    *,
+    margin_m: float = 0.02,
+) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """(lo, hi) axis-aligned boxes, from the table up to the top, around clusters of points above the table
+    that are neither a detection's nor inside a known box grown by `margin_m` (the fixtures: bins, plate):
+    something on the table perception cannot name, which the planners must still go around."""
+    from scipy.spatial import cKDTree
+
+    from twin.perception.segmentation import cluster_points
+
+    above = np.flatnonzero(cloud.height > cloud.table_threshold_m)
+    if len(above) == 0:
+        return ()
+    select = _selector(cloud)
+    mine = np.zeros(len(cloud.points), dtype=bool)
+    for det in detections:
+        mine[select(det.pixels)] = True
+    pts = cloud.points[above]
+    keep = ~mine[above]
+    for lo, hi in known_boxes:
+        keep &= ~np.all((pts >= np.asarray(lo) - margin_m) & (pts <= np.asarray(hi) + margin_m), axis=1)
+    owned = cloud.points[mine & (cloud.height > cloud.table_threshold_m)]
+    if len(owned) and keep.any():
+        near, _ = cKDTree(owned).query(pts[keep], distance_upper_bound=_UNKNOWN_CLEAR_OF_DETECTIONS_M)
+        keep[np.flatnonzero(keep)[np.isfinite(near)]] = False
+    idx = above[keep]
+    if len(idx) < _UNKNOWN_MIN_POINTS:
+        return ()
+    clusters = cluster_points(cloud.points[idx], cloud.rgb[idx], eps_m=_UNKNOWN_EPS_M, min_points=40, voxel_m=0.005)
+    out = []
+    for cl in clusters:
+        if cl.n_points < _UNKNOWN_MIN_POINTS:
+            continue
+        top = float(np.percentile(cloud.table.distance(cl.points), 98))
+        lo, hi = cl.points.min(axis=0), cl.points.max(axis=0)
+        table_z = _table_z(cloud, float(cl.points[:, 0].mean()), float(cl.points[:, 1].mean()))
+        lo[2], hi[2] = table_z, table_z + top
+        out.append((lo, hi))
+    return tuple(out)
 
 
 def perceive_robocup(
@@ -366,9 +429,11 @@ def perceive_robocup(
     detector: Detector,
     *,
     seed: int = 0,
+    known_boxes: list[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> RobocupResult:
-    """Detect, then estimate pose and grasp per detection (seed 002 pipeline). Nothing here hands the
-    simulator's truth on: an oracle detector arrives already bound to it by the judge."""
+    """Detect, then estimate pose and grasp per detection (seed 002 pipeline); with `known_boxes` (the
+    fixtures' (lo, hi) boxes) also what stands on the table unexplained (`RobocupResult.unknown`). Nothing
+    here hands the simulator's truth on: an oracle detector arrives already bound to it by the judge."""
     params = settings.perception.robocup
     timings: dict[str, float] = {}
     cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
@@ -387,5 +452,10 @@ def perceive_robocup(
         estimates.append(est)
         for k in ("pca", "icp"):
             timings[k] += est.timings_s.get(k, 0.0)
-    log.debug("robocup: %d detections, %d estimates", len(detections), len(estimates))
-    return RobocupResult(tuple(estimates), tuple(detections), timings)
+    unknown: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    if known_boxes is not None:
+        with stage("perception.unknown") as unknown_stage:
+            unknown = unexplained_clusters(cloud, detections, known_boxes)
+        timings["unknown"] = unknown_stage.seconds
+    log.debug("robocup: %d detections, %d estimates, %d unknown", len(detections), len(estimates), len(unknown))
+    return RobocupResult(tuple(estimates), tuple(detections), timings, unknown)

@@ -57,6 +57,7 @@ _RELEASE_OPEN_M = 0.01  # in the bin the fingers open only this much wider than 
 _WALL_MARGIN_M = 0.005  # a placed object's footprint keeps this from the inner walls and from the others
 _SPOT_STEP_M = 0.005  # the grid of candidate release points in a bin
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
+_UNKNOWN_PAD_M = 0.01  # an unnamed thing on the table is planned around this much wider than it was seen
 _GRASP_CLEARANCE_M = 0.01  # a grasp yaw is turned away from neighbours only when the gripper comes closer
 
 
@@ -431,6 +432,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     captures = 0
     stopped: str | None = None
     hand_eye = _calibrate_hand_eye(cell)
+    fixture_boxes = _fixture_boxes(cell)
     while True:
         budget = min(task.max_captures, (task.retries + 2) * most_seen + 3)
         if captures >= budget:
@@ -456,12 +458,13 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             T_bc = cap.T_base_camera_nominal
         else:
             T_bc = camera_extrinsics(settings, cap, None)
-        seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector)  # an oracle detector gets the truth
+        # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
+        seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:
             break
-        _update_obstacles(cell, seen.objects, est, bins)
+        _update_obstacles(cell, seen.objects, est, bins, seen.unknown)
         tgt = _target_for(est, targets)
         tgt.attempts += 1
         tgt.true_ids |= referee.match(est.position)  # metrics only: which true object this was
@@ -524,12 +527,32 @@ def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
         cell.move_joints("capture", q)
 
 
+def _fixture_boxes(cell: Cell) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(lo, hi) around each fixture of the planning scene (the bins with their insides): what perception
+    need not explain."""
+    out = []
+    for shapes in cell.scene.environment_shapes().values():
+        boxes = [(T, np.asarray(dims, dtype=float)) for kind, dims, T in shapes if kind == "box"]
+        if not boxes:
+            continue
+        corners = [T[:3, 3] + s * (np.abs(T[:3, :3]) @ (dims / 2.0)) for T, dims in boxes for s in (-1.0, 1.0)]
+        out.append((np.min(corners, axis=0), np.max(corners, axis=0)))
+    return out
+
+
 def _update_obstacles(
-    cell: Cell, estimates: tuple[ObjectEstimate, ...], target: ObjectEstimate, bins: dict[str, BinGeometry]
+    cell: Cell,
+    estimates: tuple[ObjectEstimate, ...],
+    target: ObjectEstimate,
+    bins: dict[str, BinGeometry],
+    unknown: tuple[tuple[np.ndarray, np.ndarray], ...] = (),
 ) -> None:
     """Every other perceived object on the table becomes a box in the planning scene (the target is left
-    out: the fingers close around it)."""
+    out: the fingers close around it), and so does everything perception saw there but could not name
+    (grown by `_UNKNOWN_PAD_M`)."""
     _clear_seen(cell)
+    for i, (lo, hi) in enumerate(unknown):
+        cell.scene.add_box_bounds(f"seen_unknown_{i}", lo - _UNKNOWN_PAD_M, hi + _UNKNOWN_PAD_M)
     for i, est in enumerate(estimates):
         if est is target or _in_any_bin(est.position, bins):
             continue
