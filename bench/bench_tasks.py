@@ -71,7 +71,9 @@ def main() -> None:
             for k, v in r["timings"].items():
                 stages[k].append(v)
             for o in r["objects"]:
-                per_class[o["class"]].append(o["placed"])
+                # the detection classes: cubes by colour (RoboCup's 8), as the seeds report them
+                label = f"{o['class']}_{o['color']}" if o["class"] == "cube" and o.get("color") else o["class"]
+                per_class[label].append(o["placed"])
                 if o["placed"]:
                     cycles.append(o["cycle_time_s"])
             failed = [(o["id"], o["error"]) for o in r["objects"] if not o["placed"]]
