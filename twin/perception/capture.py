@@ -1,10 +1,14 @@
 """Taking a frame the way the reference systems do, and nothing more.
 
-Fixed mount (seeds 000/001): let the scene settle, render from the configured camera pose. Wrist mount
-(seed 002): put the arm in the capture pose (~0.7 m above the table), wait the settling pause, render.
-The frame then goes through the sensor model. What perception gets back is the frame, the measured
-joint angles and the camera pose that the robot's own kinematics predicts (for a wrist camera: forward
-kinematics of the measured joints times the configured hand-eye offset) - never simulator ground truth.
+Fixed mount (seeds 000/001): let the scene settle, render from the camera's real pose (the configured one
+times `camera.extrinsic_error`). Wrist mount (seed 002): put the arm in the capture pose (~0.7 m above
+the table), wait the settling pause, render. The frame then goes through the sensor model, once per frame
+of the burst the depth filter averages (`perception.depth_filter`: the last frames of the pause, one
+render, as the scene is at rest), and through the filter. What perception gets back is the frame, the
+measured joint angles and the camera pose that the robot's own kinematics predicts (for a wrist camera:
+forward kinematics of the measured joints times the configured hand-eye offset) - never simulator ground
+truth. A late frame (`camera.latency_s`, a fault model) shows the world that long before the joints
+read with it.
 
 The arm is teleported to the capture pose (`World.reset_joints`): a perception run needs no planner. A
 task that moves there with a planner calls `capture_frame(..., move=False)` once it has arrived.
