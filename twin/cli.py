@@ -436,7 +436,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     from twin.compare import plan_comparison, run_comparison
     from twin.compare.gate import Tolerance, gate, load_baseline
-    from twin.compare.report import summary_table
+    from twin.compare.report import summary_table, sweep_tables
     from twin.errors import ConfigError
 
     if args.tolerance is not None and args.baseline is None:
@@ -476,7 +476,10 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         overrides=args.overrides,
         on_row=progress,
     )
-    Console(width=200).print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
+    console = Console(width=200)
+    console.print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
+    for table in sweep_tables(result.summary):  # a scenario with a `sweep:`: success and time per level
+        console.print(table)
     _print_skipped(result.skipped, "skipped")
     again = f", {result.retried} rerun after an error" if result.retried else ""
     print(

@@ -12,6 +12,7 @@ A box is (name, lo (3,), hi (3,)) in the base frame, m, without the margin.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Sequence
@@ -45,6 +46,12 @@ Box = tuple[str, np.ndarray, np.ndarray]
 CHECK_TOL_M = 5e-4  # the numpy re-check of the hard constraints accepts this much below the margin
 
 
+@functools.lru_cache(maxsize=64)
+def _warn_large_spheres(size: tuple[float, ...], r: float, r_max: float, n: int) -> None:
+    """Say once per process and box (not at every receding-horizon step) that its spheres are coarse."""
+    log.warning("nmpc: held box %s needs spheres of %.3f m (> %.3f m) with %d spheres", list(size), r, r_max, n)
+
+
 def object_spheres(size: np.ndarray, T_tcp_obj: np.ndarray, *, r_min: float, r_max: float, max_n: int) -> np.ndarray:
     """(n, 4) spheres (x, y, z, r) in the TCP frame covering a held box of full extents `size`.
 
@@ -59,7 +66,7 @@ def object_spheres(size: np.ndarray, T_tcp_obj: np.ndarray, *, r_min: float, r_m
         n += 1
     r = max(math.sqrt((half[ax] / n) ** 2 + rest), r_min)
     if r > r_max + 1e-12:
-        log.warning("nmpc: held box %s needs spheres of %.3f m (> %.3f m) with %d spheres", size.tolist(), r, r_max, n)
+        _warn_large_spheres(tuple(float(v) for v in size), round(r, 4), r_max, n)
     offs = np.zeros((n, 3))
     offs[:, ax] = (np.arange(n) + 0.5) / n * 2 * half[ax] - half[ax]
     centres = (T_tcp_obj[:3, :3] @ offs.T).T + T_tcp_obj[:3, 3]

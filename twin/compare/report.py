@@ -23,12 +23,20 @@ Whether a difference is real, three ways (the statistics themselves live in `twi
   (planner - reference) and a two-sided Wilcoxon signed-rank p for `PAIRED_KEYS`; for success, the
   runs one planner solved and the other did not and an exact sign test (binomial) on them. See
   `PairedComparison` for the tie rule. p values are per comparison, not corrected for multiplicity.
+
+A scenario with a `sweep` (see `twin.compare.spec`) is also summarised along each swept key
+(`SweepPoint`, `sweep.csv`, a table per axis in summary.md): per planner and level the success rate with
+its 95 % Wilson score interval (`stats.wilson_ci`: a level has a few runs, where a bootstrap interval of a
+rate collapses to a point or to [0, 100 %]), for task runs the mean share of objects placed, and the median
+cycle time per placed object (task runs) or trajectory duration (queries) with its bootstrap interval. The
+nominal point's runs count on every axis.
 """
 
 from __future__ import annotations
 
 import csv
 import difflib
+import json
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -47,6 +55,7 @@ from twin.compare.stats import (
     sign_test,
     signed_rank,
     stable_seed,
+    wilson_ci,
 )
 from twin.errors import ConfigError
 
@@ -59,14 +68,18 @@ __all__ = [
     "CONFIDENCE",
     "MIN_DISCORDANT",
     "PAIRED_KEYS",
+    "SWEEP_TIME_KEYS",
     "PairedComparison",
     "Stat",
     "Summary",
     "SummaryRow",
+    "SweepPoint",
     "bootstrap_ci",
     "is_tie",
     "summarize",
     "summary_table",
+    "sweep_points",
+    "sweep_tables",
     "write_summary",
 ]
 
@@ -77,6 +90,7 @@ _TABLE_KEYS = ("planning_time_s", "duration_s", "min_clearance_m", "max_jerk", "
 
 PAIRED_KEYS = ("planning_time_s", "duration_s")  # metrics compared pair by pair with the reference
 SUCCESS = "success"  # the metric name of the paired success comparison
+SWEEP_TIME_KEYS = {"task": "cycle_time_s", "query": "duration_s"}  # the time a sweep shows, per run kind
 
 
 @dataclass(frozen=True)
@@ -165,15 +179,50 @@ class PairedComparison:
 
 
 @dataclass(frozen=True)
+class SweepPoint:
+    """One planner at one level (`value`) of one swept `key` of a scenario: the runs on that key's axis
+    with that value (the nominal point's runs lie on every axis), their success rate with its 95 % Wilson
+    interval, the mean share of objects placed (task runs; None for queries), and the median of
+    `time_key` (SWEEP_TIME_KEYS: cycle time per placed object, or trajectory duration) with its 95 %
+    percentile-bootstrap interval."""
+
+    scenario: str
+    key: str
+    value: Any
+    planner: str
+    runs: int
+    successes: int
+    errors: int
+    success_ci: tuple[float, float] | None
+    placed: float | None
+    time_key: str
+    time: Stat
+
+    @property
+    def success_rate(self) -> float | None:
+        return self.successes / self.runs if self.runs else None
+
+    @property
+    def value_text(self) -> str:
+        """The level as a column header shows it: a string as it is, anything else as compact JSON."""
+        return self.value if isinstance(self.value, str) else json.dumps(self.value, separators=(",", ":"))
+
+
+@dataclass(frozen=True)
 class Summary:
     """Overall rows (one per planner, in config order) and per-scenario rows; skipped runs with reasons;
-    the paired comparison of every planner with `reference`."""
+    the paired comparison of every planner with `reference`; the sweep points of swept scenarios."""
 
     overall: list[SummaryRow]
     by_scenario: list[SummaryRow]
     skipped: list[tuple[str, str]] = field(default_factory=list)
     paired: list[PairedComparison] = field(default_factory=list)
     reference: str | None = None
+    sweeps: list[SweepPoint] = field(default_factory=list)
+
+    def sweep_axes(self) -> list[tuple[str, str]]:
+        """(scenario, key) of every swept key, in the order the rows first show them."""
+        return list(dict.fromkeys((p.scenario, p.key) for p in self.sweeps))
 
     def metric_keys(self) -> list[str]:
         """Metrics that have at least one value (the others would be empty columns)."""
@@ -291,6 +340,50 @@ def _paired(
     return out
 
 
+def sweep_points(rows: Iterable[dict[str, Any]], *, planners: Sequence[str] | None = None) -> list[SweepPoint]:
+    """The sweep points of the rows that carry a sweep level (`row["sweep"]`, `row["sweep_axes"]`): per
+    scenario, swept key, level and planner (in `planners` order, then any others). Levels are in the order
+    the rows show them: in run order (as `run_comparison` returns them) the nominal value first, then the
+    others as the sweep lists them."""
+    rows = [r for r in rows if r.get("status") != "skipped" and r.get("sweep")]
+    order = list(planners or [])
+    order += sorted({r["planner"] for r in rows} - set(order))
+    out: list[SweepPoint] = []
+    for scenario in dict.fromkeys(r["scenario"] for r in rows):
+        srows = [r for r in rows if r["scenario"] == scenario]
+        for key in dict.fromkeys(k for r in srows for k in r["sweep"]):
+            on_axis = [r for r in srows if key in (r.get("sweep_axes") or ()) and key in r["sweep"]]
+            levels: dict[str, Any] = {}
+            for r in on_axis:
+                levels.setdefault(json.dumps(r["sweep"][key], sort_keys=True), r["sweep"][key])
+            for text in levels:
+                at = [r for r in on_axis if json.dumps(r["sweep"][key], sort_keys=True) == text]
+                for p in order:
+                    sel = [r for r in at if r["planner"] == p]
+                    if not sel:
+                        continue
+                    time_key = SWEEP_TIME_KEYS.get(str(sel[0].get("kind")), "duration_s")
+                    ok = sum(1 for r in sel if r.get("success"))
+                    placed = [v for r in sel if (v := _value(r, "task_success_rate")) is not None]
+                    times = [v for r in sel if (v := _value(r, time_key)) is not None]
+                    out.append(
+                        SweepPoint(
+                            scenario=scenario,
+                            key=key,
+                            value=levels[text],
+                            planner=p,
+                            runs=len(sel),
+                            successes=ok,
+                            errors=sum(1 for r in sel if r.get("status") == "error"),
+                            success_ci=wilson_ci(ok, len(sel)),
+                            placed=float(np.mean(placed)) if placed else None,
+                            time_key=time_key,
+                            time=Stat.of(times, seed=stable_seed(p, scenario, f"{key}={text}", time_key)),
+                        )
+                    )
+    return out
+
+
 def summarize(
     rows: Iterable[dict[str, Any]],
     *,
@@ -323,7 +416,7 @@ def summarize(
         hint = f" Did you mean {close[0]!r}?" if close else ""
         raise ConfigError(f"reference planner {reference!r} is not compared here.{hint} Planners: {', '.join(order)}")
     paired = _paired(rows, order, scenarios, reference) if reference is not None else []
-    return Summary(overall, by_scenario, list(skipped), paired, reference)
+    return Summary(overall, by_scenario, list(skipped), paired, reference, sweep_points(rows, planners=order))
 
 
 def _fmt(v: float | None, unit: str = "") -> str:
@@ -353,6 +446,18 @@ def _rate(r: SummaryRow) -> str:
     return f"{100 * r.success_rate:.0f}% ({r.successes}/{r.runs}){ci}"
 
 
+def _sweep_rate(p: SweepPoint) -> str:
+    """'67% (2/3) [21, 94]': a sweep point's success rate, runs and 95 % Wilson interval in percent."""
+    if p.success_rate is None:
+        return "-"
+    ci = "" if p.success_ci is None else f" [{100 * p.success_ci[0]:.0f}, {100 * p.success_ci[1]:.0f}]"
+    return f"{100 * p.success_rate:.0f}% ({p.successes}/{p.runs}){ci}"
+
+
+def _sweep_time(p: SweepPoint) -> str:
+    return f"{_fmt(p.time.median, 's')} s" if p.time.n else "-"
+
+
 def _median_ci(st: Stat, unit: str) -> str:
     """'median [lo, hi]' of a Stat with values."""
     ci = "" if st.ci is None else f" [{_fmt(st.ci_low, unit)}, {_fmt(st.ci_high, unit)}]"
@@ -377,10 +482,56 @@ _PAIRED_COLUMNS = (
 )
 
 
+_SWEEP_COLUMNS = (
+    "scenario",
+    "key",
+    "value",
+    "planner",
+    "runs",
+    "successes",
+    "success_rate",
+    "success_ci_low",
+    "success_ci_high",
+    "errors",
+    "placed_mean",
+    "time_metric",
+    "time_median",
+    "time_ci_low",
+    "time_ci_high",
+)
+
+
+def _write_sweep_csv(summary: Summary, path: Path) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.writer(f)
+        w.writerow(_SWEEP_COLUMNS)
+        for p in summary.sweeps:
+            ci = ["", ""] if p.success_ci is None else [f"{v:.6g}" for v in p.success_ci]
+            w.writerow(
+                [
+                    p.scenario,
+                    p.key,
+                    json.dumps(p.value),
+                    p.planner,
+                    p.runs,
+                    p.successes,
+                    "" if p.success_rate is None else f"{p.success_rate:.6g}",
+                    *ci,
+                    p.errors,
+                    _csv_float(p.placed),
+                    p.time_key,
+                    _csv_float(p.time.median),
+                    _csv_float(p.time.ci_low),
+                    _csv_float(p.time.ci_high),
+                ]
+            )
+
+
 def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
     """Write DIR/summary.csv (every metric, median and p95, per planner overall and per scenario, then the
     95 % intervals and failure counts), DIR/summary.md and DIR/paired.csv (the paired comparison, one row
-    per planner, scenario and metric); returns the three paths."""
+    per planner, scenario and metric), and, when a scenario has a sweep, DIR/sweep.csv (one row per
+    scenario, swept key, level and planner: `SweepPoint`); returns the paths."""
     out = Path(out_dir)
     csv_path, md_path, paired_path = out / "summary.csv", out / "summary.md", out / "paired.csv"
     keys = [d.key for d in _DEFS]
@@ -438,9 +589,11 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
                     ]
                 )
         md_path.write_text(_markdown(summary), encoding="utf-8")
+        if summary.sweeps:
+            _write_sweep_csv(summary, out / "sweep.csv")
     except OSError as e:
         raise ConfigError(f"cannot write the summary in {out}: {e.strerror}") from None
-    return [csv_path, md_path, paired_path]
+    return [csv_path, md_path, paired_path] + ([out / "sweep.csv"] if summary.sweeps else [])
 
 
 def _markdown(summary: Summary) -> str:
@@ -490,6 +643,8 @@ def _markdown(summary: Summary) -> str:
         cell = {(r.planner, r.scenario): _rate(r) for r in summary.by_scenario}
         for p in planners:
             lines.append(f"| {p} | " + " | ".join(cell.get((p, s), "-") for s in scen) + " |")
+    if summary.sweeps:
+        lines += _sweep_markdown(summary)
     if summary.paired:
         lines += _paired_markdown(summary, defs)
     if summary.skipped:
@@ -497,6 +652,34 @@ def _markdown(summary: Summary) -> str:
     lines += ["", "## Metric definitions", ""]
     lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in _DEFS if d.key in keys]
     return "\n".join(lines) + "\n"
+
+
+def _sweep_markdown(summary: Summary) -> list[str]:
+    lines = ["", "## Sweeps: success by level", ""]
+    lines += [
+        "One swept key at a time, the other swept keys at their first (nominal) value; the nominal runs count "
+        "on every axis. Cells: success rate (runs) [95% Wilson CI]; for task runs the mean share of objects "
+        "placed; the median cycle time per placed object (task runs) or trajectory duration (queries).",
+    ]
+    for scenario, key in summary.sweep_axes():
+        pts = [p for p in summary.sweeps if p.scenario == scenario and p.key == key]
+        levels = list(dict.fromkeys(p.value_text for p in pts))
+        planners = list(dict.fromkeys(p.planner for p in pts))
+        cell = {(p.planner, p.value_text): p for p in pts}
+        lines += ["", f"### {scenario}: {key}", ""]
+        head = [f"{lv} (nominal)" if i == 0 else lv for i, lv in enumerate(levels)]
+        lines += ["| planner | " + " | ".join(head) + " |", "|---|" + "---:|" * len(levels)]
+        for planner in planners:
+            cells = []
+            for lv in levels:
+                p = cell.get((planner, lv))
+                if p is None:
+                    cells.append("-")
+                    continue
+                placed = "" if p.placed is None else f"; placed {100 * p.placed:.0f}%"
+                cells.append(f"{_sweep_rate(p)}{placed}; {_sweep_time(p)}")
+            lines.append(f"| {planner} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _paired_markdown(summary: Summary, defs: dict[str, MetricDef]) -> list[str]:
@@ -557,3 +740,29 @@ def summary_table(summary: Summary, *, title: str = "planner comparison") -> Tab
             cells.append(escape(r.common_pair or "-"))
         table.add_row(r.planner, escape(_rate(r)), *cells)
     return table
+
+
+def sweep_tables(summary: Summary) -> list[Table]:
+    """Rich tables of the sweep points, one per swept key of a scenario: a row per planner, a column per
+    level, each cell the success rate (runs) with its 95 % Wilson interval over the median time."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    tables = []
+    for scenario, key in summary.sweep_axes():
+        pts = [p for p in summary.sweeps if p.scenario == scenario and p.key == key]
+        levels = list(dict.fromkeys(p.value_text for p in pts))
+        cell = {(p.planner, p.value_text): p for p in pts}
+        time_key = pts[0].time_key
+        table = Table(title=escape(f"{scenario}: success (runs) [95% Wilson CI] / median {time_key}, by {key}"))
+        table.add_column("planner")
+        for lv in levels:
+            table.add_column(escape(f"{lv}\n(nominal)" if lv == levels[0] else lv), justify="right")
+        for planner in dict.fromkeys(p.planner for p in pts):
+            cells = []
+            for lv in levels:
+                p = cell.get((planner, lv))
+                cells.append("-" if p is None else escape(f"{_sweep_rate(p)}\n{_sweep_time(p)}"))
+            table.add_row(planner, *cells)
+        tables.append(table)
+    return tables

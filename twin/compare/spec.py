@@ -23,25 +23,51 @@ path, `extends: other.yaml` and `--set a.b=value` work as for scene configs)::
       - name: warehouse-task                          # a full task run (`twin run`)
         task: warehouse.yaml
         seeds: [0, 1]                                 # this scenario's own seeds
+      - name: robocup-faults                          # a sweep: any config key as a scenario axis
+        task: robocup.yaml
+        sweep:
+          camera.noise.scale: [1, 2, 3, 4]            # the first value of each key is its nominal level
+          camera.extrinsic_error.translation_m: [0, 0.005, 0.01]
 
 Why the cross product is expanded here: every run gets its `run_id` from (planner, case, seed), where a
 case is one query of a query scenario (`name#i`) or a task scenario (`name`), plus a hash of everything
 that defines the run (the whole planner block and label, the scenario's settings and its loaded config,
 the seed), e.g. `rrtconnect|robocup-blocked#3|seed=1|a1b2c3d4`. So run ids are stable across reruns,
 resumes and backends, and a run whose definition changed is a different run, never a stale row.
+
+Why a sweep is one factor at a time: each swept key is an axis, varied with every other swept key at its
+first (nominal) value, so the example runs the nominal point (noise 1, translation 0) once, then 3 noise
+levels and 2 translations: 1 + 3 + 2 = 6 levels, where the full grid would be 4 x 3 = 12; with three or
+four keys a grid explodes, while the question asked ("how does success fall off along this fault?") needs
+only the axes. `sweep_mode: grid` runs the cross product instead (for interactions; the report still
+draws the axes through the nominal point).
+
+Each level is a case of the scenario, named `robocup-faults@camera.noise.scale=3` (`@nominal` for the
+shared point, which runs once and belongs to every axis; a grid point off the axes joins its keys with
+';'; a query scenario's query index follows: `...@camera.noise.scale=3#2`). Its config gets `key=value`
+for every swept key appended to the scenario's `overrides`, in `sweep` order. Its run id hashes the whole
+point, so a changed level or nominal value is a different run, and an added level leaves the others their
+ids. Rows carry the point (`sweep`: {key: value} of every swept key; None without a sweep) and the axes it
+lies on (`sweep_axes`: every key for the nominal point), so results group by level without parsing names.
+Every value and level is loaded into the scenario's config when the comparison is: an unknown key or a
+value the config rejects is a ConfigError naming the scenario, the key and what is allowed.
 """
 
 from __future__ import annotations
 
+import difflib
 import hashlib
+import itertools
 import json
 import math
+import re
 import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NamedTuple
 
+import yaml
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -54,19 +80,23 @@ from pydantic import (
     model_validator,
 )
 
-from twin.config import PlannerBlock, apply_override, find_config, read_yaml
+from twin.config import PlannerBlock, apply_override, find_config, load_config, read_yaml
 from twin.errors import ConfigError
 from twin.problems.model import ProblemSet, load_problem_set
 from twin.problems.queries import query_of_problem
 
 __all__ = [
+    "NOMINAL",
+    "Case",
     "ComparePlanner",
     "CompareSpec",
     "QueryScenario",
     "QuerySpec",
     "RandomQueries",
     "RunTask",
+    "SweepLevel",
     "TaskScenario",
+    "case_name",
     "compare_spec_from_dict",
     "definitions",
     "describe_changes",
@@ -77,7 +107,10 @@ __all__ = [
     "run_key",
 ]
 
-_NAME_PATTERN = r"^[A-Za-z0-9_.+\-]+$"  # no '|', '#' or spaces: they delimit run ids
+_NAME_PATTERN = r"^[A-Za-z0-9_.+\-]+$"  # no '|', '#', '@' or spaces: they delimit run ids and case names
+_KEY_PATTERN = r"^[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*$"  # a dotted config key, as `--set` takes it
+NOMINAL = "nominal"  # the case label of a sweep's shared point (every swept key at its first value)
+_LABEL_FORBIDDEN = set("|#@;") | {" ", "\t", "\n", "\r"}
 
 Q6 = tuple[float, float, float, float, float, float]
 
@@ -176,7 +209,116 @@ class RandomQueries(_Model):
         return v
 
 
-class QueryScenario(_Model):
+def _yaml_text(v: Any) -> str:
+    """`v` as the YAML flow text an override carries (`apply_override` reads it back to `v`)."""
+    return str(yaml.safe_dump([v], default_flow_style=True, width=1_000_000)).strip()[1:-1]
+
+
+def _label_text(v: Any) -> str:
+    """`v` as a case name shows it: a string as it is, anything else as compact JSON ('0.005', '[0.5,1.5]')."""
+    return v if isinstance(v, str) else json.dumps(v, separators=(",", ":"))
+
+
+@dataclass(frozen=True)
+class SweepLevel:
+    """One point of a scenario's sweep: the value of every swept key (`point`, in `sweep` order), its label
+    in case names ('nominal', 'camera.noise.scale=3'; '' for a scenario without a sweep) and the swept keys
+    whose axis it lies on (every other key at its first value: all of them for the nominal point)."""
+
+    point: dict[str, Any]
+    label: str
+    axes: tuple[str, ...]
+
+    def overrides(self) -> tuple[str, ...]:
+        """'key=value' for every swept key, in `sweep` order: what the level appends to the scenario's overrides."""
+        return tuple(f"{k}={_yaml_text(v)}" for k, v in self.point.items())
+
+
+UNSWEPT = SweepLevel({}, "", ())
+
+
+class _Swept(_Model):
+    """The sweep of a scenario (see the module docstring): `sweep` maps dotted config keys to their levels,
+    the first one nominal; `sweep_mode` is `one_at_a_time` (default: the axes through the nominal point)
+    or `grid` (every combination)."""
+
+    sweep: dict[str, list[Any]] = Field(default_factory=dict)
+    sweep_mode: Literal["one_at_a_time", "grid"] = "one_at_a_time"
+
+    @model_validator(mode="after")
+    def _check_sweep(self) -> _Swept:
+        name = getattr(self, "name", "?")
+        for key, values in self.sweep.items():
+            where = f"scenario {name!r}: sweep {key!r}"
+            if not re.match(_KEY_PATTERN, key):
+                raise ValueError(f"{where}: a sweep key is a dotted config key such as camera.noise.scale")
+            if not values:
+                raise ValueError(f"{where}: the list of values is empty; give at least one (the first is nominal)")
+            for i, v in enumerate(values):
+                try:
+                    json.dumps(v, allow_nan=False)
+                except (TypeError, ValueError):
+                    raise ValueError(f"{where}: value {v!r} is not a plain YAML value (number, string, list)") from None
+                try:
+                    back = yaml.safe_load(_yaml_text(v))
+                except yaml.YAMLError:
+                    back = None
+                if back != v:
+                    raise ValueError(f"{where}: value {v!r} does not survive a --set override; write it plainly")
+                text = _label_text(v)
+                if not text or _LABEL_FORBIDDEN & set(text):
+                    raise ValueError(
+                        f"{where}: value {text!r} names a case: no spaces, '|', '#', '@' or ';', and not empty"
+                    )
+                if any(_same(v, w) for w in values[:i]):
+                    raise ValueError(f"{where}: value {text} is listed twice; each level once")
+        if self.sweep_mode == "grid" and self.level_count() > 10_000:
+            raise ValueError(f"scenario {name!r}: a sweep grid of {self.level_count()} levels; use one_at_a_time")
+        return self
+
+    def level_count(self) -> int:
+        """How many levels the sweep has (1 without a sweep; the nominal point counts once)."""
+        if self.sweep_mode == "grid":
+            return math.prod(len(v) for v in self.sweep.values())
+        return 1 + sum(len(v) - 1 for v in self.sweep.values())
+
+    def levels(self) -> list[SweepLevel]:
+        """The sweep's levels in run order, the nominal point first: then each key's other values in
+        `sweep` order (one_at_a_time), or the cross product in `sweep` order (grid). Without a sweep, one
+        level with an empty point and label."""
+        if not self.sweep:
+            return [UNSWEPT]
+        keys = list(self.sweep)
+        nominal = {k: v[0] for k, v in self.sweep.items()}
+        if self.sweep_mode == "grid":
+            points = [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*self.sweep.values())]
+        else:
+            points = [nominal] + [dict(nominal, **{k: v}) for k in keys for v in self.sweep[k][1:]]
+        out = []
+        for point in points:
+            off = [k for k in keys if not _same(point[k], nominal[k])]
+            label = ";".join(f"{k}={_label_text(point[k])}" for k in off) or NOMINAL
+            axes = tuple(keys) if not off else tuple(off) if len(off) == 1 else ()
+            out.append(SweepLevel(point, label, axes))
+        return out
+
+    def query_count(self) -> int:
+        """Queries (or problems) per seed of a query scenario; 1 for a task run."""
+        return 1
+
+    def case_count(self) -> int:
+        """Cases per seed: queries (1 for a task run) x sweep levels."""
+        return self.query_count() * self.level_count()
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Two sweep values are one level when they are equal as data (1 and 1.0 are; True and 1 are not)."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True) or (
+        type(a) in (int, float) and type(b) in (int, float) and a == b
+    )
+
+
+class QueryScenario(_Swept):
     """Motion queries planned in the static cell of a scene config, then executed in PyBullet.
 
     The queries are listed (`queries`), drawn at random (`random`), or read from a problem-set file
@@ -223,13 +365,13 @@ class QueryScenario(_Model):
             raise ConfigError(f"scenario {self.name!r}: its problem set is not loaded (load the spec from a file)")
         return self._problem_set
 
-    def case_count(self) -> int:
+    def query_count(self) -> int:
         if self.problems is not None:
             return len(self.problem_set.problems)
         return len(self.queries) if self.queries else self.random.count  # type: ignore[union-attr]
 
 
-class TaskScenario(_Model):
+class TaskScenario(_Swept):
     """A full task run (`twin run`) of a scene/task config with each planner."""
 
     name: str = Field(pattern=_NAME_PATTERN)
@@ -240,9 +382,6 @@ class TaskScenario(_Model):
     @property
     def kind(self) -> str:
         return "task"
-
-    def case_count(self) -> int:
-        return 1
 
 
 def _scenario_kind(v: Any) -> str:
@@ -325,13 +464,25 @@ class CompareSpec(_Model):
             return sorted({p.seed for p in scenario.problem_set.problems})
         return list(self.seeds)
 
-    def cases(self, scenario: QueryScenario | TaskScenario) -> list[tuple[int | None, int]]:
-        """(case index or None for a task, seed) of every run a planner makes in `scenario`, in run order."""
+    def cases(self, scenario: QueryScenario | TaskScenario) -> list[Case]:
+        """(query index or None for a task, seed, sweep level) of every run a planner makes in `scenario`,
+        in run order: by seed, then query, then level (so the first seed has seen every level early)."""
+        levels = scenario.levels()
         if isinstance(scenario, TaskScenario):
-            return [(None, seed) for seed in self.seeds_for(scenario)]
-        if scenario.problems is not None and scenario.seeds is None:
-            return [(i, p.seed) for i, p in enumerate(scenario.problem_set.problems)]
-        return [(i, seed) for seed in self.seeds_for(scenario) for i in range(scenario.case_count())]
+            pairs: list[tuple[int | None, int]] = [(None, seed) for seed in self.seeds_for(scenario)]
+        elif scenario.problems is not None and scenario.seeds is None:
+            pairs = [(i, p.seed) for i, p in enumerate(scenario.problem_set.problems)]
+        else:
+            pairs = [(i, seed) for seed in self.seeds_for(scenario) for i in range(scenario.query_count())]
+        return [Case(i, seed, level) for i, seed in pairs for level in levels]
+
+
+class Case(NamedTuple):
+    """One case of a scenario: the query index (None for a task run), the seed and the sweep level."""
+
+    query_index: int | None
+    seed: int
+    level: SweepLevel
 
 
 # ---- runs ----------------------------------------------------------------------------------------
@@ -361,7 +512,11 @@ def scenario_definitions(spec: CompareSpec) -> dict[str, dict[str, Any]]:
     for sc in spec.scenarios:
         path = sc.task if isinstance(sc, TaskScenario) else sc.scene
         assert path is not None  # resolved on load
-        d = sc.model_dump(mode="json", exclude={"seeds", "scene", "task", "problems"})
+        d = sc.model_dump(mode="json", exclude={"seeds", "scene", "task", "problems", "sweep", "sweep_mode"})
+        if sc.sweep:  # only then, so the runs of a scenario without a sweep keep the ids they had
+            d["sweep"] = sc.sweep
+            if sc.sweep_mode != "one_at_a_time":
+                d["sweep_mode"] = sc.sweep_mode
         d["kind"] = sc.kind
         d["config"] = {"file": Path(path).name, "sha256": config_digest(path, sc.overrides)}
         if isinstance(sc, QueryScenario) and sc.problems is not None:
@@ -386,10 +541,12 @@ def definitions(spec: CompareSpec) -> dict[str, Any]:
     }
 
 
-def _case_definition(scenario: dict[str, Any], index: int | None) -> dict[str, Any]:
-    """A scenario's definition narrowed to one case: adding queries or raising `count` leaves the runs
-    that were there before with their ids."""
-    d = dict(scenario)
+def _case_definition(scenario: dict[str, Any], index: int | None, level: SweepLevel = UNSWEPT) -> dict[str, Any]:
+    """A scenario's definition narrowed to one case: adding queries, raising `count` or adding sweep levels
+    leaves the runs that were there before with their ids (a level's point is its whole sweep)."""
+    d = {k: v for k, v in scenario.items() if k not in ("sweep", "sweep_mode")}
+    if level.point:
+        d["sweep"] = level.point
     if d.get("queries"):
         d["queries"] = [d["queries"][index or 0]]
     if d.get("random"):
@@ -437,6 +594,8 @@ class RunTask:
     jerk_dt_s: float = 1e-3
     unknown_fixtures: Literal["box", "ignore"] = "box"
     timeout_s: float = 3600.0  # stop the run (an error row) if it has not returned after this long
+    sweep: dict[str, Any] | None = None  # the sweep level's point {key: value}; None without a sweep
+    sweep_axes: tuple[str, ...] = ()  # the swept keys whose axis this level lies on
 
     @property
     def key(self) -> str:
@@ -463,17 +622,29 @@ def expand_runs(spec: CompareSpec, defs: dict[str, Any] | None = None) -> list[R
     defs = definitions(spec) if defs is None else defs
     out: list[RunTask] = []
     for sc in spec.scenarios:
-        for i, seed in spec.cases(sc):
-            out += _case_runs(spec, sc, i, seed, defs)
+        for i, seed, level in spec.cases(sc):
+            out += _case_runs(spec, sc, i, seed, defs, level)
     return out
 
 
+def case_name(scenario: str, index: int | None, level: SweepLevel = UNSWEPT) -> str:
+    """'scenario', 'scenario#3', 'scenario@camera.noise.scale=3', 'scenario@nominal#3'."""
+    name = f"{scenario}@{level.label}" if level.label else scenario
+    return name if index is None else f"{name}#{index}"
+
+
 def _case_runs(
-    spec: CompareSpec, sc: QueryScenario | TaskScenario, i: int | None, seed: int, defs: dict[str, Any]
+    spec: CompareSpec,
+    sc: QueryScenario | TaskScenario,
+    i: int | None,
+    seed: int,
+    defs: dict[str, Any],
+    level: SweepLevel = UNSWEPT,
 ) -> list[RunTask]:
-    """One run per planner of one case: a query (index i) or a task run (i None), with its seed."""
-    case = sc.name if i is None else f"{sc.name}#{i}"
-    case_def = _case_definition(defs["scenarios"][sc.name], i)
+    """One run per planner of one case: a query (index i) or a task run (i None), with its seed, at one
+    level of the scenario's sweep."""
+    case = case_name(sc.name, i, level)
+    case_def = _case_definition(defs["scenarios"][sc.name], i, level)
     out = []
     for p in spec.planners:
         rid = run_id(p.id, case, seed, {"planner": defs["planners"][p.id], "scenario": case_def, "seed": seed})
@@ -484,7 +655,9 @@ def _case_runs(
             "scenario": sc.name,
             "case": case,
             "seed": seed,
-            "overrides": tuple(sc.overrides),
+            "overrides": (*sc.overrides, *level.overrides()),
+            "sweep": dict(level.point) if level.point else None,
+            "sweep_axes": level.axes,
         }
         if isinstance(sc, TaskScenario):
             timeout = spec.run_timeout_s or default_run_timeout("task", 0.0)
@@ -618,8 +791,55 @@ def compare_spec_from_dict(
     except ValidationError as err:
         raise ConfigError(_format(source, err)) from None
     spec = _resolve_configs(spec, Path(base_dir) if base_dir is not None else Path.cwd(), source)
+    _check_sweeps(spec, source)
     spec._source = source
     return spec
+
+
+def _check_sweeps(spec: CompareSpec, source: str) -> None:
+    """Load every sweep value, and every level, into its scenario's config: an unknown key (with the key
+    meant) or a value the config rejects (with what it allows) is a ConfigError naming the scenario."""
+    for i, sc in enumerate(spec.scenarios):
+        if not sc.sweep:
+            continue
+        path = sc.task if isinstance(sc, TaskScenario) else sc.scene
+        assert path is not None  # resolved on load
+        where = f"{source}: scenarios.{i} ({sc.name})"
+        try:
+            base = load_config(path, sc.overrides)
+        except ConfigError as e:
+            raise ConfigError(f"{where}: {e}") from None
+        keys = _flat(base.model_dump(mode="json"))
+        for key, values in sc.sweep.items():
+            for v in values:
+                try:
+                    load_config(path, [*sc.overrides, f"{key}={_yaml_text(v)}"])
+                except ConfigError as e:
+                    if not _is_config_key(key, keys):
+                        close = difflib.get_close_matches(key, list(keys), n=1, cutoff=0.6)
+                        hint = (
+                            f" Did you mean {close[0]!r}?"
+                            if close
+                            else " Sweep keys are dotted config keys such as camera.noise.scale."
+                        )
+                        raise ConfigError(
+                            f"{where}: sweep key {key!r} is not a key of {Path(path).name}.{hint}"
+                        ) from None
+                    raise ConfigError(f"{where}: sweep {key!r} value {_label_text(v)}: {e}") from None
+        if len(sc.sweep) > 1:  # each value loads on its own; together they must too
+            for level in sc.levels():
+                try:
+                    load_config(path, [*sc.overrides, *level.overrides()])
+                except ConfigError as e:
+                    raise ConfigError(f"{where}: sweep level {level.label}: {e}") from None
+
+
+def _is_config_key(key: str, flat: dict[str, Any]) -> bool:
+    """Whether `key` names a value or section of a loaded config (`flat`: its dotted leaves), or lies in a
+    free-form mapping of it (a planner's `params`)."""
+    if key in flat or any(k.startswith(key + ".") for k in flat):
+        return True
+    return any(key.startswith(k + ".") and v == {} for k, v in flat.items())
 
 
 def load_compare_config(path: str | Path, overrides: Iterable[str] = ()) -> CompareSpec:

@@ -447,6 +447,8 @@ def _new_row(task: RunTask) -> dict[str, Any]:
         "case": task.case,
         "kind": task.kind,
         "seed": task.seed,
+        "sweep": dict(task.sweep) if task.sweep else None,  # the sweep level {key: value}; None without a sweep
+        "sweep_axes": list(task.sweep_axes) if task.sweep else None,  # the swept keys whose axis it lies on
         "status": None,
         "reason": "",
         "success": False,
