@@ -227,6 +227,7 @@ def test_a_late_frame_shows_the_world_as_it_was_latency_ago():
 FAULTS_OFF = [
     "camera.noise.scale=1",
     "camera.noise.static_fraction=0",
+    "camera.noise.color_gain=[1,1,1]",
     "camera.extrinsic_error.translation_m=0",
     "camera.extrinsic_error.rotation_deg=0",
     "camera.latency_s=0",
@@ -257,8 +258,34 @@ def test_a_run_with_every_fault_model_set_to_off_is_the_nominal_run_bit_for_bit(
         "gripper.force_scale=0",
         "camera.latency_s=2",
         "camera.noise.static_fraction=1.5",
+        "camera.noise.color_gain=[0.1,1,1]",
     ],
 )
 def test_a_fault_model_out_of_its_range_is_a_config_error(override):
     with pytest.raises(ConfigError):
         load_config("robocup", [override])
+
+
+def test_a_coloured_light_scales_each_channel_of_the_colour_image_and_nothing_when_off():
+    from twin.config import DepthNoiseSettings
+
+    rgb = np.full((8, 8, 3), [100, 150, 200], np.uint8)
+    frame = RGBDFrame(rgb, np.full((8, 8), 0.7), Intrinsics(8, 8, 612.0, 611.0))
+    plain = DepthNoiseSettings(rgb_noise_std=0.0)
+    warm = DepthNoiseSettings(rgb_noise_std=0.0, color_gain=(1.2, 1.0, 0.8))
+    out = apply_sensor_noise(frame, warm, np.random.default_rng(0)).rgb
+    assert out[0, 0].tolist() == [120, 150, 160]
+    assert np.array_equal(apply_sensor_noise(frame, plain, np.random.default_rng(0)).rgb, rgb)
+
+
+def test_under_a_warm_light_the_table_white_balance_keeps_the_colours_and_the_seed_pipeline_does_not():
+    """A light of [1.5, 1.0, 0.6] turns the blue cube grey-violet; balanced on the table, whose model colour
+    is known, it is blue again."""
+
+    def correct(preset: str) -> int:
+        s = load_config("robocup", ["camera.noise.color_gain=[1.5,1.0,0.6]", f"perception.preset={preset}"])
+        rep = run_perception(s, seed=5, renderer=RENDERER)
+        return sum(o["class_est"] == o["class_true"] and o["color_est"] == o["color_true"] for o in rep.objects)
+
+    assert correct("robust") == 8
+    assert correct("seed") <= 7

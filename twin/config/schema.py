@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
@@ -224,6 +224,13 @@ class DepthNoiseSettings(ConfigModel):
     max_range_m: float = Field(10.0, gt=0)
     depth_unit_m: float = Field(0.001, ge=0)
     rgb_noise_std: float = Field(2.0, ge=0)
+    # a fault model (off at 1, 1, 1): per-channel gain on the colour image, for a light of another colour
+    # or a camera's white balance off (warm light: [1.2, 1.0, 0.8]); equal gains are a brighter or dimmer light
+    color_gain: tuple[
+        Annotated[float, Field(ge=0.2, le=3.0)],
+        Annotated[float, Field(ge=0.2, le=3.0)],
+        Annotated[float, Field(ge=0.2, le=3.0)],
+    ] = (1.0, 1.0, 1.0)
 
 
 class ExtrinsicErrorSettings(ConfigModel):
@@ -328,7 +335,7 @@ class DepthFilterSettings(ConfigModel):
 # thresholds (keys a config sets itself win)
 _SEED_PERCEPTION: dict[str, dict[str, Any]] = {
     "depth_filter": {"temporal_frames": 1, "spatial": False},
-    "robocup": {"table_threshold_sigmas": None},
+    "robocup": {"table_threshold_sigmas": None, "white_balance": False},
 }
 
 

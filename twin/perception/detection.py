@@ -30,6 +30,7 @@ __all__ = [
     "scene_cloud",
     "table_noise",
     "table_threshold_for",
+    "white_balance_gains",
     "with_ground_truth",
 ]
 
@@ -135,13 +136,20 @@ class SceneCloud:
 
 
 def scene_cloud(
-    frame: RGBDFrame, T_base_camera: np.ndarray, params: RobocupPerceptionSettings, *, seed: int = 0
+    frame: RGBDFrame,
+    T_base_camera: np.ndarray,
+    params: RobocupPerceptionSettings,
+    *,
+    seed: int = 0,
+    table_rgb: np.ndarray | None = None,
 ) -> SceneCloud:
     """Back-project the frame within the depth limits, map it to the base frame, fit the table plane.
 
     The plane is fitted by RANSAC on every 4th point (threshold: half the table removal threshold), then
     refitted on its inliers; it is the largest plane in view, which from the capture pose is the table.
-    Then the table's noise is measured and the table threshold set from it (`table_threshold_for`).
+    Then the table's noise is measured and the table threshold set from it (`table_threshold_for`), and,
+    given the table's own colour `table_rgb` (and `params.white_balance`), the colours are white-balanced
+    on the table (`white_balance_gains`).
     """
     with stage("perception.cloud") as cloud_stage:
         H, W = frame.depth_m.shape
@@ -161,7 +169,33 @@ def scene_cloud(
         noise = table_noise(height[::4])
     timings = {"cloud": cloud_stage.seconds, "plane": plane_stage.seconds}
     threshold = table_threshold_for(noise, params)
+    if table_rgb is not None and params.white_balance:
+        gains = white_balance_gains(rgb[::4][np.abs(height[::4]) < threshold], table_rgb)
+        if gains is not None:
+            rgb = np.clip(rgb * gains, 0.0, 1.0)
     return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings, noise, threshold)
+
+
+# a light whose colour moves the table's chromaticity by less than this is left alone: the rendered table
+# matches its model colour to 0.001 under the nominal light, a warm light of [1.2, 1.0, 0.8] moves it ~0.1
+_WHITE_BALANCE_MIN_SHIFT = 0.01
+
+
+def white_balance_gains(table_rgb_measured: np.ndarray, table_rgb: np.ndarray) -> np.ndarray | None:
+    """Per-channel gains (3,) that give the table's points (n, 3) the chromaticity of its model colour
+    `table_rgb`, brightness kept: a light of another colour, or a white balance off, undone on the one
+    surface whose colour is known. None when there are no table points or the shift is negligible."""
+    if len(table_rgb_measured) == 0:
+        return None
+    m = np.median(table_rgb_measured, axis=0)
+    ref = np.asarray(table_rgb, dtype=float)
+    if np.any(m <= 1e-6) or np.linalg.norm(ref) <= 1e-9:
+        return None
+    shift = m / np.linalg.norm(m) - ref / np.linalg.norm(ref)
+    if float(np.abs(shift).max()) < _WHITE_BALANCE_MIN_SHIFT:
+        return None
+    gains = (ref / np.linalg.norm(ref)) / (m / np.linalg.norm(m))
+    return gains * (np.linalg.norm(m) / np.linalg.norm(m * gains))  # the table's brightness kept
 
 
 def table_noise(height: np.ndarray, band_m: float = 0.05) -> float:

@@ -83,6 +83,8 @@ def apply_sensor_noise(
         drop |= ~valid
     depth[drop] = 0.0
     rgb = frame.rgb
+    if rgb_noise and noise.color_gain != (1.0, 1.0, 1.0):  # the light's colour, before the sensor's noise
+        rgb = np.clip(np.rint(rgb * np.asarray(noise.color_gain, dtype=np.float32)), 0, 255).astype(np.uint8)
     if rgb_noise and noise.rgb_noise_std > 0:
         noisy = rng.standard_normal(rgb.shape).astype(np.float32)
         noisy *= noise.rgb_noise_std

@@ -57,6 +57,7 @@ __all__ = [
     "pca_features",
     "pca_yaw",
     "perceive_robocup",
+    "table_color",
     "unexplained_clusters",
     "wrap_half_turn",
 ]
@@ -422,6 +423,17 @@ def unexplained_clusters(
     return tuple(out)
 
 
+def table_color(settings: Settings) -> np.ndarray | None:
+    """The model colour (3,) of the fixture named "table", from its URDF; None without one."""
+    from twin.urdf_model import urdf_rgba
+
+    for fx in settings.world.fixtures:
+        if fx.name == "table":
+            rgba = urdf_rgba(settings.resolve(fx.urdf))
+            return None if rgba is None else np.asarray(rgba[:3], dtype=float)
+    return None
+
+
 def perceive_robocup(
     frame: RGBDFrame,
     T_base_camera: np.ndarray,
@@ -436,7 +448,7 @@ def perceive_robocup(
     here hands the simulator's truth on: an oracle detector arrives already bound to it by the judge."""
     params = settings.perception.robocup
     timings: dict[str, float] = {}
-    cloud = scene_cloud(frame, T_base_camera, params, seed=seed)
+    cloud = scene_cloud(frame, T_base_camera, params, seed=seed, table_rgb=table_color(settings))
     timings.update(cloud.timings_s)
     with stage("perception.detect") as detect_stage:
         detections = detector.detect(frame, T_base_camera, cloud=cloud)

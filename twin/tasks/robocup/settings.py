@@ -80,6 +80,9 @@ class RobocupPerceptionSettings(ConfigModel):
     # noise-aware table removal: the threshold is at least this many times the depth noise measured on the
     # table (the spread of its points about the fitted plane); None: `table_threshold_m` alone (the seed)
     table_threshold_sigmas: float | None = Field(3.0, gt=0, le=10)
+    # colours white-balanced on the table, whose model colour is known (a light of another colour); off: the
+    # seed's raw colours
+    white_balance: bool = True
     alpha1_vertical_deg: float = Field(30.0, gt=0, lt=90)
     elongation_horizontal: float = Field(3.0, gt=1)
     alpha1_horizontal_deg: float = Field(45.0, gt=0, lt=90)
