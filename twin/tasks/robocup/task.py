@@ -180,11 +180,13 @@ def grasp_yaw_symmetry(est: ObjectEstimate) -> float | None:
     """The turn (rad) about the vertical that maps this object's grasp onto an equal one: 0 for any turn
     (a standing cylinder), a quarter turn for a cube; None when only the perceived yaw (or its half turn,
     the same for a parallel gripper) grips it."""
-    if est.cls in ("bottle", "can", "marker") and est.orientation == "vertical":
-        return 0.0
-    if est.cls == "cube":
-        return math.pi / 2
-    return None
+    t = OBJECT_TEMPLATES.get(est.cls)
+    if t is None:
+        return None
+    if t.shape == "cylinder":
+        return 0.0 if est.orientation == "vertical" else None
+    ex, ey, _ = t.extents(est.orientation == "horizontal")
+    return math.pi / 2 if abs(ex - ey) < 1e-6 else None  # a square footprint: the cube
 
 
 def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, float], yaw: float) -> float:
