@@ -313,9 +313,13 @@ def _still(q: np.ndarray) -> Trajectory:
 
 
 def colliding_pair(scene: PlanningScene, q: np.ndarray) -> str:
-    """'forearm_link with table' for the closest (penetrating) pair at q, for failure reasons."""
+    """'forearm_link with table' for the closest (penetrating) pair at q, for failure reasons ("an unknown
+    pair" from a scene that cannot measure distances, e.g. a planner's own collision-only scene)."""
+    measure = getattr(scene, "min_distance", None)
+    if measure is None:
+        return "an unknown pair"
     try:
-        d = scene.min_distance(q)
+        d = measure(q)
     except TwinError:
         return "an unknown pair"
     return f"{d.robot_part} with {d.other}" if d.robot_part else "an unknown pair"
