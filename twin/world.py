@@ -263,7 +263,6 @@ class World:
         placements = sample_layout(objects, self.seed, boxes)
         for sp in placements:
             self._load_object(sp)
-        self.unmodelled_obstacle_id: int | None = None
         self.unmodelled_obstacle_centre: tuple[float, float, float] | None = None  # ground truth; it is static
         centre = place_unmodelled_obstacle(self.settings.world, self.seed, placements, boxes)
         if centre is not None:
@@ -356,7 +355,7 @@ class World:
         vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half, rgbaColor=[0.45, 0.45, 0.5, 1.0], physicsClientId=c)
         bid = pb.createMultiBody(0.0, col, vis, list(centre), physicsClientId=c)
         self._bodies["unmodelled_obstacle"] = bid
-        self.unmodelled_obstacle_id, self.unmodelled_obstacle_centre = bid, centre
+        self.unmodelled_obstacle_centre = centre
 
     def _add_marker_quad(self) -> None:
         """The marker: a visual-only textured quad on the plate's top face (pose: scene_layout)."""
