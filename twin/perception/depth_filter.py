@@ -1,7 +1,8 @@
 """Depth post-processing before perception, as a RealSense pipeline does it on the host.
 
-A stereo camera's depth error is mostly independent from frame to frame and from pixel to pixel, so the
-SDK's post-processing blocks average it away where the scene holds still:
+A stereo camera's depth error is largely independent from frame to frame and from pixel to pixel, so the
+SDK's post-processing blocks average it away where the scene holds still (the part that is the same in
+every frame, `camera.noise.static_fraction` in the sensor model, no averaging over time removes):
 
 - temporal: the per-pixel mean of the valid depths over the last frames of the settling pause (the
   camera streams at 30 fps; the reference systems took one frame after a 1-3 s pause, so the frames are
