@@ -3,7 +3,8 @@ runs it: `twin run CONFIG --seed N --json` in a fresh process per seed (process 
 real-time factor is simulated time / wall time of the whole command. Prints per config the median of each
 stage of the run's time breakdown (`timings` in the --json file; twin.timing) beside the median total.
 
-    python bench/bench_tasks.py [--seeds 10] [--planner NAME] [--config robocup ...] [--set KEY=VALUE ...]
+    python bench/bench_tasks.py [--seeds 10] [--first-seed 0] [--planner NAME] [--config robocup ...]
+        [--set KEY=VALUE ...]
         [--jobs N]
 
 `--set` passes overrides to every run (fault models, e.g. `--set camera.noise.scale=3`); `--jobs` runs
@@ -49,6 +50,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", action="append", default=None, help="config(s) to run (default: robocup, warehouse)")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1")
     ap.add_argument("--planner", default=None, help="transfer planner (default: the config's)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a setting")
     ap.add_argument("--jobs", type=int, default=1, help="seeds run at once")
@@ -60,9 +62,10 @@ def main() -> None:
         t0 = time.perf_counter()
         planner = "?"
         with ThreadPoolExecutor(max(1, args.jobs)) as pool:
-            jobs = [pool.submit(run_once, cfg, seed, args.planner, tuple(args.set)) for seed in range(args.seeds)]
+            seeds = range(args.first_seed, args.first_seed + args.seeds)
+            jobs = [pool.submit(run_once, cfg, seed, args.planner, tuple(args.set)) for seed in seeds]
             runs = [j.result() for j in jobs]
-        for seed, r in enumerate(runs):
+        for seed, r in zip(seeds, runs, strict=True):
             planner = r["planner"]
             wall = r["command_wall_time_s"]
             walls.append(wall)
