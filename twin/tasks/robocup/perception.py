@@ -392,7 +392,8 @@ def unexplained_clusters(
 
     from twin.perception.segmentation import cluster_points
 
-    above = np.flatnonzero(cloud.height > cloud.table_threshold_m)
+    is_above = cloud.height > cloud.table_threshold_m
+    above = np.flatnonzero(is_above)
     if len(above) == 0:
         return ()
     select = _selector(cloud)
@@ -403,7 +404,7 @@ def unexplained_clusters(
     keep = ~mine[above]
     for lo, hi in known_boxes:
         keep &= ~np.all((pts >= np.asarray(lo) - margin_m) & (pts <= np.asarray(hi) + margin_m), axis=1)
-    owned = cloud.points[mine & (cloud.height > cloud.table_threshold_m)]
+    owned = cloud.points[mine & is_above]
     if len(owned) and keep.any():
         near, _ = cKDTree(owned).query(pts[keep], distance_upper_bound=_UNKNOWN_CLEAR_OF_DETECTIONS_M)
         keep[np.flatnonzero(keep)[np.isfinite(near)]] = False
@@ -425,13 +426,20 @@ def unexplained_clusters(
 
 def table_color(settings: Settings) -> np.ndarray | None:
     """The model colour (3,) of the fixture named "table", from its URDF; None without one."""
-    from twin.urdf_model import urdf_rgba
-
     for fx in settings.world.fixtures:
         if fx.name == "table":
-            rgba = urdf_rgba(settings.resolve(fx.urdf))
+            rgba = _urdf_color(str(settings.resolve(fx.urdf)))
             return None if rgba is None else np.asarray(rgba[:3], dtype=float)
     return None
+
+
+@lru_cache(maxsize=8)
+def _urdf_color(path: str) -> tuple[float, ...] | None:
+    """A URDF's colour, read once per process (perception asks at every capture)."""
+    from twin.urdf_model import urdf_rgba
+
+    rgba = urdf_rgba(path)
+    return None if rgba is None else tuple(rgba)
 
 
 def perceive_robocup(
