@@ -130,6 +130,8 @@ def _flush_c_stdout() -> None:
 # Implicit cylinders: PyBullet otherwise meshes every cylinder into a polygon, and its geometry then
 # differs from the FCL planning scene's exact cylinders by up to 2 mm.
 _URDF_FLAGS = pb.URDF_USE_INERTIA_FROM_FILE | pb.URDF_USE_IMPLICIT_CYLINDER
+# `world.sleep_at_rest`: a body sleeps once |v|^2 + |w|^2 (m/s, rad/s) has stayed below this for Bullet's 2 s
+_SLEEP_MOTION = 1e-5
 
 
 @contextmanager
@@ -410,6 +412,14 @@ class World:
             raise ConfigError(f"object name {sp.name!r} clashes with a fixture name")
         if sp.color is not None:
             pb.changeVisualShape(bid, -1, rgbaColor=list(color_rgba(sp.color)), physicsClientId=c)
+        if self.settings.world.sleep_at_rest:
+            pb.changeDynamics(
+                bid,
+                -1,
+                activationState=pb.ACTIVATION_STATE_ENABLE_SLEEPING,
+                sleepThreshold=_SLEEP_MOTION,
+                physicsClientId=c,
+            )
         self._objects[bid] = sp
         self._bodies[sp.name] = bid
 
@@ -731,6 +741,7 @@ class World:
             body_id, pos.tolist(), (quat / np.linalg.norm(quat)).tolist(), physicsClientId=c
         )
         pb.resetBaseVelocity(body_id, [0, 0, 0], [0, 0, 0], physicsClientId=c)
+        pb.changeDynamics(body_id, -1, activationState=pb.ACTIVATION_STATE_WAKE_UP, physicsClientId=c)
 
     def link_pose(self, link_name: str) -> tuple[np.ndarray, np.ndarray]:
         """(position (3,), quaternion xyzw (4,)) of a robot link frame (e.g. 'tool0', 'tcp')."""

@@ -23,9 +23,13 @@ into `Status.LIMIT_VIOLATION` with the reason.
 from __future__ import annotations
 
 import functools
+import importlib
+import importlib.util
 import itertools
 import logging
 import math
+import sys
+import types
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
@@ -372,6 +376,28 @@ def _limit_constraints(vlim: tuple[float, ...], alim: tuple[float, ...]) -> list
     ]
 
 
+class _DeferredPyplot(types.ModuleType):
+    """Stands in for matplotlib.pyplot until an attribute of it is asked for, then imports it, takes its
+    place in `sys.modules` and passes every attribute on."""
+
+    def __getattr__(self, name: str) -> Any:
+        if sys.modules.get("matplotlib.pyplot") is self:
+            del sys.modules["matplotlib.pyplot"]
+        real = importlib.import_module("matplotlib.pyplot")
+        return getattr(real, name)
+
+
+def _defer_pyplot() -> None:
+    """TOPP-RA imports matplotlib.pyplot at module level for its plotting helpers (~0.25 s, a fifth of a
+    task run's imports) and needs it only when asked to plot: until then it gets a stand-in that imports
+    pyplot on first use. Nothing changes when pyplot or TOPP-RA was imported already."""
+    if "matplotlib.pyplot" in sys.modules or "toppra" in sys.modules:
+        return
+    if importlib.util.find_spec("matplotlib") is None:
+        return
+    sys.modules["matplotlib.pyplot"] = _DeferredPyplot("matplotlib.pyplot")
+
+
 def toppra_time_spline(
     knots: np.ndarray,
     waypoints: np.ndarray,
@@ -398,7 +424,8 @@ def toppra_time_spline(
     If `tcp_speed` is given, the TCP travels `tcp_length_m * (s - s0) / (s1 - s0)` along a straight line
     and its speed is limited too, through a virtual seventh coordinate.
     """
-    with stage("imports"):  # the first call imports TOPP-RA (and the matplotlib it pulls in): not planning
+    with stage("imports"):  # the first call imports TOPP-RA: not planning
+        _defer_pyplot()
         import toppra
         import toppra.algorithm as algo
         import toppra.solverwrapper as sw

@@ -161,6 +161,11 @@ class WorldSettings(ConfigModel):
     physics_hz: float = Field(240.0, gt=0)
     gravity: float = -9.81
     gui: bool = False
+    # Objects still for 2 s (|v|^2 + |w|^2 under 1e-5: ~3 mm/s, ~3 mrad/s) sleep: the engine stops
+    # integrating them until something touches them, and wakes them then (Bullet's deactivation). A still
+    # object costs ~7 us per physics step awake, nearly nothing asleep; what is lost is the slow creep of a
+    # lying cylinder or a box on the soft contacts. False: every object is integrated at every step.
+    sleep_at_rest: bool = True
     fixtures: list[FixtureSettings] = Field(
         default_factory=lambda: [
             FixtureSettings(name="table", urdf="urdf/table.urdf", position=(-0.30, 0.0, 0.0)),

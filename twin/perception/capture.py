@@ -27,7 +27,7 @@ import numpy as np
 from twin.camera import Intrinsics, RGBDFrame, camera_pose, true_camera_pose
 from twin.config import Settings
 from twin.perception.depth_filter import filter_frames
-from twin.perception.noise import sensor_burst
+from twin.perception.noise import PrefetchedDraws, burst_draws, sensor_burst
 from twin.timing import stage
 
 if TYPE_CHECKING:
@@ -71,6 +71,9 @@ def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
 # captures taken so far per world: each capture's noise is drawn from its own stream (a real sensor's noise
 # is new in every frame), the first from stream 0, and a run stays repeatable
 _captures_taken: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
+# per world, the noise draws of its next capture (its index and them), started once a capture is done: the
+# prefetch thread has the whole motion to the next capture pose to draw them (`prefetch_noise`)
+_next_draws: weakref.WeakKeyDictionary[Any, tuple[int, PrefetchedDraws]] = weakref.WeakKeyDictionary()
 
 
 def capture_frame(
@@ -81,11 +84,14 @@ def capture_frame(
     move: bool = True,
     settle_s: float | None = None,
     rng: np.random.Generator | None = None,
+    prefetch_noise: bool = True,
 ) -> Capture:
     """Settle, render and add sensor noise; for a wrist camera first go to the capture/calibration pose.
 
     `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed, n)`
-    for the world's n-th capture (n = 0, 1, ...).
+    for the world's n-th capture (n = 0, 1, ...). `prefetch_noise`: the noise's random numbers are drawn
+    on a second thread (`PrefetchedDraws`: the same numbers, only sooner): while the scene settles, and
+    for the world's next capture as soon as this one is done.
     """
     from twin.kinematics import UR5e
 
@@ -96,6 +102,22 @@ def capture_frame(
     settle = cam.settle_s if settle_s is None else float(settle_s)
     steps = int(round(settle * settings.world.physics_hz))
     late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
+    depth_filter = settings.perception.depth_filter
+    plan = burst_draws(cam.noise, (cam.height, cam.width), depth_filter.temporal_frames) if prefetch_noise else []
+    n_next: int | None = None
+    draws: np.random.Generator | PrefetchedDraws
+    if rng is None:
+        n = _captures_taken.get(world, 0)
+        _captures_taken[world] = n + 1
+        n_next = n + 1
+        pending = _next_draws.pop(world, None)
+        if pending is not None and pending[0] == n and pending[1].plan == plan:
+            draws = pending[1]
+        else:
+            rng = noise_rng(world.seed, n)
+            draws = PrefetchedDraws(rng, plan) if plan else rng
+    else:
+        draws = PrefetchedDraws(rng, plan) if plan else rng
     t0 = time.perf_counter()
     world.step(steps - late)
     t1 = time.perf_counter()
@@ -116,15 +138,14 @@ def capture_frame(
         if cam.mount == "wrist":
             T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
         t1 += time.perf_counter() - t3
-    depth_filter = settings.perception.depth_filter
-    if rng is None:
-        n = _captures_taken.get(world, 0)
-        _captures_taken[world] = n + 1
-        rng = noise_rng(world.seed, n)
     with stage("perception.noise") as noise:
         # the burst the depth filter averages: the last frames of the settling pause, one render (the scene
         # is at rest), each with its own sensor noise; the colour image is the first frame's
-        frames = sensor_burst(clean, cam.noise, rng, depth_filter.temporal_frames)
+        frames = sensor_burst(clean, cam.noise, draws, depth_filter.temporal_frames)
+        if isinstance(draws, PrefetchedDraws):
+            draws.finish()
+    if plan and n_next is not None:
+        _next_draws[world] = (n_next, PrefetchedDraws(noise_rng(world.seed, n_next), plan))
     with stage("perception.depth_filter") as filtering:
         frame = filter_frames(frames, depth_filter)
     log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)

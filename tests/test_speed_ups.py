@@ -1,0 +1,122 @@
+"""Run throughput (issue 15): each speed-up either changes no number at all (prefetched noise draws, the
+deferred pyplot import) or, for sleeping objects, changes what it should and nothing else."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from twin.camera import Intrinsics, RGBDFrame
+from twin.config import DepthNoiseSettings, load_config
+from twin.perception.capture import capture_frame
+from twin.perception.noise import PrefetchedDraws, burst_draws, sensor_burst
+from twin.world import World
+
+INTR = Intrinsics(64, 48, 60.0, 60.0)
+
+
+def _frame(depth: np.ndarray) -> RGBDFrame:
+    rgb = np.random.default_rng(5).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    return RGBDFrame(rgb, depth, INTR)
+
+
+def _scene_depth() -> np.ndarray:
+    """A table at 0.7 m with a box on it: depth edges, so the edge dropouts draw something."""
+    d = np.full((48, 64), 0.7)
+    d[10:30, 20:40] = 0.6
+    return d
+
+
+NOISES = {
+    "robocup": load_config("robocup").camera.noise,
+    "static share": DepthNoiseSettings(static_fraction=0.5, scale=2.0),
+    "no colour noise": DepthNoiseSettings(rgb_noise_std=0.0, dropout_fraction=0.05),
+}
+
+
+@pytest.mark.parametrize("name", list(NOISES))
+@pytest.mark.parametrize("frames", [1, 8])
+def test_a_prefetched_burst_is_the_burst_drawn_directly_number_for_number(name: str, frames: int) -> None:
+    noise, frame = NOISES[name], _frame(_scene_depth())
+    direct_rng, ahead_rng = np.random.default_rng(11), np.random.default_rng(11)
+    direct = sensor_burst(frame, noise, direct_rng, frames)
+    draws = PrefetchedDraws(ahead_rng, burst_draws(noise, (48, 64), frames))
+    ahead = sensor_burst(frame, noise, draws, frames)
+    draws.finish()
+    for a, b in zip(direct, ahead, strict=True):
+        assert np.array_equal(a.depth_m, b.depth_m) and np.array_equal(a.rgb, b.rgb)
+    assert direct_rng.random() == ahead_rng.random()  # the generator is left where it would have been
+
+
+def test_a_frame_with_missing_depth_leaves_the_prefetched_plan_and_still_draws_the_same_numbers() -> None:
+    depth = _scene_depth()
+    depth[0:5, 0:7] = 0.0  # no depth: the sensor model draws for the valid pixels only, not the planned count
+    noise, frame = NOISES["robocup"], _frame(depth)
+    direct_rng, ahead_rng = np.random.default_rng(3), np.random.default_rng(3)
+    direct = sensor_burst(frame, noise, direct_rng, 4)
+    draws = PrefetchedDraws(ahead_rng, burst_draws(noise, (48, 64), 4))
+    ahead = sensor_burst(frame, noise, draws, 4)
+    draws.finish()
+    for a, b in zip(direct, ahead, strict=True):
+        assert np.array_equal(a.depth_m, b.depth_m) and np.array_equal(a.rgb, b.rgb)
+    assert direct_rng.random() == ahead_rng.random()
+
+
+def test_captures_with_prefetched_noise_are_the_captures_without() -> None:
+    """The first capture's draws are made while it settles, the second's while the first is processed."""
+    settings = load_config("robocup")
+    runs = []
+    for prefetch in (True, False):
+        with World(settings, seed=3, renderer="tiny") as world:
+            runs.append([capture_frame(world, settings, prefetch_noise=prefetch).frame for _ in range(2)])
+    for a, b in zip(*runs, strict=True):
+        assert np.array_equal(a.depth_m, b.depth_m) and np.array_equal(a.rgb, b.rgb)
+    assert not np.array_equal(runs[0][0].depth_m, runs[0][1].depth_m)  # each capture its own noise
+
+
+def _still(world: World, body: int) -> bool:
+    lin, ang = world.object_velocity(body)
+    return not np.any(lin) and not np.any(ang)  # asleep: the engine holds it exactly still
+
+
+def test_an_object_at_rest_sleeps_and_wakes_when_something_lands_on_it() -> None:
+    settings = load_config("robocup")
+    with World(settings, seed=1, renderer="tiny") as world:
+        cube, other = (world.body_ids()[n] for n in ("cube_red_0", "cube_blue_0"))
+        world.step(round(3.0 / world.dt))  # Bullet puts a body to sleep after 2 s below the threshold
+        assert _still(world, cube)
+        pos, quat = world.object_pose(cube)
+        world.set_object_pose(other, pos + np.array([0.0, 0.0, 0.12]), quat)  # dropped onto it from 12 cm
+        world.step(round(0.15 / world.dt))
+        assert not _still(world, cube)  # hit: awake and moving again
+        before = world.object_pose(cube)[0]
+        world.step(round(5.0 / world.dt))
+        assert np.linalg.norm(world.object_pose(cube)[0] - before) < 0.05  # and settled again, nearby
+        assert _still(world, cube)
+
+
+def test_with_sleep_at_rest_off_every_object_keeps_being_integrated() -> None:
+    settings = load_config("robocup", overrides=["world.sleep_at_rest=false"])
+    with World(settings, seed=1, renderer="tiny") as world:
+        world.step(round(3.0 / world.dt))
+        assert not all(_still(world, b) for b in world.object_ids())  # contact jitter: never exactly zero
+
+
+def test_retiming_with_toppra_does_not_import_pyplot_and_pyplot_still_works() -> None:
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from twin.plugin import Limits\n"
+        "from twin_motion.retimers import toppra_time_spline\n"
+        "toppra_time_spline(np.linspace(0, 1, 3), np.linspace(0, 0.5, 3)[:, None] * np.ones(6), Limits.uniform(1, 2, 10))\n"
+        "print('pyplot loaded' if 'matplotlib.figure' in sys.modules else 'pyplot deferred')\n"
+        "import matplotlib\n"
+        "matplotlib.use('Agg')\n"
+        "import matplotlib.pyplot as plt\n"
+        "print(type(plt.figure()).__name__)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["pyplot", "deferred", "Figure"]
