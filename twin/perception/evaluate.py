@@ -246,14 +246,22 @@ def _object_row(obj: ObjectState, label_true: str, est: dict[str, Any] | None) -
 
 
 def run_perception(
-    settings: Settings, *, seed: int | None = None, renderer: str = "auto", detector: str | None = None
+    settings: Settings,
+    *,
+    seed: int | None = None,
+    renderer: str = "auto",
+    detector: str | None = None,
+    earlier_captures: int = 0,
 ) -> PerceptionReport:
     """Build the scene of `seed`, run the configured pipeline on captured frames, score it.
 
     Warehouse: one frame from the fixed camera serves calibration and perception. RoboCup: the wrist
     camera first views the marker from `camera.calibration_pose` (for the calibration report, and for
     the extrinsics when `perception.extrinsics` is "aruco"), then the scene from `camera.capture_pose`.
-    `detector` overrides `perception.detector.name` (its params then default).
+    `detector` overrides `perception.detector.name` (its params then default). `earlier_captures`: scene
+    captures taken and perceived before the one measured, as a task's earlier ones are (a world's first two
+    renders take ~100 ms each with EGL, its later ones ~15 ms); every capture's noise then comes from the
+    world's own stream per capture, as in a task, and the measured frame's is another than without them.
     """
     from twin.perception.aruco import MarkerNotFound
     from twin.perception.pipeline import camera_extrinsics, make_detector
@@ -274,7 +282,14 @@ def run_perception(
                 cal_report = _calibrate_in(world, settings, cap_cal)
             except MarkerNotFound as e:
                 log.warning("calibration view: %s", e)
-        cap = capture_frame(world, settings, pose="capture", rng=noise_rng(seed, 0))
+        for _ in range(earlier_captures):  # as a task's: each perceived (results dropped) before the next
+            earlier = capture_frame(world, settings, pose="capture")
+            if pipeline == "warehouse":
+                perceive_warehouse(earlier.frame, earlier.T_base_camera_nominal, settings.perception.warehouse)
+            else:
+                assert det is not None
+                perceive_robocup(earlier.frame, earlier.T_base_camera_nominal, settings, det, seed=seed)
+        cap = capture_frame(world, settings, pose="capture", rng=None if earlier_captures else noise_rng(seed, 0))
         timings.update(cap.timings_s)
         if settings.camera.mount == "fixed" and has_marker:
             t0 = time.perf_counter()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import sys
 import threading
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,6 +41,27 @@ def _depth_edges(depth: np.ndarray, threshold_m: float) -> np.ndarray:
     return edge
 
 
+@dataclass(frozen=True)
+class _CleanDepth:
+    """What the sensor model reads from a rendered depth image before it adds anything: the same for every
+    frame of a burst (one render), so a burst works it out once."""
+
+    valid: np.ndarray  # (H, W) bool: has depth
+    all_valid: bool
+    edges: np.ndarray  # (H, W) bool: valid pixels at a depth jump
+    rms: np.ndarray  # (H, W) RMS depth error of each pixel, m
+
+    @classmethod
+    def of(cls, depth_m: np.ndarray, noise: DepthNoiseSettings) -> _CleanDepth:
+        depth = np.asarray(depth_m, dtype=np.float64)
+        valid = depth > 0
+        all_valid = bool(valid.all())
+        edges = _depth_edges(depth, noise.edge_threshold_m)
+        if not all_valid:
+            edges &= valid
+        return cls(valid, all_valid, edges, depth_noise_rms(depth, noise))
+
+
 def apply_sensor_noise(
     frame: RGBDFrame,
     noise: DepthNoiseSettings,
@@ -56,25 +78,33 @@ def apply_sensor_noise(
     """
     if not noise.enabled:
         return frame
+    return _noisy(frame, _CleanDepth.of(frame.depth_m, noise), noise, rng, rgb_noise=rgb_noise, static=static)
+
+
+def _noisy(
+    frame: RGBDFrame,
+    clean: _CleanDepth,
+    noise: DepthNoiseSettings,
+    rng: np.random.Generator | PrefetchedDraws,
+    *,
+    rgb_noise: bool,
+    static: np.ndarray | None,
+) -> RGBDFrame:
     # The same draws in the same order and the same arithmetic as the plain formulas; what is saved is
     # gathering and scattering when every pixel has depth (the usual case) and temporary arrays.
     depth = frame.depth_m.astype(np.float64, copy=True)
-    valid = depth > 0
-    all_valid = bool(valid.all())
-    edges = _depth_edges(depth, noise.edge_threshold_m)
-    if not all_valid:
-        edges &= valid
+    valid, all_valid, edges = clean.valid, clean.all_valid, clean.edges
     n_valid = depth.size if all_valid else int(np.count_nonzero(valid))
     s = noise.static_fraction
     if s > 0:  # a share of the variance fixed for the capture, the rest new in every frame
         if static is None:
             static = rng.standard_normal(depth.shape)
         e = rng.standard_normal(depth.shape) * np.sqrt(1.0 - s) + static * np.sqrt(s)
-        depth[valid] += (e * depth_noise_rms(depth, noise))[valid]
+        depth[valid] += (e * clean.rms)[valid]
     elif all_valid:
-        depth += rng.standard_normal(n_valid).reshape(depth.shape) * depth_noise_rms(depth, noise)
+        depth += rng.standard_normal(n_valid).reshape(depth.shape) * clean.rms
     else:
-        depth[valid] += rng.standard_normal(n_valid) * depth_noise_rms(depth[valid], noise)
+        depth[valid] += rng.standard_normal(n_valid) * clean.rms[valid]
     drop = rng.random(depth.shape) < noise.dropout_fraction
     drop |= edges & (rng.random(depth.shape) < noise.edge_dropout_fraction)
     drop |= depth < noise.min_range_m
@@ -104,9 +134,12 @@ def sensor_burst(
 ) -> list[RGBDFrame]:
     """`n` frames of a scene at rest (one rendered `frame`), each with its own sensor noise, sharing the
     capture's static share of it; colour noise on the first only. n = 1 is `apply_sensor_noise` itself."""
-    static = rng.standard_normal(frame.depth_m.shape) if noise.enabled and noise.static_fraction > 0 else None
-    out = [apply_sensor_noise(frame, noise, rng, static=static)]
-    out += [apply_sensor_noise(frame, noise, rng, rgb_noise=False, static=static) for _ in range(n - 1)]
+    if not noise.enabled:
+        return [frame] * n
+    static = rng.standard_normal(frame.depth_m.shape) if noise.static_fraction > 0 else None
+    clean = _CleanDepth.of(frame.depth_m, noise)
+    out = [_noisy(frame, clean, noise, rng, rgb_noise=True, static=static)]
+    out += [_noisy(frame, clean, noise, rng, rgb_noise=False, static=static) for _ in range(n - 1)]
     return out
 
 
