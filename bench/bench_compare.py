@@ -88,9 +88,13 @@ def main() -> None:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print(f"twin compare {args.config}, {args.workers} workers")
-    print(f"  {'revision':20s} {'runs':>6s} {'wall s':>8s} {'runs/s':>7s}")
+    print(f"  {'revision':20s} {'runs':>6s} {'wall s':>8s} {'runs/s':>7s}   summed run time s: tasks / queries")
     for label, wall, rows in results:
-        print(f"  {label:20s} {len(rows):6d} {wall:8.1f} {len(rows) / wall:7.2f}")
+        task_s, query_s = (
+            sum(r["timing"].get("wall_time_s") or 0.0 for r in rows if (r.get("kind") == "task") == is_task)
+            for is_task in (True, False)
+        )
+        print(f"  {label:20s} {len(rows):6d} {wall:8.1f} {len(rows) / wall:7.2f}   {task_s:8.1f} / {query_s:8.1f}")
     if len(results) == 2:
         (_, w0, r0), (_, w1, r1) = results
         print(f"  speed-up: {w0 / w1:.2f}x")
@@ -101,7 +105,12 @@ def main() -> None:
             why = _difference(by_key.get(k) or {}, r)
             if why is not None:
                 differ.append((k, why))
-        print(f"  rows that differ apart from timings: {len(differ)} of {len(r1)}")
+        kinds = {(r["planner"], r["case"], r["seed"]): r.get("kind") for r in r1}
+        n_task = sum(kinds[k] == "task" for k, _ in differ)
+        print(
+            f"  rows that differ apart from timings: {len(differ)} of {len(r1)} "
+            f"({n_task} task runs, {len(differ) - n_task} queries)"
+        )
         fields: dict[str, int] = {}
         for _, why in differ:
             fields[why.split(":")[0]] = fields.get(why.split(":")[0], 0) + 1
