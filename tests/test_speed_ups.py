@@ -111,7 +111,8 @@ def test_retiming_with_toppra_does_not_import_pyplot_and_pyplot_still_works() ->
         "import numpy as np\n"
         "from twin.plugin import Limits\n"
         "from twin_motion.retimers import toppra_time_spline\n"
-        "toppra_time_spline(np.linspace(0, 1, 3), np.linspace(0, 0.5, 3)[:, None] * np.ones(6), Limits.uniform(1, 2, 10))\n"
+        "q = np.linspace(0, 0.5, 3)[:, None] * np.ones(6)\n"
+        "toppra_time_spline(np.linspace(0, 1, 3), q, Limits.uniform(1, 2, 10))\n"
         "print('pyplot loaded' if 'matplotlib.figure' in sys.modules else 'pyplot deferred')\n"
         "import matplotlib\n"
         "matplotlib.use('Agg')\n"
@@ -120,3 +121,18 @@ def test_retiming_with_toppra_does_not_import_pyplot_and_pyplot_still_works() ->
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["pyplot", "deferred", "Figure"]
+
+
+def test_open3d_loads_without_dash_and_its_plotly_drawing_still_works() -> None:
+    code = (
+        "import sys\n"
+        "from twin.perception.open3d_import import load_open3d\n"
+        "o3d = load_open3d()\n"
+        "print('dash loaded' if 'dash' in sys.modules else 'dash deferred')\n"
+        "pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]))\n"
+        "print(type(o3d.visualization.get_plotly_fig([pc])).__name__, 'dash' in sys.modules)\n"
+        "module = sys.modules['open3d.visualization.draw_plotly']\n"
+        "print(callable(o3d.visualization.draw_plotly), type(module).__name__)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["dash", "deferred", "Figure", "True", "True", "module"]

@@ -381,6 +381,8 @@ class _DeferredPyplot(types.ModuleType):
     place in `sys.modules` and passes every attribute on."""
 
     def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):  # the import system asks for __path__ & co.: a plain module has none
+            raise AttributeError(name)
         if sys.modules.get("matplotlib.pyplot") is self:
             del sys.modules["matplotlib.pyplot"]
         real = importlib.import_module("matplotlib.pyplot")

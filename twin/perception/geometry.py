@@ -16,6 +16,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from twin.perception.open3d_import import load_open3d
+
 __all__ = [
     "IcpResult",
     "NearestNeighbors",
@@ -195,7 +197,7 @@ class NearestNeighbors:
     def _open3d_index(self) -> Any:
         if self._index is None:
             try:
-                import open3d as o3d
+                o3d = load_open3d()
             except ImportError:
                 self._index = False
             else:
@@ -211,8 +213,7 @@ class NearestNeighbors:
         if index is None:
             dist, nn = self.tree.query(x, distance_upper_bound=distance_upper_bound)
             return dist, nn
-        import open3d as o3d
-
+        o3d = load_open3d()
         idx_t, d2_t = index.knn_search(o3d.core.Tensor.from_numpy(x), 2)
         idx, d2 = idx_t.numpy(), d2_t.numpy()
         nn = idx[:, 0].astype(np.intp)  # a copy

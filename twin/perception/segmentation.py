@@ -16,24 +16,14 @@ import cv2
 import numpy as np
 
 from twin.perception.geometry import NearestNeighbors, Plane
-from twin.timing import stage
+from twin.perception.open3d_import import load_open3d
 
 __all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "open3d", "plane_to_frame"]
 
 
 def open3d() -> Any:
-    """The open3d module, imported on first use (importing twin never imports it); DependencyMissing
-    naming the extra when it is not installed."""
-    try:
-        with stage("imports"):  # its first import takes ~0.4 s (a run's breakdown shows it as such)
-            import open3d as o3d
-    except ImportError as e:
-        from twin.errors import DependencyMissing
-
-        raise DependencyMissing(
-            "perception needs open3d, which is not installed. Install it with `pip install 'twin[perception]'`."
-        ) from e
-    return o3d
+    """The open3d module, imported on first use (`twin.perception.open3d_import`)."""
+    return load_open3d()
 
 
 @dataclass(frozen=True)
