@@ -11,7 +11,7 @@ import pytest
 
 from twin.camera import Intrinsics, RGBDFrame
 from twin.config import DepthNoiseSettings, load_config
-from twin.perception.capture import capture_frame
+from twin.perception.capture import capture_frame, prefetch_next_capture
 from twin.perception.noise import PrefetchedDraws, burst_draws, sensor_burst
 from twin.world import World
 
@@ -66,12 +66,15 @@ def test_a_frame_with_missing_depth_leaves_the_prefetched_plan_and_still_draws_t
 
 
 def test_captures_with_prefetched_noise_are_the_captures_without() -> None:
-    """The first capture's draws are made while it settles, the second's while the first is processed."""
+    """The first capture's draws are made while it settles, the second's after the first was perceived."""
     settings = load_config("robocup")
     runs = []
     for prefetch in (True, False):
         with World(settings, seed=3, renderer="tiny") as world:
-            runs.append([capture_frame(world, settings, prefetch_noise=prefetch).frame for _ in range(2)])
+            first = capture_frame(world, settings, prefetch_noise=prefetch).frame
+            if prefetch:
+                prefetch_next_capture(world, settings)
+            runs.append([first, capture_frame(world, settings, prefetch_noise=prefetch).frame])
     for a, b in zip(*runs, strict=True):
         assert np.array_equal(a.depth_m, b.depth_m) and np.array_equal(a.rgb, b.rgb)
     assert not np.array_equal(runs[0][0].depth_m, runs[0][1].depth_m)  # each capture its own noise

@@ -33,7 +33,7 @@ from twin.timing import stage
 if TYPE_CHECKING:
     from twin.world import World
 
-__all__ = ["Capture", "capture_frame", "noise_rng", "wrist_camera_offset"]
+__all__ = ["Capture", "capture_frame", "noise_rng", "prefetch_next_capture", "wrist_camera_offset"]
 
 log = logging.getLogger("twin")
 
@@ -71,9 +71,10 @@ def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
 # captures taken so far per world: each capture's noise is drawn from its own stream (a real sensor's noise
 # is new in every frame), the first from stream 0, and a run stays repeatable
 _captures_taken: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
-# per world, the noise draws of its next capture (its index and them), started once a capture is done: the
-# prefetch thread has the whole motion to the next capture pose to draw them (`prefetch_noise`)
+# per world, the noise draws of its next capture (its index and them), started by `prefetch_next_capture`;
+# worlds whose frames left the plan (pixels without depth: the draws depend on the image) are not prefetched
 _next_draws: weakref.WeakKeyDictionary[Any, tuple[int, PrefetchedDraws]] = weakref.WeakKeyDictionary()
+_off_plan: weakref.WeakSet[Any] = weakref.WeakSet()
 
 
 def capture_frame(
@@ -90,8 +91,8 @@ def capture_frame(
 
     `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed, n)`
     for the world's n-th capture (n = 0, 1, ...). `prefetch_noise`: the noise's random numbers are drawn
-    on a second thread (`PrefetchedDraws`: the same numbers, only sooner): while the scene settles, and
-    for the world's next capture as soon as this one is done.
+    on a second thread while the scene settles (`PrefetchedDraws`: the same numbers, only sooner), unless
+    `prefetch_next_capture` started them earlier.
     """
     from twin.kinematics import UR5e
 
@@ -104,12 +105,10 @@ def capture_frame(
     late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
     depth_filter = settings.perception.depth_filter
     plan = burst_draws(cam.noise, (cam.height, cam.width), depth_filter.temporal_frames) if prefetch_noise else []
-    n_next: int | None = None
     draws: np.random.Generator | PrefetchedDraws
     if rng is None:
         n = _captures_taken.get(world, 0)
         _captures_taken[world] = n + 1
-        n_next = n + 1
         pending = _next_draws.pop(world, None)
         if pending is not None and pending[0] == n and pending[1].plan == plan:
             draws = pending[1]
@@ -144,10 +143,22 @@ def capture_frame(
         frames = sensor_burst(clean, cam.noise, draws, depth_filter.temporal_frames)
         if isinstance(draws, PrefetchedDraws):
             draws.finish()
-    if plan and n_next is not None:
-        _next_draws[world] = (n_next, PrefetchedDraws(noise_rng(world.seed, n_next), plan))
+            if not draws.followed_plan:
+                _off_plan.add(world)
     with stage("perception.depth_filter") as filtering:
         frame = filter_frames(frames, depth_filter)
     log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)
     timings = {"settle": t1 - t0, "render": t3 - t2, "noise": noise.seconds, "depth_filter": filtering.seconds}
     return Capture(frame, q, T_nominal, cam.mount, pose, timings)
+
+
+def prefetch_next_capture(world: World, settings: Settings) -> None:
+    """Start drawing the sensor noise of the world's next capture (that takes its noise from the world's
+    stream) on a second thread: a task calls this once it has perceived a capture, so the draws run while
+    the arm works (not beside perception) and are ready when the next capture settles. Changes no number."""
+    cam = settings.camera
+    plan = burst_draws(cam.noise, (cam.height, cam.width), settings.perception.depth_filter.temporal_frames)
+    n = _captures_taken.get(world, 0)
+    pending = _next_draws.get(world)
+    if plan and world not in _off_plan and (pending is None or pending[0] != n or pending[1].plan != plan):
+        _next_draws[world] = (n, PrefetchedDraws(noise_rng(world.seed, n), plan))

@@ -28,7 +28,7 @@ from scipy.optimize import linear_sum_assignment
 from twin.camera import true_camera_pose
 from twin.config import Settings
 from twin.perception.aruco import Calibration, calibrate, transform_error
-from twin.perception.capture import Capture, capture_frame, noise_rng
+from twin.perception.capture import Capture, capture_frame, noise_rng, prefetch_next_capture
 from twin.perception.detection import detection_label, with_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.tasks.robocup.perception import CYLINDERS
@@ -289,6 +289,7 @@ def run_perception(
             else:
                 assert det is not None
                 perceive_robocup(earlier.frame, earlier.T_base_camera_nominal, settings, det, seed=seed)
+            prefetch_next_capture(world, settings)
         cap = capture_frame(world, settings, pose="capture", rng=None if earlier_captures else noise_rng(seed, 0))
         timings.update(cap.timings_s)
         if settings.camera.mount == "fixed" and has_marker:

@@ -206,6 +206,7 @@ class PrefetchedDraws:
         self._ahead = copy.deepcopy(rng)
         self._used = 0
         self._direct = False
+        self._left_plan = False
         self._thread = threading.Thread(target=self._draw, name="twin-noise-prefetch", daemon=True)
         self._thread.start()
 
@@ -213,6 +214,11 @@ class PrefetchedDraws:
     def plan(self) -> list[tuple[str, int]]:
         """The draws (method, count) made ahead, in order."""
         return self._plan
+
+    @property
+    def followed_plan(self) -> bool:
+        """False once a call did not follow the plan (from then on the draws are made directly)."""
+        return not self._left_plan
 
     def _draw(self) -> None:
         with _fast_switching:
@@ -229,6 +235,7 @@ class PrefetchedDraws:
                 self._arrays[self._used] = None  # handed out: not kept alive here
                 self._used += 1
                 return out.reshape(size)
+            self._left_plan = True
             self._go_direct()
         out = getattr(self._rng, method)(size)
         assert isinstance(out, np.ndarray)
@@ -254,6 +261,7 @@ class PrefetchedDraws:
             self._thread.join()
             self._rng.bit_generator.state = self._ahead.bit_generator.state
         else:
+            self._left_plan = True
             self._go_direct()
         self._direct = True
         self._arrays = []

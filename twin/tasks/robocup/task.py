@@ -23,7 +23,7 @@ import numpy as np
 from twin.config import Settings
 from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
-from twin.perception.capture import capture_frame
+from twin.perception.capture import capture_frame, prefetch_next_capture
 from twin.perception.pipeline import camera_extrinsics, make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, top_down
@@ -462,6 +462,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             T_bc = camera_extrinsics(settings, cap, None)
         # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
+        prefetch_next_capture(world, settings)
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:
@@ -511,6 +512,7 @@ def _calibrate_hand_eye(cell: Cell) -> tuple[np.ndarray, np.ndarray] | None:
         _reach_capture_pose(cell, q)
         cap = capture_frame(cell.world, settings, pose="calibration", move=False)
         cal = calibrate(cap.frame, settings)
+        prefetch_next_capture(cell.world, settings)
     except (StageFailed, MarkerNotFound) as e:
         log.warning("robocup: no hand-eye calibration (%s); using the configured camera.wrist_offset_m", e)
         return None

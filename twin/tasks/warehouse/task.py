@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.perception.aruco import MarkerNotFound, calibrate
-from twin.perception.capture import capture_frame
+from twin.perception.capture import capture_frame, prefetch_next_capture
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
 from twin.tasks.judge import WarehouseReferee
 from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
@@ -107,7 +107,9 @@ def _perceive(cell: Cell) -> WarehouseResult:
     settings, world = cell.settings, cell.world
     capture = capture_frame(world, settings)
     calib = calibrate(capture.frame, settings)
-    return perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+    seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+    prefetch_next_capture(world, settings)
+    return seen
 
 
 def _perceive_again(cell: Cell, cube: LabeledCube) -> LabeledCube | None:
