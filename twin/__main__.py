@@ -1,3 +1,3 @@
-from twin.cli import main
+from twin.cli import console_main
 
-raise SystemExit(main())
+console_main()

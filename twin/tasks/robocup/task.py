@@ -462,11 +462,11 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             T_bc = camera_extrinsics(settings, cap, None)
         # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
-        prefetch_next_capture(world, settings)
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:
             break
+        prefetch_next_capture(world, settings)  # there will be another look
         _update_obstacles(cell, seen.objects, est, bins, seen.unknown)
         tgt = _target_for(est, targets)
         tgt.attempts += 1
