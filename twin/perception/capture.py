@@ -104,7 +104,11 @@ def capture_frame(
     steps = int(round(settle * settings.world.physics_hz))
     late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
     depth_filter = settings.perception.depth_filter
-    plan = burst_draws(cam.noise, (cam.height, cam.width), depth_filter.temporal_frames) if prefetch_noise else []
+    plan = (
+        burst_draws(cam.noise, (cam.height, cam.width), depth_filter.temporal_frames)
+        if prefetch_noise and world not in _off_plan
+        else []
+    )
     draws: np.random.Generator | PrefetchedDraws
     if rng is None:
         n = _captures_taken.get(world, 0)

@@ -207,6 +207,7 @@ class PrefetchedDraws:
         self._used = 0
         self._direct = False
         self._left_plan = False
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._draw, name="twin-noise-prefetch", daemon=True)
         self._thread.start()
 
@@ -223,6 +224,8 @@ class PrefetchedDraws:
     def _draw(self) -> None:
         with _fast_switching:
             for method, count in self._plan:
+                if self._stop.is_set():
+                    return
                 self._arrays.append(getattr(self._ahead, method)(count))
 
     def _take(self, method: str, size: int | tuple[int, ...]) -> np.ndarray:
@@ -242,7 +245,7 @@ class PrefetchedDraws:
         return out
 
     def _go_direct(self) -> None:
-        self._thread.join()
+        self._stop.set()  # what the thread draws from here on is not needed (it draws from a copy of rng)
         for method, count in self._plan[: self._used]:  # the stream up to here, drawn again
             getattr(self._rng, method)(count)
         self._direct = True
