@@ -301,9 +301,9 @@ class _Worker:
     started: float = 0.0
 
 
-def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]]) -> None:
+def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]], threads: int) -> None:
     """A local worker: run each task it is sent and send its row back, until it is sent None."""
-    worker_init()
+    worker_init(threads)
     while True:
         try:
             task = conn.recv()
@@ -325,10 +325,11 @@ def _run_local(
     ctx = _mp_context()
     queue = list(reversed(todo))
     pool: list[_Worker] = []
+    threads = max(1, _default_workers() // max(1, workers))  # each worker's share of the CPUs
 
     def spawn() -> _Worker:
         parent, child = ctx.Pipe()
-        proc = ctx.Process(target=_worker_loop, args=(child, run), daemon=True)
+        proc = ctx.Process(target=_worker_loop, args=(child, run, threads), daemon=True)
         proc.start()
         child.close()
         return _Worker(proc, parent)
