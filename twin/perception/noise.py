@@ -4,7 +4,8 @@ Depth error grows with the square of the distance, as for any stereo camera: RMS
 (focal_px * baseline_m), Intel's own model (~1 mm at 0.5 m, ~4 mm at 1 m, ~15 mm at 2 m with the
 defaults). Invalid pixels (depth 0) appear at random and, more often, at depth edges where a stereo
 matcher loses the correspondence. Depth is quantised to the sensor's depth unit and limited to its range.
-Everything is drawn from a caller-supplied generator, so a seed reproduces the frame exactly.
+Everything is drawn from a caller-supplied generator, so a seed reproduces the frame exactly;
+`PrefetchedDraws` draws a burst's numbers ahead on a second thread, the same numbers.
 """
 
 from __future__ import annotations
