@@ -47,10 +47,24 @@ def sweep(checkout: Path, config: str, workers: int, out: Path) -> tuple[float, 
     return wall, rows
 
 
+# wall-clock measurements, at any depth of a row (a task run's per-planner metrics hold them too); simulated
+# times (cycle_time_s, sim_time_s, duration_s) are results and compared
+_WALL_CLOCK = {
+    "timing",
+    "run_id",
+    "planning_time_s",
+    "wall_time_s",
+    "solve_time_median_s",
+    "solve_time_max_s",
+    "solve_times_s",
+    "final_check_time_s",
+}
+
+
 def _difference(a: dict[str, Any], b: dict[str, Any], at: str = "") -> str | None:
-    """The first field (dotted) on which two rows disagree among the fields both have, timings aside (a newer
-    revision may add fields), or None when they agree."""
-    for k in sorted(a.keys() & b.keys() - {"timing", "run_id"}):
+    """The first field (dotted) on which two rows disagree among the fields both have, wall-clock timings
+    aside (a newer revision may add fields), or None when they agree."""
+    for k in sorted(a.keys() & b.keys() - _WALL_CLOCK):
         if isinstance(a[k], dict) and isinstance(b[k], dict):
             inner = _difference(a[k], b[k], f"{at}{k}.")
             if inner is not None:

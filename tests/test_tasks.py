@@ -292,6 +292,7 @@ SPEED_UPS_OFF = {
     "robocup": [
         "perception.robocup.icp.tolerance=[1e-4,1e-6]",
         "perception.detector.params.voxel_m=0.004",
+        "perception.robocup.icp.denoise_on=raw",
         "world.sleep_at_rest=false",
     ],
     "warehouse": [

@@ -4,7 +4,7 @@ machine's bins and grips, and the seed-002 pose estimation with its grasp lookup
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator
 
@@ -31,6 +31,10 @@ class IcpSettings(ConfigModel):
     denoise_std_ratio: float = Field(1.5, gt=0)
     voxel_m: float = Field(0.003, ge=0)
     voxel_above_points: int = Field(500, ge=1)
+    # what the statistical outlier removal looks at when the object gets the voxel grid: "voxels", the grid's
+    # points (~10x fewer than the raw ones: ~4 ms less per object), or "raw", every point before the grid
+    # (the seed's order, and the default before issue 15)
+    denoise_on: Literal["voxels", "raw"] = "voxels"
     max_iterations: int = Field(60, ge=1)
     tolerance: tuple[float, float] = (1e-4, 1e-3)  # translation (m), rotation (rad) change to stop; seed: 1e-6 rad
     inlier_ratio: float = Field(0.7, gt=0, le=1)
