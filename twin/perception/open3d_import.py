@@ -54,7 +54,10 @@ def _deferred(name: str) -> Callable[..., Any]:
 
 def load_open3d() -> Any:
     """The open3d module; DependencyMissing naming the extra when it is not installed."""
-    if "open3d" not in sys.modules and _PLOTLY not in sys.modules:
+    loaded = sys.modules.get("open3d")
+    if loaded is not None:  # the usual case, on hot paths (a neighbour search per ICP iteration)
+        return loaded
+    if _PLOTLY not in sys.modules:
         standin = _DeferredPlotly(_PLOTLY)
         for name in _PLOTLY_FUNCTIONS:
             setattr(standin, name, _deferred(name))

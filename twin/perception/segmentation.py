@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -21,9 +20,7 @@ from twin.perception.open3d_import import load_open3d
 __all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "open3d", "plane_to_frame"]
 
 
-def open3d() -> Any:
-    """The open3d module, imported on first use (`twin.perception.open3d_import`)."""
-    return load_open3d()
+open3d = load_open3d  # the open3d module, imported on first use (`twin.perception.open3d_import`)
 
 
 @dataclass(frozen=True)
