@@ -1,14 +1,15 @@
 """Wall time of a whole `twin compare` sweep (issue 15), this checkout against another revision on the same
 config, side by side in one run; and whether both sweeps wrote the same rows apart from their timings.
 
-    python bench/bench_compare.py [--config compare] [--against REV] [--workers 2]
+    python bench/bench_compare.py [--config compare] [--against REV] [--workers 2] [--keep DIR]
 
 `--against REV` (a git revision, e.g. HEAD~5 or a tag) checks that revision out into a temporary worktree
 and runs the same sweep there with this virtualenv (its packages and plugins first on the path). Without
-it only this checkout is timed. Prints: runs, wall time, runs per second, and for two sweeps the speed-up
-and the rows that differ (a row is its run id plus everything but `timing`, floats compared to 1e-9
-relative; the optimising planners' rows depend on wall-clock time only through their time limits, so a
-differing row is worth a look), counted by the first field that differs.
+it only this checkout is timed. `--keep DIR` keeps both sweeps' results. Prints: runs, wall time, runs per
+second, and for two sweeps the speed-up and the rows that differ (a row is its run id plus everything but
+its wall-clock timings, floats compared to 1e-9 relative; the optimising planners' rows depend on wall-clock
+time through their time limits, so they differ between any two sweeps), counted by the first field that
+differs.
 """
 
 from __future__ import annotations
@@ -87,6 +88,7 @@ def main() -> None:
     ap.add_argument("--config", default="compare", help="comparison config (default: the full compare.yaml)")
     ap.add_argument("--against", default=None, metavar="REV", help="git revision to time on the same config")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--keep", default=None, metavar="DIR", help="keep both sweeps' output directories here")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-compare-"))
     results: list[tuple[str, float, list[dict[str, Any]]]] = []
@@ -100,6 +102,9 @@ def main() -> None:
                 subprocess.run(["git", "worktree", "remove", "--force", str(wt)], cwd=ROOT, check=False)
         results.append(("this checkout", *sweep(ROOT, args.config, args.workers, tmp / "out-here")))
     finally:
+        if args.keep:
+            for out in tmp.glob("out-*"):
+                shutil.copytree(out, Path(args.keep) / out.name, dirs_exist_ok=True)
         shutil.rmtree(tmp, ignore_errors=True)
     print(f"twin compare {args.config}, {args.workers} workers")
     print(f"  {'revision':20s} {'runs':>6s} {'wall s':>8s} {'runs/s':>7s}   summed run time s: tasks / queries")
