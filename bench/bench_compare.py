@@ -52,6 +52,7 @@ def sweep(checkout: Path, config: str, workers: int, out: Path) -> tuple[float, 
 # times (cycle_time_s, sim_time_s, duration_s) are results and compared
 _WALL_CLOCK = {
     "timing",
+    "timings",
     "run_id",
     "planning_time_s",
     "wall_time_s",
