@@ -104,11 +104,7 @@ def capture_frame(
     steps = int(round(settle * settings.world.physics_hz))
     late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
     depth_filter = settings.perception.depth_filter
-    plan = (
-        burst_draws(cam.noise, (cam.height, cam.width), depth_filter.temporal_frames)
-        if prefetch_noise and world not in _off_plan
-        else []
-    )
+    plan = _burst_plan(settings) if prefetch_noise and world not in _off_plan else []
     draws: np.random.Generator | PrefetchedDraws
     if rng is None:
         n = _captures_taken.get(world, 0)
@@ -160,9 +156,14 @@ def prefetch_next_capture(world: World, settings: Settings) -> None:
     """Start drawing the sensor noise of the world's next capture (that takes its noise from the world's
     stream) on a second thread: a task calls this once it has perceived a capture, so the draws run while
     the arm works (not beside perception) and are ready when the next capture settles. Changes no number."""
-    cam = settings.camera
-    plan = burst_draws(cam.noise, (cam.height, cam.width), settings.perception.depth_filter.temporal_frames)
+    plan = _burst_plan(settings)
     n = _captures_taken.get(world, 0)
     pending = _next_draws.get(world)
     if plan and world not in _off_plan and (pending is None or pending[0] != n or pending[1].plan != plan):
         _next_draws[world] = (n, PrefetchedDraws(noise_rng(world.seed, n), plan))
+
+
+def _burst_plan(settings: Settings) -> list[tuple[str, int]]:
+    """The noise draws of one capture's burst (`burst_draws`) for this camera and depth filter."""
+    cam = settings.camera
+    return burst_draws(cam.noise, (cam.height, cam.width), settings.perception.depth_filter.temporal_frames)
