@@ -13,8 +13,9 @@ ROOT = Path(__file__).resolve().parent.parent
 # Written against the plugin API the README documented before `twin.plugin` existed (`from twin import
 # hookimpl`, `twin.types`, `twin.planning`): it must keep working. The task `acme.wave` is the newer hook.
 ACME_PLUGIN = '''
-"""A throwaway third-party twin plugin: a straight joint-space planner with constant velocity, a crashing
-receding-horizon planner, and a task that waves the arm and places nothing."""
+"""A throwaway third-party twin plugin: a straight joint-space planner within the limits but without a
+collision check, one beyond the limits, a crashing receding-horizon planner, and a task that waves the arm
+and places nothing."""
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -32,15 +33,28 @@ class StraightLine:
         self.context = context
 
     def plan(self, request, scene):
+        """A quintic blend from rest to rest, its duration the shortest that keeps `speed_fraction` of every
+        joint limit (peak velocity 1.875 d/T, acceleration 5.774 d/T^2, jerk 60 d/T^3)."""
         if not isinstance(request.goal, JointGoal):
             return MotionResult(Status.INVALID_GOAL, "acme.straight takes joint goals only")
         dq = request.goal.q - request.start
-        vel = request.limits.max_joint_vel * self.params.speed_fraction
-        T = max(float(np.max(np.abs(dq) / vel)), 1e-3)
-        t = np.linspace(0.0, T, 50)
-        q = request.start + np.outer(t / T, dq)
-        qd = np.tile(dq / T, (50, 1))
-        return MotionResult(Status.SUCCESS, "", Trajectory(t, q, qd, np.zeros_like(q)))
+        lim, f, d = request.limits, self.params.speed_fraction, np.abs(dq)
+        T = max(
+            float(np.max(1.875 * d / (f * lim.max_joint_vel))),
+            float(np.max(np.sqrt(5.7735 * d / (f * lim.max_joint_acc)))),
+            float(np.max(np.cbrt(60.0 * d / (f * lim.max_joint_jerk)))),
+            1e-3,
+        )
+        t = np.linspace(0.0, T, 200)
+        u = t / T
+        s = 10 * u**3 - 15 * u**4 + 6 * u**5
+        sd = (30 * u**2 - 60 * u**3 + 30 * u**4) / T
+        sdd = (60 * u - 180 * u**2 + 120 * u**3) / T**2
+        return MotionResult(
+            Status.SUCCESS,
+            "",
+            Trajectory(t, request.start + np.outer(s, dq), np.outer(sd, dq), np.outer(sdd, dq)),
+        )
 
 
 class Crash:
@@ -69,6 +83,50 @@ class Crash:
         return Segment(Trajectory(t, np.stack([q, q + dq]), np.zeros((2, 6)), np.zeros((2, 6))), 1e-4, {})
 
 
+class Hasty:
+    """Ruckig's time-optimal straight joint line to the goal (a pose goal's nearest collision-free IK
+    solution) under the request's limits, those named in `limits` times `factor`: a planner that breaks
+    the joint limits and would win every race it were allowed to run."""
+
+    class Params(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        limits: list[str] = ["velocity", "acceleration", "jerk"]
+        factor: float = Field(3.0, gt=0)
+
+    def __init__(self, params, context):
+        self.params = params
+        self.kin = context.kinematics
+
+    def plan(self, request, scene):
+        import ruckig
+
+        a, goal = np.array(request.start), request.goal
+        if isinstance(goal, JointGoal):
+            b = np.array(goal.q)
+        else:
+            sols = self.kin.ik(goal.pose.matrix(), goal.frame)
+            sols = sols[~scene.in_collision_batch(sols)] if sols.shape[0] else sols
+            if sols.shape[0] == 0:
+                return MotionResult(Status.INVALID_GOAL, "no collision-free IK solution of the goal")
+            b = sols[int(np.argmin(np.abs(sols - a).max(axis=1)))]
+        lim = request.limits
+        f = {k: self.params.factor if k in self.params.limits else 1.0 for k in ("velocity", "acceleration", "jerk")}
+        if np.abs(b - a).max() < 1e-9:
+            still = Trajectory(np.zeros(1), a[None], np.zeros((1, 6)), np.zeros((1, 6)))
+            return MotionResult(Status.SUCCESS, "", still)
+        otg, inp, out = ruckig.Ruckig(6), ruckig.InputParameter(6), ruckig.Trajectory(6)
+        inp.current_position, inp.target_position = a.tolist(), b.tolist()
+        inp.max_velocity = (lim.max_joint_vel * f["velocity"]).tolist()
+        inp.max_acceleration = (lim.max_joint_acc * f["acceleration"]).tolist()
+        inp.max_jerk = (lim.max_joint_jerk * f["jerk"]).tolist()
+        otg.calculate(inp, out)
+        t = np.linspace(0.0, out.duration, max(2, int(np.ceil(out.duration / 0.002)) + 1))
+        q, qd, qdd = (np.array(x) for x in zip(*(out.at_time(float(ti)) for ti in t)))
+        q[0], q[-1] = a, b
+        qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
+        return MotionResult(Status.SUCCESS, "", Trajectory(t, q, qd, qdd))
+
+
 class Wave:
     """A task: to the capture pose and home again, `times` times; it places nothing."""
 
@@ -95,6 +153,9 @@ def twin_register_tasks(registry):
 def twin_register_planners(registry):
     registry.add_planner(
         "acme.straight", "acme_twin_plugin:StraightLine", description="straight joint line (test plugin)"
+    )
+    registry.add_planner(
+        "acme.hasty", "acme_twin_plugin:Hasty", description="straight line beyond a joint limit (test plugin)"
     )
     registry.add_planner(
         "acme.crash", "acme_twin_plugin:Crash", receding_horizon=True, description="drives into the table (test plugin)"

@@ -182,7 +182,7 @@ BROKEN = [  # (planner, the one rule it breaks, whether CheckedPlanner keeps the
     (RaisesOnBadGoals, "statuses", False, {}),
     (StartsBeside, "start_goal", True, {}),
     (StopsShort, "start_goal", True, {}),
-    (TooFast, "velocity", False, {}),
+    (TooFast, "velocity", True, {}),  # the judge refuses a motion beyond the limits
     (Sleepy, "time_limit", False, {"time_limit_s": 0.05}),
     (Unseeded, "determinism", False, {}),
     (IgnoresTheStart, "invalid_start", True, {}),
@@ -338,8 +338,9 @@ def test_cli_exits_1_when_a_rule_breaks(acme_plugin, tmp_path):
     assert "FAIL" in r.stdout and "Traceback" not in r.stderr
     data = json.loads(out.read_text())
     failed = {x["rule"] for x in data["rules"] if not x["passed"]}
-    # constant velocity from rest; no collision checks at all
-    assert {"acceleration", "collision_free", "invalid_start"} <= failed and data["seed"] == 1
+    # within the limits (a quintic blend), but no collision checks at all
+    assert {"collision_free", "invalid_start"} <= failed and data["seed"] == 1
+    assert not failed & {"velocity", "acceleration", "jerk"}
 
 
 @pytest.mark.parametrize(

@@ -209,7 +209,8 @@ def test_the_cli_names_the_unservable_stage_in_one_line(tmp_path):
 
 
 class _Boasting:
-    """A one-shot planner that claims it planned in a microsecond and returns a straight joint motion."""
+    """A one-shot planner that claims it planned in a microsecond and returns a straight joint motion (a
+    quintic blend from rest to rest over 1 s, within the limits)."""
 
     def __init__(self, kin):
         self.kin = kin
@@ -217,9 +218,14 @@ class _Boasting:
     def plan(self, request, scene):
         from twin.types import MotionResult, Trajectory
 
-        q = np.linspace(request.start, request.goal.q, 50)
         t = np.linspace(0.0, 1.0, 50)
-        traj = Trajectory(t, q, np.gradient(q, t, axis=0), np.zeros_like(q))
+        s, sd, sdd = (
+            10 * t**3 - 15 * t**4 + 6 * t**5,
+            30 * t**2 - 60 * t**3 + 30 * t**4,
+            60 * t - 180 * t**2 + 120 * t**3,
+        )
+        d = request.goal.q - request.start
+        traj = Trajectory(t, request.start + np.outer(s, d), np.outer(sd, d), np.outer(sdd, d))
         return MotionResult(Status.SUCCESS, "ok", traj, planning_time_s=1e-6)
 
 

@@ -20,8 +20,10 @@ from twin.planning import FINAL_CHECK
         ("invalid_goal", "the goal pose has no IK solution (out of reach)", None, "ik_failure"),
         ("ik_failed", "the line passes a singularity", None, "ik_failure"),
         ("limit_violation", "TOPP-RA could not keep the limits", None, "retiming_failed"),
-        ("collision", "the straight line collides", {}, "no_solution"),  # the planner's own verdict
+        ("collision", "the straight line collides", {}, "collision"),  # the planner's own verdict
         ("collision", "the trajectory collides (x with y)", {"rejected_by": FINAL_CHECK}, "final_check_collision"),
+        ("limit_violation", "joint 2 reaches 5.2 rad/s", {"rejected_by": FINAL_CHECK}, "limit_violation"),
+        ("no_solution", "reported success but ends 0.1 m away", {"rejected_by": FINAL_CHECK}, "final_check_goal"),
         ("execution_stopped", "protective stop: contact", None, "execution_contact"),
         ("something_new", "", None, "error"),
     ],
@@ -38,6 +40,7 @@ def test_a_plan_status_maps_to_one_reason(status: str, reason: str, info: dict |
         (["transfer: ompl.rrtconnect: timeout: no path in 1 s", "grasp: nothing"], "timeout"),
         (["approach: toppra.movel: ik_failed: the line leaves the workspace"], "ik_failure"),
         (["transfer: nmpc: execution_stopped: protective stop"], "execution_contact"),
+        (["hover: ruckig.movej: collision: the trajectory collides (right_finger with obstacle)"], "collision"),
         (["grasp: the fingers closed on nothing (can, upright)"], "grasp_lost"),
         (["transfer: the object was dropped while carrying it: opening fell"], "grasp_lost"),
         (["place: released, but it is outside the bin"], "grasp_lost"),
@@ -63,3 +66,41 @@ def test_rows_written_before_the_taxonomy_get_their_reason_from_the_status() -> 
     assert failure_of_row({"status": "collision", "success": False, "failure": "final_check_collision"}) == (
         "final_check_collision"
     )
+
+
+def test_a_task_row_takes_the_failure_its_failed_stage_named(monkeypatch) -> None:
+    """A motion the judge refused fails the task row under the judge's name (its text alone would read as the
+    planner's own collision); objects without a structured failure fall back to their text."""
+    from twin.compare import worker
+    from twin.compare.spec import RunTask
+    from twin.types import ObjectOutcome, RunSummary
+
+    refused = "transfer: nmpc: collision: segment 4 would collide (left_finger with obstacle); not executed"
+    outcomes = (
+        ObjectOutcome("cube_0", "cube", "red", "drop_red", placed=True),
+        ObjectOutcome(
+            "cube_1", "cube", "blue", "drop_blue", placed=False, error=refused, failure="final_check_collision"
+        ),
+        ObjectOutcome(
+            "cube_2", "cube", "green", "drop_green", placed=False, error="grasp: nothing between the fingers"
+        ),
+    )
+    metrics = {"nmpc": {"max_vel_ratio": 0.5, "max_acc_ratio": 1.0, "max_jerk_ratio": 0.9}}
+    summary = RunSummary("warehouse", 0, "nmpc", outcomes, 30.0, 10.0, metrics=metrics)
+    monkeypatch.setattr("twin.tasks.run_task", lambda *a, **k: summary)
+    task = RunTask(
+        run_id="nmpc|warehouse-task|seed=0|x",
+        planner_id="nmpc",
+        planner={"name": "nmpc"},
+        scenario="warehouse-task",
+        case="warehouse-task",
+        kind="task",
+        seed=0,
+        config="warehouse",
+    )
+    row = worker.execute_run(task)
+    assert row["failure"] == "final_check_collision" and row["status"] == "incomplete"
+    assert refused in row["reason"] and "grasp: nothing" in row["reason"]
+    assert row["metrics"]["max_acc_ratio"] == 1.0 and row["metrics"]["max_vel_ratio"] == 0.5
+    summary = RunSummary("warehouse", 0, "nmpc", outcomes[::2], 30.0, 10.0, metrics=metrics)
+    assert worker.execute_run(task)["failure"] == "grasp_lost"  # no name given: from the text

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.planning import as_checked
+from twin.planning import as_checked, limit_ratios
 from twin.registry import PluginContext
 from twin.types import MotionRequest, MotionResult, Trajectory
 
@@ -57,6 +57,7 @@ class MotionRecord:
     fallback_steps: int = 0
     unexpected_contacts: int = 0
     info: dict[str, Any] = field(default_factory=dict)
+    limit_ratios: dict[str, float] = field(default_factory=dict)  # the judge's (twin.planning.limit_ratios)
 
 
 def execute(
@@ -162,6 +163,7 @@ def plan_and_execute(
         solves=int(info.get("solves", 0)),
         fallback_steps=int(info.get("fallback_steps", 0)),
         unexpected_contacts=len(plant.stops),
+        limit_ratios=limit_ratios(result),
         info={
             "max_tracking_error_rad": plant.max_tracking_error_rad,
             "solve_times_s": list(info.get("solve_times_s", [])),

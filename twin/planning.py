@@ -4,10 +4,12 @@ Planners never touch PyBullet: they get a `MotionRequest`, the kinematics (in th
 `PlanningScene`. Whatever the registry hands out goes through `make_planner`, which wraps it in a
 `CheckedPlanner`: one-shot trajectories and every receding-horizon segment are re-checked against the
 scene at a resolution of at most `collision.check_resolution_m` of TCP travel and `check_resolution_rad`
-per joint before anything can execute them, and every planner's end state is judged against the goal's
-own tolerances (`goal_miss`). A colliding trajectory or segment becomes a COLLISION result, never a
-success and never a motion. `CheckedPlanner.drive` is the one loop that plans and hands checked pieces to
-a plant: the kinematic model (`plan`) or the simulated arm (`twin.executor`).
+per joint, and against the request's joint velocity and acceleration limits (jerk too for a planner that
+declares itself `jerk_limited`), before anything can execute them; every planner's end state is judged
+against the goal's own tolerances (`goal_miss`). A colliding trajectory or segment becomes a COLLISION
+result, one beyond the limits a LIMIT_VIOLATION, never a success and never a motion. `CheckedPlanner.drive`
+is the one loop that plans and hands checked pieces to a plant: the kinematic model (`plan`) or the
+simulated arm (`twin.executor`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from twin.errors import InvalidRequestError, PlanningError, TwinError
+from twin.limit_check import LIMIT_TOLERANCE, LimitExcess, limit_excess, stitched
 from twin.registry import PluginContext, Registry, default_registry
 from twin.timing import stage
 from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
@@ -54,6 +57,7 @@ __all__ = [
     "first_collision",
     "goal_miss",
     "jerk_limited",
+    "limit_ratios",
     "limits_from_settings",
     "make_context",
     "make_planner",
@@ -64,8 +68,33 @@ __all__ = [
 log = logging.getLogger("twin")
 
 # `MotionResult.info["rejected_by"]` of a result the planner called a success and the independent check
-# (collision re-check of every returned trajectory or segment, goal reached) turned down
+# (collision re-check of every returned trajectory or segment, joint limits, goal reached) turned down
 FINAL_CHECK = "final_check"
+# `MotionResult.info["limit_ratios"]`: {'velocity' | 'acceleration' | 'jerk': the largest |value| / limit of
+# any joint} over everything the judge saw of the motion (jerk is measured for every planner, judged only
+# for one that declares `jerk_limited`)
+LIMIT_RATIOS = "limit_ratios"
+
+
+def limit_ratios(result: MotionResult) -> dict[str, float]:
+    """The judge's limit ratios of a result (`info["limit_ratios"]`); empty when it judged no motion."""
+    r = result.info.get(LIMIT_RATIOS) if isinstance(result.info, dict) else None
+    return {str(k): float(v) for k, v in r.items()} if isinstance(r, dict) else {}
+
+
+def _over_limits(excess: dict[str, LimitExcess], *, jerk: bool) -> str | None:
+    """'joint 2 reaches 5.17 rad/s (declared qd), limit 3.14 (1.65x); ...' for every judged limit beyond
+    LIMIT_TOLERANCE, or None."""
+    over = [e for k, e in excess.items() if e.ratio > 1.0 + LIMIT_TOLERANCE and (jerk or k != "jerk")]
+    return "; ".join(f"{e.kind} {e.reason()}" for e in over) or None
+
+
+def _worst(ratios: dict[str, float], excess: dict[str, LimitExcess]) -> dict[str, float]:
+    """`ratios` raised to the ratios of `excess` where those are larger."""
+    out = dict(ratios)
+    for k, e in excess.items():
+        out[k] = max(out.get(k, 0.0), e.ratio)
+    return out
 
 
 @runtime_checkable
@@ -389,6 +418,8 @@ class CheckedPlanner:
         self._segments = 0
         self._reset_time_s = 0.0  # wall time of the last reset(), s
         self._check_time_s = 0.0  # wall time of our FCL check of the segments since reset(), s
+        self._last: Trajectory | None = None  # the last segment accepted since reset()
+        self._ratios: dict[str, float] = {}  # the worst limit ratios of the segments since reset()
 
     def __getattr__(self, attr: str) -> Any:
         if attr.startswith("__") or attr == "inner":
@@ -411,6 +442,7 @@ class CheckedPlanner:
         self._request, self._scene = request, scene
         self._fallback_steps = self._segments = 0
         self._check_time_s = 0.0
+        self._last, self._ratios = None, {}
         t0 = time.perf_counter()
         self.inner.reset(request, scene)
         self._reset_time_s = time.perf_counter() - t0
@@ -423,16 +455,27 @@ class CheckedPlanner:
         t0 = time.perf_counter()
         out = self.inner.step(q)
         elapsed = time.perf_counter() - t0
-        info_extra = {"fallback_steps": self._fallback_steps, "final_check_time_s": self._check_time_s}
         if isinstance(out, MotionResult):
+            if out.success and self._last is not None:  # the arm stops at the end: from the last segment to rest
+                excess = limit_excess(self._last, self._request.limits, from_rest=False, to_rest=True)
+                self._ratios = _worst(self._ratios, excess)
+                over = _over_limits(excess, jerk=jerk_limited(self.inner))
+                if over is not None:
+                    return MotionResult(
+                        Status.LIMIT_VIOLATION,
+                        f"stopping at the end of segment {self._segments} exceeds the joint limits: {over}",
+                        info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
+                    )
             if out.success:
                 q_end = out.trajectory.q[-1] if out.trajectory is not None else q
                 why = goal_miss(self._request.goal, q_end, self.context.kinematics)
                 if why is not None:
                     return MotionResult(
-                        Status.NO_SOLUTION, f"{self.name} reported success but {why}", info=dict(out.info, **info_extra)
+                        Status.NO_SOLUTION,
+                        f"{self.name} reported success but {why}",
+                        info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
                     )
-            return replace(out, info=dict(out.info, **info_extra))
+            return replace(out, info=dict(out.info, **self._info_extra()))
         if not isinstance(out, Segment):
             raise PlanningError(
                 f"{type(self.inner).__name__}.step returned {type(out).__name__}, not Segment or MotionResult"
@@ -445,6 +488,21 @@ class CheckedPlanner:
             )
         # the step's time is the wall time of everything the planner did for it, whatever it reports itself
         out = replace(out, solve_time_s=elapsed, info=dict(out.info, reported_solve_time_s=out.solve_time_s))
+        kind = "fallback segment" if out.fallback else "segment"
+        # the limits, with the motion that led into the segment (velocity and acceleration carry over)
+        excess = limit_excess(
+            stitched(self._last, traj), self._request.limits, from_rest=self._last is None, to_rest=False
+        )
+        self._ratios = _worst(self._ratios, excess)
+        over = _over_limits(excess, jerk=jerk_limited(self.inner))
+        if over is not None:
+            self._segments += 1
+            log.warning("%s: %s %d exceeds the joint limits; not executed", self.name, kind, self._segments)
+            return MotionResult(
+                Status.LIMIT_VIOLATION,
+                f"{kind} {self._segments} would exceed the joint limits ({over}); not executed",
+                info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
+            )
         col = self.context.settings.collision
         t0 = time.perf_counter()
         hit = first_collision(
@@ -460,16 +518,24 @@ class CheckedPlanner:
             qs = densify(
                 traj, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m
             )
-            kind = "fallback segment" if out.fallback else "segment"
             log.warning("%s: %s %d collides; not executed", self.name, kind, self._segments)
             return MotionResult(
                 Status.COLLISION,
                 f"{kind} {self._segments} would collide ({colliding_pair(self._scene, qs[hit])}); not executed",
-                info=dict(out.info, **info_extra, rejected_by=FINAL_CHECK),
+                info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
             )
         if out.fallback:
             self._fallback_steps += traj.q.shape[0] - 1
+        self._last = traj
         return out
+
+    def _info_extra(self) -> dict[str, Any]:
+        """What the judge adds to a receding-horizon result's info: fallback steps, check time, limit ratios."""
+        return {
+            "fallback_steps": self._fallback_steps,
+            "final_check_time_s": self._check_time_s,
+            LIMIT_RATIOS: dict(self._ratios),
+        }
 
     # ---- one-shot, checked ----------------------------------------------------------------------
     def _plan_one_shot(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
@@ -487,7 +553,7 @@ class CheckedPlanner:
         if not result.success:
             return result
         t0 = time.perf_counter()
-        checked = _checked(result, request, scene, self.context)
+        checked = _checked(result, request, scene, self.context, jerk=jerk_limited(self.inner))
         return replace(checked, info=dict(checked.info, final_check_time_s=time.perf_counter() - t0))
 
     # ---- the one loop ---------------------------------------------------------------------------
@@ -534,17 +600,11 @@ class CheckedPlanner:
             stop = _execute(plant, out.trajectory)
             if stop is not None:
                 final = MotionResult(
-                    Status.EXECUTION_STOPPED,
-                    stop,
-                    info={"execution_stop": stop, "fallback_steps": self._fallback_steps},
+                    Status.EXECUTION_STOPPED, stop, info={"execution_stop": stop, **self._info_extra()}
                 )
                 break
         if final is None:
-            final = MotionResult(
-                Status.NO_SOLUTION,
-                f"no end after {max_segments} segments",
-                info={"fallback_steps": self._fallback_steps},
-            )
+            final = MotionResult(Status.NO_SOLUTION, f"no end after {max_segments} segments", info=self._info_extra())
         info = dict(
             final.info,
             solve_times_s=solve_times,
@@ -588,8 +648,11 @@ def plan_with(planner: Any, request: MotionRequest, scene: PlanningScene, contex
 
 
 def _checked(
-    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext
+    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext, *, jerk: bool
 ) -> MotionResult:
+    """The judge of a one-shot success: it starts at the start, ends on the goal, keeps the joint limits
+    (jerk when `jerk`: the planner declares itself jerk-limited) and is collision-free; else a failure
+    status naming what broke, `info["rejected_by"] = FINAL_CHECK`. The limit ratios go to the info either way."""
     traj = result.trajectory
     assert traj is not None
     kin = context.kinematics
@@ -604,6 +667,18 @@ def _checked(
             status=Status.NO_SOLUTION,
             trajectory=None,
             reason=f"the trajectory {why}",
+            info=dict(result.info, rejected_by=FINAL_CHECK),
+        )
+    excess = limit_excess(traj, request.limits)
+    result = replace(result, info=dict(result.info, **{LIMIT_RATIOS: {k: e.ratio for k, e in excess.items()}}))
+    over = _over_limits(excess, jerk=jerk)
+    if over is not None:
+        log.warning("planner returned a trajectory beyond the joint limits; reported as LIMIT_VIOLATION")
+        return replace(
+            result,
+            status=Status.LIMIT_VIOLATION,
+            trajectory=None,
+            reason=f"the trajectory exceeds the joint limits: {over}",
             info=dict(result.info, rejected_by=FINAL_CHECK),
         )
     hit = first_collision(traj, scene, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)

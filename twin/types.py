@@ -311,6 +311,7 @@ class ObjectOutcome:
     error: str | None = None  # why it was not placed (None when placed)
     cycle_time_s: float = 0.0  # simulated time spent on this object
     pose_error_m: float | None = None  # perceived vs true centroid, xy
+    failure: str | None = None  # the failure's name (a twin.failures.FAILURES key) when the task knew it
 
 
 @dataclass(frozen=True)
@@ -345,6 +346,7 @@ class RunSummary:
                     "target_bin": o.target_bin,
                     "placed": o.placed,
                     "error": o.error,
+                    "failure": o.failure,
                     "cycle_time_s": o.cycle_time_s,
                     "pose_error_m": o.pose_error_m,
                 }

@@ -14,14 +14,14 @@ stands on (it is fixed to the world and cannot move).
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from twin.executor import execute
-from twin.planning import FINAL_CHECK
+from twin.failures import FAILURES, failure_of_plan, failure_of_task
+from twin.limit_check import RATIO_METRICS
 from twin.types import JointGoal, MotionRequest, MotionResult, RunSummary, Trajectory
 
 if TYPE_CHECKING:
@@ -45,6 +45,7 @@ __all__ = [
     "failure_of_row",
     "failure_of_task",
     "finite_or_none",
+    "limit_metrics",
     "path_smoothness",
     "task_metrics",
     "timing_metrics",
@@ -76,6 +77,19 @@ METRICS: tuple[MetricDef, ...] = (
         f"{SMOOTHNESS_STEP_RAD:g} rad; 0 for a straight line",
     ),
     MetricDef("max_jerk", "rad/s^3", "max |jerk| of any joint (finite differences of qdd, fine resampling)"),
+    MetricDef(
+        "max_vel_ratio",
+        "",
+        "largest joint velocity / its limit, as the judge measured it (declared qd and differences of q); "
+        "above 1.001 the motion is refused (limit_violation), also on failed rows",
+    ),
+    MetricDef("max_acc_ratio", "", "largest joint acceleration / its limit, as max_vel_ratio"),
+    MetricDef(
+        "max_jerk_ratio",
+        "",
+        "largest joint jerk / its limit, as max_vel_ratio; judged only for a planner that declares itself "
+        "jerk-limited (TOPP-RA-timed motion is not)",
+    ),
     MetricDef("min_clearance_m", "m", "minimum FCL distance to the environment along the trajectory", "higher"),
     MetricDef("contacts", "", "distinct (robot link, body) contacts seen when executed in physics"),
     MetricDef("contact_time_s", "s", "simulated time with any unexpected robot contact"),
@@ -102,72 +116,6 @@ TIMINGS: tuple[MetricDef, ...] = (
     MetricDef("solve_time_max_s", "s", "longest step (receding horizon)"),
     MetricDef("wall_time_s", "s", "wall time of the whole run in its worker"),
 )
-
-# Why a run failed: one fixed set for every planner (row["failure"]; None on success), so failures can be
-# counted and compared across planners whatever words their reasons use.
-FAILURES: dict[str, str] = {
-    "start_in_collision": "the start is in collision or outside the joint limits",
-    "goal_in_collision": "the goal is in collision, out of reach or outside the joint limits",
-    "ik_failure": "no acceptable inverse-kinematics solution for the goal or a waypoint",
-    "timeout": "the time limit ran out before a solution was found",
-    "no_solution": "the planner searched and found no solution",
-    "retiming_failed": "the path could not be time-parameterised within the limits",
-    "final_check_collision": "the returned trajectory failed the independent FCL re-check",
-    "execution_contact": "executed in physics, the arm touched something",
-    "grasp_lost": "a task run did not get an object where it belongs: never perceived, grasp not sensed, slipped, "
-    "dropped, or released outside its bin",
-    "dependency_missing": "the planner's backend is not installed",
-    "error": "the run raised an error or was stopped (time-out of the run, crashed worker)",
-}
-
-_STATUS_FAILURE = {
-    "no_solution": "no_solution",
-    "timeout": "timeout",
-    "invalid_start": "start_in_collision",
-    "invalid_goal": "goal_in_collision",
-    "collision": "no_solution",  # the planner's own check found only a colliding trajectory
-    "ik_failed": "ik_failure",
-    "limit_violation": "retiming_failed",
-    "execution_stopped": "execution_contact",
-}
-_TASK_STATUS = re.compile(r": (" + "|".join(_STATUS_FAILURE) + r"): ")
-
-
-def failure_of_plan(status: str, reason: str = "", info: Any = None) -> str | None:
-    """The failure reason (a FAILURES key) of a planning result: None on success.
-
-    From the status, refined where the status alone is ambiguous: an invalid goal whose reason names IK
-    (no or no acceptable IK solution) is an ik_failure; a result the independent check turned down
-    (`info["rejected_by"] == twin.planning.FINAL_CHECK`) is a final_check_collision when it collided."""
-    if status == "success":
-        return None
-    rejected = isinstance(info, dict) and info.get("rejected_by") == FINAL_CHECK
-    if status == "collision" and rejected:
-        return "final_check_collision"
-    if status == "invalid_goal" and re.search(r"\bIK\b", reason):
-        return "ik_failure"
-    return _STATUS_FAILURE.get(status, "error")
-
-
-def failure_of_task(errors: list[str]) -> str | None:
-    """The failure reason of a task run from the errors of its objects not placed (in object order): that
-    of the first one. None when every object was placed.
-
-    A stage that failed to move says its planner's status (`"<stage>: <planner>: <status>: <why>"`, see
-    twin.tasks.cell), which maps as for a motion query; a run out of time is a timeout; every other
-    object not placed (not perceived, grasp not sensed, slipped, dropped, released outside its bin) is
-    grasp_lost; a calibration failure is an error."""
-    if not errors:
-        return None
-    e = errors[0]
-    m = _TASK_STATUS.search(e)
-    if m:
-        return failure_of_plan(m.group(1), e[m.end() :])
-    if e.startswith("time:"):
-        return "timeout"
-    if e.startswith("calibration:"):
-        return "error"
-    return "grasp_lost"
 
 
 def failure_of_row(row: dict[str, Any]) -> str | None:
@@ -274,6 +222,12 @@ def trajectory_metrics(
         "max_jerk": max_jerk,
         "min_clearance_m": finite_or_none(float(d.min())),
     }, pair
+
+
+def limit_metrics(ratios: dict[str, float]) -> dict[str, float | None]:
+    """`max_vel_ratio`, `max_acc_ratio`, `max_jerk_ratio` from the judge's limit ratios
+    (`twin.planning.limit_ratios`; None where it measured nothing)."""
+    return {key: finite_or_none(ratios.get(kind)) for kind, key in RATIO_METRICS.items()}
 
 
 def timing_metrics(result: MotionResult) -> tuple[dict[str, float | None], int | None]:

@@ -28,6 +28,7 @@ from twin.compare.metrics import (
     failure_of_exception,
     failure_of_plan,
     failure_of_task,
+    limit_metrics,
     task_metrics,
     timing_metrics,
     trajectory_metrics,
@@ -333,7 +334,7 @@ def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> Motion
 
 def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     from twin.config import PlannerBlock
-    from twin.planning import make_context, make_planner, plan_with
+    from twin.planning import limit_ratios, make_context, make_planner, plan_with
 
     cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems)
     settings = cell.settings.model_copy(update={"seed": task.seed})
@@ -358,6 +359,7 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     row["metrics"]["solves"] = solves
     fallback = result.info.get("fallback_steps") if isinstance(result.info, dict) else None
     row["metrics"]["fallback_steps"] = None if fallback is None else int(fallback)
+    row["metrics"].update(limit_metrics(limit_ratios(result)))  # a refused motion's too: why it was refused
     if not result.success or result.trajectory is None:
         return
     traj = result.trajectory
@@ -391,7 +393,11 @@ def _run_task(task: RunTask, row: dict[str, Any]) -> None:
     row["status"] = "success" if row["success"] else "incomplete"
     failed = [o for o in summary.objects if not o.placed]
     row["reason"] = "; ".join(f"{o.id}: {o.error}" for o in failed)
-    row["failure"] = failure_of_task([o.error or "" for o in failed])
+    # the first object not placed, by the name its failed stage gave (the reason's words for older outcomes)
+    row["failure"] = (failed[0].failure or failure_of_task([failed[0].error or ""])) if failed else None
+    # the judge's limit ratios over the compared (transfer) planner's motions
+    transfer = summary.metrics.get(block.name, {}) if isinstance(summary.metrics, dict) else {}
+    row["metrics"].update({k: transfer.get(k) for k in limit_metrics({})})
     row["timing"]["wall_time_s"] = float(summary.wall_time_s)
     row["task"] = summary.to_json()  # per-object outcomes and the run's planner metrics
 

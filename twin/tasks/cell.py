@@ -19,6 +19,8 @@ from twin.collision import PlanningScene
 from twin.config import PlannerBlock, Settings
 from twin.errors import ConfigError
 from twin.executor import MotionRecord, plan_and_execute
+from twin.failures import failure_of_plan
+from twin.limit_check import RATIO_METRICS
 from twin.planning import CheckedPlanner, describe_goal_kinds, limits_from_settings, make_context, make_planner
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 
@@ -57,12 +59,16 @@ _GRASPING_STAGES = frozenset({"descent", "ascent", "place"})
 
 
 class StageFailed(Exception):
-    """A stage could not be done; the task logs the reason and moves on to the next object."""
+    """A stage could not be done; the task logs the reason and moves on to the next object.
 
-    def __init__(self, stage: str, reason: str):
+    `failure`: the failure's name (a `twin.failures.FAILURES` key) when the stage knows it, as a motion
+    that failed does from its planner's result and the judge's verdict; None leaves it to the reason."""
+
+    def __init__(self, stage: str, reason: str, *, failure: str | None = None):
         super().__init__(f"{stage}: {reason}")
         self.stage = stage
         self.reason = reason
+        self.failure = failure
 
 
 def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
@@ -199,7 +205,11 @@ class Cell:
         )
         self.records.append(record)
         if result.status is not Status.SUCCESS:
-            raise StageFailed(stage, f"{name}: {result.status.value}: {result.reason}")
+            raise StageFailed(
+                stage,
+                f"{name}: {result.status.value}: {result.reason}",
+                failure=failure_of_plan(result.status.value, result.reason, result.info),
+            )
         return result
 
     def move_pose(self, stage: str, T_tcp: np.ndarray, **kw: Any) -> MotionResult:
@@ -344,8 +354,9 @@ class Cell:
     # ---- bookkeeping ----------------------------------------------------------------------------
     def metrics(self) -> dict[str, Any]:
         """Planner metrics over the run: per planner, motions, successes, planning and motion time, solves,
-        steps a receding-horizon planner followed without a solve (`fallback_steps`), and motions stopped
-        by an unexpected contact."""
+        steps a receding-horizon planner followed without a solve (`fallback_steps`), motions stopped by an
+        unexpected contact, and the largest joint velocity, acceleration and jerk over their limits that the
+        judge measured in any of its motions (`max_vel_ratio`, ...; None when it judged none)."""
         out: dict[str, Any] = {}
         keys = (
             "motions",
@@ -367,4 +378,10 @@ class Cell:
             m["fallback_steps"] += r.fallback_steps
             m["unexpected_contacts"] += r.unexpected_contacts
             m["collisions"] += r.status == "collision"
+            for kind, key in RATIO_METRICS.items():
+                if kind in r.limit_ratios:
+                    m[key] = max(m.get(key) or 0.0, r.limit_ratios[kind])
+        for m in out.values():
+            for key in RATIO_METRICS.values():
+                m.setdefault(key, None)
         return out

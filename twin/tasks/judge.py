@@ -179,6 +179,7 @@ class RobocupTarget(Protocol):
     """What the RoboCup task records about one object it worked on (twin.tasks.robocup._Target)."""
 
     error: str | None
+    failure: str | None
     done: bool
     cycle_time_s: float
     first_estimate: np.ndarray | None
@@ -218,12 +219,13 @@ class RobocupReferee:
                 if bin_ is not None
                 else Verdict(False, f"there is no fixture {bin_name!r}")
             )
+            failure = None
             if verdict.placed:
                 err = None
             elif not mine:
                 err = "perception: never seen on the table" + (f" (the run stopped: {stopped})" if stopped else "")
             elif mine[-1].error:
-                err = mine[-1].error
+                err, failure = mine[-1].error, mine[-1].failure
             elif mine[-1].done:
                 err = f"place: released, but {verdict.reason}{self._elsewhere(oid, bin_name)}"
             else:
@@ -239,6 +241,7 @@ class RobocupReferee:
                     target_bin=bin_name,
                     placed=verdict.placed,
                     error=err,
+                    failure=failure,
                     cycle_time_s=sum(t.cycle_time_s for t in mine),
                     pose_error_m=float(np.linalg.norm(first[:2] - o0.position[:2])) if first is not None else None,
                 )
@@ -259,6 +262,7 @@ class WarehouseAttempt(Protocol):
     cube: Any  # twin.perception.warehouse.LabeledCube
     true_id: int | None
     error: str | None
+    failure: str | None
     cycle_time_s: float
 
 
@@ -289,12 +293,13 @@ class WarehouseReferee:
                 else Verdict(False, "no drop zone")
             )
             att = by_true.get(oid)
+            failure = None
             if verdict.placed:
                 err = None
             elif att is None:
                 err = global_error or "perception: never seen on the table"
             elif att.error:
-                err = att.error
+                err, failure = att.error, att.failure
             else:
                 err = f"place: released, but {verdict.reason}"
             out.append(
@@ -305,6 +310,7 @@ class WarehouseReferee:
                     target_bin=f"drop_{o0.color}",
                     placed=verdict.placed,
                     error=err,
+                    failure=failure,
                     cycle_time_s=att.cycle_time_s if att else 0.0,
                     pose_error_m=float(np.linalg.norm(att.cube.centroid[:2] - o0.position[:2])) if att else None,
                 )

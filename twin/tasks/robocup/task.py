@@ -150,6 +150,7 @@ class _Target:
     attempts: int = 0
     done: bool = False
     error: str | None = None
+    failure: str | None = None  # the failure's name, when the failed stage knew it (StageFailed.failure)
     cycle_time_s: float = 0.0
     first_estimate: np.ndarray | None = None
     true_ids: set[int] = field(default_factory=set)  # metrics only (the referee's), never decided on
@@ -475,13 +476,13 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         t0 = world.sim_time
         bin_name = bin_for(est.cls, est.color, settings)
         if bin_name not in bins:
-            tgt.done, tgt.error = True, f"bin: no bin named {bin_name!r} among the fixtures"
+            tgt.done, tgt.error, tgt.failure = True, f"bin: no bin named {bin_name!r} among the fixtures", "error"
             continue
         try:
             _pick_and_place(cell, est, bins[bin_name], placed_in.setdefault(bin_name, []))
-            tgt.done, tgt.error = True, None
+            tgt.done, tgt.error, tgt.failure = True, None, None
         except StageFailed as e:
-            tgt.error = str(e)
+            tgt.error, tgt.failure = str(e), e.failure
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
             _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
             cell.recover()

@@ -45,6 +45,7 @@ class _Attempt:
     cube: LabeledCube
     true_id: int | None  # metrics only (the referee's), never decided on
     error: str | None = None
+    failure: str | None = None  # the failure's name, when the failed stage knew it (StageFailed.failure)
     cycle_time_s: float = 0.0
 
 
@@ -167,10 +168,10 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         for k in range(task.retries + 1):
             try:
                 _pick_and_place(cell, att.cube, zone)
-                att.error = None
+                att.error = att.failure = None
                 break
             except StageFailed as e:
-                att.error = str(e)
+                att.error, att.failure = str(e), e.failure
                 log.info("warehouse: %s cube, attempt %d failed: %s", att.cube.color_label, k + 1, e)
                 cell.recover()
                 if k < task.retries:

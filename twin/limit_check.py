@@ -1,0 +1,161 @@
+"""How far a trajectory goes against the request's joint limits: the one measure the judge
+(`twin.planning.CheckedPlanner`), the planner contract (`twin.testing`) and the comparison rows share.
+
+A limit is judged on what the trajectory declares (qd, qdd; jerk as differences of qdd between samples)
+and on the divided differences of its q samples, which a motion that keeps a limit cannot exceed (mean
+value theorem): a planner cannot pass by declaring small derivatives for large steps. The arm stands
+still before a motion that starts from rest and after one that ends at rest, so a trajectory that starts
+moving or stops dead jumps from rest. `LIMIT_TOLERANCE` absorbs float round-off and sampling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.types import Limits, Trajectory
+
+__all__ = [
+    "LIMIT_KINDS",
+    "LIMIT_TOLERANCE",
+    "RATIO_METRICS",
+    "LimitExcess",
+    "limit_excess",
+    "limit_violations",
+    "stitched",
+]
+
+# Relative excess over a limit that is still float round-off or sampling, not a violation: Ruckig and the
+# quintic hit their limits exactly, TOPP-RA's samples are kept under them, and 0.1 % of pi rad/s is 3 mrad/s.
+LIMIT_TOLERANCE = 1e-3
+# The divided differences of q are taken over samples at least this far apart (s): closer samples (a
+# trajectory's last sample 1e-12 s after the previous one) would turn round-off into huge "jerk".
+_MIN_DIFF_DT_S = 5e-4
+LIMIT_KINDS: tuple[str, ...] = ("velocity", "acceleration", "jerk")
+# the metric each kind's worst ratio is reported as (compare rows, a run's per-planner metrics)
+RATIO_METRICS: dict[str, str] = {"velocity": "max_vel_ratio", "acceleration": "max_acc_ratio", "jerk": "max_jerk_ratio"}
+_UNITS = {"velocity": "rad/s", "acceleration": "rad/s^2", "jerk": "rad/s^3"}
+
+
+@dataclass(frozen=True)
+class LimitExcess:
+    """The worst sample of one kind of limit: `ratio` = |value| / limit of joint `joint` (0-based), seen in
+    `source` ('declared qd', 'differences of q', ...)."""
+
+    kind: str
+    ratio: float
+    joint: int
+    value: float
+    limit: float
+    source: str
+
+    def reason(self) -> str:
+        """'joint 2 reaches 5.17 rad/s (declared qd), limit 3.14 (1.65x)'."""
+        return (
+            f"joint {self.joint + 1} reaches {self.value:.4g} {_UNITS[self.kind]} ({self.source}), "
+            f"limit {self.limit:.4g} ({self.ratio:.2f}x)"
+        )
+
+
+def _thinned(t: np.ndarray, min_dt: float) -> np.ndarray:
+    """Indices of samples at least `min_dt` apart (the first and, if far enough, the last kept)."""
+    if t.shape[0] < 2 or float(np.diff(t).min()) >= min_dt:
+        return np.arange(t.shape[0])
+    keep = [0]
+    for i in range(1, t.shape[0]):
+        if t[i] - t[keep[-1]] >= min_dt:
+            keep.append(i)
+    return np.array(keep)
+
+
+def _rest(arr: np.ndarray, n: int, *, before: bool, hold: bool) -> np.ndarray:
+    """`arr` with `n` samples of rest added before or after it: the end sample held (q) or zeros (qd, qdd)."""
+    end = arr[:1] if before else arr[-1:]
+    pad = np.repeat(end, n, 0) if hold else np.zeros((n, arr.shape[1]))
+    return np.vstack([pad, arr]) if before else np.vstack([arr, pad])
+
+
+def limit_excess(
+    traj: Trajectory, limits: Limits, *, from_rest: bool = True, to_rest: bool = True, jerk: bool = True
+) -> dict[str, LimitExcess]:
+    """{'velocity' | 'acceleration' | 'jerk': its worst sample} of `traj` against `limits` (jerk only with
+    `jerk=True`); a kind with nothing to measure (one sample) is left out.
+
+    `from_rest`: the arm stands still before the first sample (a request has no start velocity), so a
+    trajectory that begins moving jumps from rest; `to_rest`: it holds the last sample afterwards."""
+    out: dict[str, LimitExcess] = {}
+    if traj.t.shape[0] < 2:
+        return out
+    i = _thinned(traj.t, _MIN_DIFF_DT_S)
+    t, q, qd, qdd = traj.t[i], traj.q[i], traj.qd[i], traj.qdd[i]
+    if t.shape[0] >= 2:  # standing still: three samples of rest before and after, at the first/last spacing
+        k = np.arange(3, 0, -1)
+        if from_rest:
+            t = np.concatenate([t[0] - (t[1] - t[0]) * k, t])
+            q, qd = _rest(q, 3, before=True, hold=True), _rest(qd, 3, before=True, hold=False)
+            qdd = _rest(qdd, 3, before=True, hold=False)
+        if to_rest:
+            t = np.concatenate([t, t[-1] + (t[-1] - t[-2]) * k[::-1]])
+            q, qd = _rest(q, 3, before=False, hold=True), _rest(qd, 3, before=False, hold=False)
+            qdd = _rest(qdd, 3, before=False, hold=False)
+    dt = np.diff(t)[:, None]
+    d1 = np.diff(q, axis=0) / dt
+    d2 = 2.0 * np.diff(d1, axis=0) / (t[2:] - t[:-2])[:, None] if t.shape[0] > 2 else np.zeros((0, 6))
+    d3 = 3.0 * np.diff(d2, axis=0) / (t[3:] - t[:-3])[:, None] if t.shape[0] > 3 else np.zeros((0, 6))
+    checks: list[tuple[str, np.ndarray, tuple[tuple[str, np.ndarray], ...]]] = [
+        ("velocity", limits.max_joint_vel, (("declared qd", qd), ("differences of q", d1))),
+        ("acceleration", limits.max_joint_acc, (("declared qdd", qdd), ("second differences of q", d2))),
+    ]
+    if jerk:
+        jerk_declared = np.diff(qdd, axis=0) / dt
+        checks.append(
+            ("jerk", limits.max_joint_jerk, (("differences of qdd", jerk_declared), ("third differences of q", d3)))
+        )
+    for kind, lim, sources in checks:
+        worst: LimitExcess | None = None
+        for src, values in sources:
+            if values.size == 0:
+                continue
+            ratio = np.abs(values) / lim[None, :]
+            at = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+            r = float(ratio[at])
+            if worst is None or r > worst.ratio:
+                j = int(at[1])
+                worst = LimitExcess(kind, r, j, float(np.abs(values[at])), float(lim[j]), src)
+        if worst is not None:
+            out[kind] = worst
+    return out
+
+
+def limit_violations(
+    traj: Trajectory,
+    limits: Limits,
+    *,
+    tolerance: float = LIMIT_TOLERANCE,
+    from_rest: bool = True,
+    to_rest: bool = True,
+    jerk: bool = True,
+) -> dict[str, str]:
+    """{'velocity' | 'acceleration' | 'jerk': why} for every limit `traj` exceeds by more than `tolerance`
+    (relative); see `limit_excess`."""
+    excess = limit_excess(traj, limits, from_rest=from_rest, to_rest=to_rest, jerk=jerk)
+    return {k: e.reason() for k, e in excess.items() if e.ratio > 1.0 + tolerance}
+
+
+def stitched(before: Trajectory | None, after: Trajectory, *, samples: int = 4) -> Trajectory:
+    """The last `samples` samples of `before` followed by `after`, `before` shifted to end where `after`
+    starts: a receding-horizon segment judged with the motion that led into it (its velocity and
+    acceleration carry over), without the tracking error between the last command and the measured state
+    at which the segment starts (a real arm's, not the planner's)."""
+    if before is None or before.t.shape[0] < 2:
+        return after
+    n = min(samples, before.t.shape[0] - 1)  # before's last sample is after's first: dropped
+    tail_t = before.t[-1 - n : -1] - before.t[-1] + after.t[0]
+    tail_q = before.q[-1 - n : -1] - before.q[-1] + after.q[0]
+    return Trajectory(
+        np.concatenate([tail_t, after.t]),
+        np.vstack([tail_q, after.q]),
+        np.vstack([before.qd[-1 - n : -1], after.qd]),
+        np.vstack([before.qdd[-1 - n : -1], after.qdd]),
+    )
