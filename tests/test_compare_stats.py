@@ -1,6 +1,7 @@
-"""The statistics of a comparison summary on synthetic rows (no PyBullet): bootstrap intervals of medians
-and success rates, failure counts per reason, and the paired comparison against a reference planner, in
-the summary files and the plots."""
+"""The statistics of a comparison summary on synthetic rows (no PyBullet): bootstrap intervals of medians,
+Wilson intervals of success rates, failure counts per reason, and the paired comparison against a
+reference planner, in the summary files and the plots (tests/test_compare_intervals.py: the same interval
+everywhere)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from twin.compare.report import (
     summary_table,
     write_summary,
 )
+from twin.compare.stats import wilson_ci
 from twin.errors import ConfigError
 
 
@@ -90,26 +92,29 @@ def test_the_median_interval_contains_the_sample_median_and_is_deterministic():
     assert bootstrap_ci(values, seed=7) != bootstrap_ci(values, seed=8)  # the seed is what fixes it
 
 
-def test_degenerate_intervals_for_one_value_and_none_for_no_value():
+def test_no_median_interval_below_two_values():
     assert bootstrap_ci([], seed=0) is None
-    assert bootstrap_ci([2.5], seed=0) == (2.5, 2.5)
+    assert bootstrap_ci([2.5], seed=0) is None  # nothing to resample: [2.5, 2.5] would claim certainty
     assert bootstrap_ci([3.0, 3.0, 3.0], seed=0) == (3.0, 3.0)
-    assert Stat.of([]).ci is None and Stat.of([4.0]).ci == (4.0, 4.0)
+    assert Stat.of([]).ci is None and Stat.of([4.0]).ci is None and Stat.of([4.0]).n == 1
     summary = summarize([row("a", 0, success=False, planning_time_s=0.2)])
     r = summary.overall[0]
     assert r.stats["duration_s"].n == 0 and r.stats["duration_s"].ci is None  # no trajectory: no interval
-    assert r.stats["planning_time_s"].ci == (0.2, 0.2)
-    assert r.success_ci == (0.0, 0.0)
+    assert r.stats["planning_time_s"].median == 0.2 and r.stats["planning_time_s"].ci is None
+    assert r.success_ci == pytest.approx((0.0, wilson_ci(0, 1)[1]))  # type: ignore[index]
+    assert r.success_ci[1] > 0.7  # type: ignore[index]  # one failure does not prove it always fails
 
 
-def test_the_success_interval_brackets_the_rate():
+def test_the_success_interval_is_wilsons_and_brackets_the_rate():
     rows = [row("a", i, success=i < 10) for i in range(12)]
     r = summarize(rows).overall[0]
     assert r.successes == 10 and r.success_ci is not None
     lo, hi = r.success_ci
-    assert 0.5 < lo < 10 / 12 < hi <= 1.0
-    assert summarize(rows).overall[0].success_ci == r.success_ci
-    assert summarize([row("a", i) for i in range(12)]).overall[0].success_ci == (1.0, 1.0)
+    assert 0.5 < lo < 10 / 12 < hi < 1.0
+    assert r.success_ci == wilson_ci(10, 12)
+    # 12/12 is not certainty: Wilson's lower bound is 1 - 3.84 / 15.84 = 75.8 %
+    lo, hi = summarize([row("a", i) for i in range(12)]).overall[0].success_ci  # type: ignore[misc]
+    assert hi == 1.0 and lo == pytest.approx(12 / (12 + 1.959964**2), abs=1e-6)
 
 
 def test_every_scenario_row_has_its_own_interval():

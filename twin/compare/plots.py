@@ -4,10 +4,11 @@ level (`sweep_<key>.png`). The only module of twin that imports matplotlib (Agg,
 works headless), and only when called.
 
 The plots show how sure the numbers are with the intervals of the summary (`report.summarize`, the
-same percentile bootstrap, seeds and numbers as summary.md): each box carries a marker at its median
-with the median's 95 % interval as an error bar beside it, each success bar the 95 % interval of its
-success rate, each sweep line the band of its 95 % interval (Wilson for a success rate, the bootstrap
-for a median time; `report.SweepPoint`).
+same methods, seeds and numbers as summary.md; `stats.INTERVALS`): each box carries a marker at its median
+with the median's 95 % percentile-bootstrap interval as an error bar beside it and its number of values
+under the planner's name, each success bar the 95 % Wilson interval of its success rate, each sweep line
+the band of its 95 % interval (Wilson for a success rate, the bootstrap for a median time;
+`report.SweepPoint`).
 """
 
 from __future__ import annotations
@@ -79,7 +80,8 @@ def comparison_figures(
         fig, ax = plt.subplots(figsize=(width, 4.5))
         if any(data):
             ax.boxplot([d or [float("nan")] for d in data], showfliers=True)
-            ax.set_xticks(range(1, len(order) + 1), order, rotation=20, ha="right")
+            ticks = [f"{p}\n(n={len(d)})" for p, d in zip(order, data, strict=True)]  # n beside each median
+            ax.set_xticks(range(1, len(order) + 1), ticks, rotation=20, ha="right")
             if log_scale and all(v > 0 for d in data for v in d):
                 ax.set_yscale("log")
             x, med, lo, hi = [], [], [], []
@@ -93,7 +95,15 @@ def comparison_figures(
                     hi.append(st.ci[1] - st.median)
             if x:
                 ax.errorbar(
-                    x, med, yerr=[lo, hi], fmt="D", ms=3.5, color="C3", capsize=3, lw=1.2, label="median, 95 % CI"
+                    x,
+                    med,
+                    yerr=[lo, hi],
+                    fmt="D",
+                    ms=3.5,
+                    color="C3",
+                    capsize=3,
+                    lw=1.2,
+                    label="median, 95 % bootstrap CI",
                 )
                 ax.legend(fontsize="small", loc="best", frameon=False)
         else:
@@ -130,7 +140,7 @@ def comparison_figures(
     ax.set_xticks(range(len(order)), order, rotation=20, ha="right")
     ax.set_ylim(0, 119)  # room above 100 % for the legend
     ax.set_yticks(range(0, 101, 20))
-    ax.set_ylabel("success rate (%), 95 % CI")
+    ax.set_ylabel("success rate (%), 95 % Wilson CI")
     ax.set_title("success rate per planner and scenario")
     if scenarios:
         ax.legend(fontsize="small", loc="upper center", ncol=min(len(scenarios), 4), frameon=False)
@@ -191,7 +201,7 @@ def sweep_figures(summary: Summary) -> dict[str, Figure]:
             top.set_ylabel("success rate (%), 95 % Wilson band")
             time_key = pts[0].time_key
             bottom.set_title(f"{scenario}: median {_TIME_LABELS.get(time_key, time_key).split(' (')[0]}")
-            bottom.set_ylabel(_TIME_LABELS.get(time_key, time_key) + ", 95 % CI")
+            bottom.set_ylabel(_TIME_LABELS.get(time_key, time_key) + ", 95 % bootstrap CI")
             bottom.set_xlabel(key)
             ticks = list(xs.values())
             bottom.set_xticks(ticks, list(xs) if not numeric else [f"{v:g}" for v in ticks])
@@ -217,10 +227,10 @@ def write_plots(
     planners: Sequence[str] | None = None,
     summary: Summary | None = None,
 ) -> list[Path]:
-    """Write DIR/planning_time.png, duration.png, clearance.png (box plots with the median's 95 % interval;
-    a planner with no value is shown empty), DIR/success.png (bars with the success rate's 95 % interval)
-    and, for a sweep, DIR/sweep_<key>.png per swept key (`sweep_figures`); returns the paths written. Pass
-    the `summary` of the same rows to reuse its intervals."""
+    """Write DIR/planning_time.png, duration.png, clearance.png (box plots with the median's 95 % bootstrap
+    interval and n; a planner with no value is shown empty), DIR/success.png (bars with the success rate's
+    95 % Wilson interval) and, for a sweep, DIR/sweep_<key>.png per swept key (`sweep_figures`); returns the
+    paths written. Pass the `summary` of the same rows to reuse its intervals."""
     from twin.compare.report import summarize
 
     plt = _pyplot()

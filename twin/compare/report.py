@@ -12,11 +12,13 @@ is fast at giving up, and that is worth seeing), task metrics from every task ru
 
 Whether a difference is real, three ways (the statistics themselves live in `twin.compare.stats`):
 
-- 95 % confidence intervals of every median and success rate: percentile bootstrap
-  (`scipy.stats.bootstrap`, method="percentile", BOOTSTRAP_RESAMPLES resamples, vectorised). The
-  generator is seeded from crc32(planner, scenario, key), so the same rows always give the same
-  intervals. One value gives [v, v], none gives no interval. A percentile bootstrap cannot see beyond
-  the sample: 12/12 successes give [100 %, 100 %].
+- 95 % confidence intervals, one method per kind of quantity, the same in every table, file and plot
+  (`stats.INTERVALS` says so at the top of summary.md and under the terminal tables): a success rate
+  k/n gets the Wilson score interval (`stats.wilson_ci`; 2/2 gives [34 %, 100 %], never [100 %, 100 %]);
+  a median gets a percentile bootstrap (`stats.bootstrap_ci`, BOOTSTRAP_RESAMPLES resamples, the
+  generator seeded from crc32(planner, scenario, key), so the same rows always give the same
+  intervals; fewer than two values give no interval). n, the runs a number comes from, is printed
+  beside every rate (k/n) and every median (n=...), and written to the CSVs (`<metric>_n`, `time_n`).
 - why runs failed: counts per reason of the fixed set `metrics.FAILURES` (`row["failure"]`).
 - a paired comparison against a reference planner (the first one unless told) on the same problems
   (same scenario, case and seed): wins, ties and losses, the median of the differences
@@ -26,10 +28,9 @@ Whether a difference is real, three ways (the statistics themselves live in `twi
 
 A scenario with a `sweep` (see `twin.compare.spec`) is also summarised along each swept key
 (`SweepPoint`, `sweep.csv`, a table per axis in summary.md): per planner and level the success rate with
-its 95 % Wilson score interval (`stats.wilson_ci`: a level has a few runs, where a bootstrap interval of a
-rate collapses to a point or to [0, 100 %]), for task runs the mean share of objects placed, and the median
-cycle time per placed object (task runs) or trajectory duration (queries) with its bootstrap interval. The
-nominal point's runs count on every axis.
+its 95 % Wilson score interval (as every success rate), for task runs the mean share of objects placed, and
+the median cycle time per placed object (task runs) or trajectory duration (queries) with n and its
+bootstrap interval. The nominal point's runs count on every axis.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from twin.compare.metrics import FAILURES, METRICS, TIMINGS, MetricDef, failure_
 from twin.compare.stats import (
     BOOTSTRAP_RESAMPLES,
     CONFIDENCE,
+    INTERVALS,
     MIN_DISCORDANT,
     bootstrap_ci,
     is_tie,
@@ -66,6 +68,7 @@ __all__ = [
     "ALL",
     "BOOTSTRAP_RESAMPLES",
     "CONFIDENCE",
+    "INTERVALS",
     "MIN_DISCORDANT",
     "PAIRED_KEYS",
     "SWEEP_TIME_KEYS",
@@ -86,7 +89,16 @@ __all__ = [
 ALL = "all"  # the scenario column of a planner's overall row
 _DEFS: tuple[MetricDef, ...] = METRICS + TIMINGS
 _BETTER = {d.key: d.better for d in _DEFS}
-_TABLE_KEYS = ("planning_time_s", "duration_s", "min_clearance_m", "max_jerk", "contacts", "goal_error_m")
+_TABLE_KEYS = (
+    "planning_time_s",
+    "duration_s",
+    "min_clearance_m",
+    "max_vel_ratio",
+    "max_acc_ratio",
+    "max_jerk",
+    "contacts",
+    "goal_error_m",
+)
 
 PAIRED_KEYS = ("planning_time_s", "duration_s")  # metrics compared pair by pair with the reference
 SUCCESS = "success"  # the metric name of the paired success comparison
@@ -96,7 +108,7 @@ SWEEP_TIME_KEYS = {"task": "cycle_time_s", "query": "duration_s"}  # the time a 
 @dataclass(frozen=True)
 class Stat:
     """Median and 95th percentile (linear interpolation) of n values, and the 95 % percentile-bootstrap
-    interval of the median [ci_low, ci_high] (None without values; [v, v] for one value)."""
+    interval of the median [ci_low, ci_high] (None below two values: `stats.bootstrap_ci`)."""
 
     n: int
     median: float | None
@@ -135,7 +147,7 @@ class SummaryRow:
     common_pair_runs: int = 0  # ... in how many of them
     straight_free: int = 0  # query runs whose straight joint motion was collision-free
     straight_known: int = 0  # query runs that recorded it
-    success_ci: tuple[float, float] | None = None  # 95 % bootstrap interval of success_rate (0..1)
+    success_ci: tuple[float, float] | None = None  # 95 % Wilson interval of success_rate (0..1)
     failures: dict[str, int] = field(default_factory=dict)  # reason -> runs, in FAILURES order, nonzero only
 
     @property
@@ -263,12 +275,12 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
     counts = Counter(p for _, p in with_pair)
     common, n_common = counts.most_common(1)[0] if counts else (None, 0)
     known = [r["straight_free"] for r in rows if r.get("straight_free") is not None]
-    ok = [1.0 if r.get("success") else 0.0 for r in rows]
+    ok = sum(1 for r in rows if r.get("success"))
     return SummaryRow(
         planner=planner,
         scenario=scenario,
         runs=len(rows),
-        successes=int(sum(ok)),
+        successes=ok,
         errors=sum(1 for r in rows if r.get("status") == "error"),
         stats=stats,
         min_clearance_m=closest[0],
@@ -277,7 +289,7 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
         common_pair_runs=n_common,
         straight_free=sum(1 for v in known if v),
         straight_known=len(known),
-        success_ci=bootstrap_ci(ok, seed=stable_seed(planner, scenario, SUCCESS), statistic="mean"),
+        success_ci=wilson_ci(ok, len(rows)),
         failures=_failure_counts(rows),
     )
 
@@ -438,30 +450,24 @@ def _p(p: float | None) -> str:
     return "-" if p is None else "<0.001" if p < 1e-3 else f"{p:.3f}"
 
 
-def _rate(r: SummaryRow) -> str:
-    """'83% (10/12) [67, 100]': the success rate, the runs and its 95 % interval in percent."""
+def _rate(r: SummaryRow | SweepPoint) -> str:
+    """'83% (10/12) [55, 95]': a success rate, successes/runs and its 95 % Wilson interval in percent; the
+    one format of a rate in every table (overall, per scenario, per sweep level)."""
     if r.success_rate is None:
         return "-"
     ci = "" if r.success_ci is None else f" [{100 * r.success_ci[0]:.0f}, {100 * r.success_ci[1]:.0f}]"
     return f"{100 * r.success_rate:.0f}% ({r.successes}/{r.runs}){ci}"
 
 
-def _sweep_rate(p: SweepPoint) -> str:
-    """'67% (2/3) [21, 94]': a sweep point's success rate, runs and 95 % Wilson interval in percent."""
-    if p.success_rate is None:
-        return "-"
-    ci = "" if p.success_ci is None else f" [{100 * p.success_ci[0]:.0f}, {100 * p.success_ci[1]:.0f}]"
-    return f"{100 * p.success_rate:.0f}% ({p.successes}/{p.runs}){ci}"
-
-
 def _sweep_time(p: SweepPoint) -> str:
-    return f"{_fmt(p.time.median, 's')} s" if p.time.n else "-"
+    return _median_ci(p.time, "s", symbol=" s") if p.time.n else "-"
 
 
-def _median_ci(st: Stat, unit: str) -> str:
-    """'median [lo, hi]' of a Stat with values."""
+def _median_ci(st: Stat, unit: str, *, symbol: str = "") -> str:
+    """'0.84 s (n=12) [0.71, 0.95]': the median of a Stat with values, `symbol` after it (a unit where no
+    column names it), the number of values and its 95 % bootstrap interval (none below two values)."""
     ci = "" if st.ci is None else f" [{_fmt(st.ci_low, unit)}, {_fmt(st.ci_high, unit)}]"
-    return _fmt(st.median, unit) + ci
+    return f"{_fmt(st.median, unit)}{symbol} (n={st.n}){ci}"
 
 
 def _csv_float(v: float | None) -> str:
@@ -495,6 +501,7 @@ _SWEEP_COLUMNS = (
     "errors",
     "placed_mean",
     "time_metric",
+    "time_n",
     "time_median",
     "time_ci_low",
     "time_ci_high",
@@ -520,6 +527,7 @@ def _write_sweep_csv(summary: Summary, path: Path) -> None:
                     p.errors,
                     _csv_float(p.placed),
                     p.time_key,
+                    p.time.n,
                     _csv_float(p.time.median),
                     _csv_float(p.time.ci_low),
                     _csv_float(p.time.ci_high),
@@ -529,9 +537,10 @@ def _write_sweep_csv(summary: Summary, path: Path) -> None:
 
 def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
     """Write DIR/summary.csv (every metric, median and p95, per planner overall and per scenario, then the
-    95 % intervals and failure counts), DIR/summary.md and DIR/paired.csv (the paired comparison, one row
-    per planner, scenario and metric), and, when a scenario has a sweep, DIR/sweep.csv (one row per
-    scenario, swept key, level and planner: `SweepPoint`); returns the paths."""
+    95 % intervals (`stats.INTERVALS`), the number of values of each metric and failure counts),
+    DIR/summary.md and DIR/paired.csv (the paired comparison, one row per planner, scenario and metric),
+    and, when a scenario has a sweep, DIR/sweep.csv (one row per scenario, swept key, level and planner:
+    `SweepPoint`); returns the paths."""
     out = Path(out_dir)
     csv_path, md_path, paired_path = out / "summary.csv", out / "summary.md", out / "paired.csv"
     keys = [d.key for d in _DEFS]
@@ -544,6 +553,7 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
                 + [f"{k}_{s}" for k in keys for s in ("median", "p95")]
                 + ["success_ci_low", "success_ci_high"]
                 + [f"{k}_median_ci_{s}" for k in keys for s in ("low", "high")]
+                + [f"{k}_n" for k in keys]
                 + ["failures"]
                 + ["closest_pair", "common_closest_pair", "straight_free_rate"]
             )
@@ -564,6 +574,7 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
                         *stats,
                         *sci,
                         *cis,
+                        *[r.stats[k].n for k in keys],
                         ";".join(f"{k}={n}" for k, n in r.failures.items()),
                         r.closest_pair or "",
                         r.common_pair or "",
@@ -600,7 +611,7 @@ def _markdown(summary: Summary) -> str:
     defs = {d.key: d for d in _DEFS}
     keys = summary.metric_keys()
     planners = [r.planner for r in summary.overall]
-    lines = ["# Planner comparison", "", "## Success", ""]
+    lines = ["# Planner comparison", "", INTERVALS, "", "## Success", ""]
     lines += ["| planner | runs | success (runs) [95% CI] | errors |", "|---|---:|---:|---:|"]
     lines += [f"| {r.planner} | {r.runs} | {_rate(r)} | {r.errors} |" for r in summary.overall]
     reasons = [k for k in FAILURES if any(k in r.failures for r in summary.overall)]
@@ -611,14 +622,14 @@ def _markdown(summary: Summary) -> str:
         for r in summary.overall:
             lines.append(f"| {r.planner} | " + " | ".join(str(r.failures.get(k, 0)) for k in reasons) + " |")
         lines += [""] + [f"- `{k}`: {FAILURES.get(k, 'a reason outside the fixed set')}" for k in reasons]
-    lines += ["", "## Metrics: median [95% CI] / p95 (n = runs with a value)", ""]
+    lines += ["", "## Metrics: median (n = runs with a value) [95% CI] / p95", ""]
     lines += ["| metric | unit | " + " | ".join(planners) + " |", "|---|---|" + "---:|" * len(planners)]
     for k in keys:
         d = defs[k]
         cells = []
         for r in summary.overall:
             st = r.stats[k]
-            cells.append("-" if not st.n else f"{_median_ci(st, d.unit)} / {_fmt(st.p95, d.unit)} (n={st.n})")
+            cells.append("-" if not st.n else f"{_median_ci(st, d.unit)} / {_fmt(st.p95, d.unit)}")
         lines.append(f"| {k} | {d.unit} | " + " | ".join(cells) + " |")
     if any(r.closest_pair for r in summary.overall):
         lines += ["", "## Closest approach to the cell", ""]
@@ -658,8 +669,9 @@ def _sweep_markdown(summary: Summary) -> list[str]:
     lines = ["", "## Sweeps: success by level", ""]
     lines += [
         "One swept key at a time, the other swept keys at their first (nominal) value; the nominal runs count "
-        "on every axis. Cells: success rate (runs) [95% Wilson CI]; for task runs the mean share of objects "
-        "placed; the median cycle time per placed object (task runs) or trajectory duration (queries).",
+        "on every axis. Cells: success rate (successes/runs) [95% CI]; for task runs the mean share of objects "
+        "placed; the median cycle time per placed object (task runs) or trajectory duration (queries) "
+        "(n = runs with a value) [95% CI].",
     ]
     for scenario, key in summary.sweep_axes():
         pts = [p for p in summary.sweeps if p.scenario == scenario and p.key == key]
@@ -677,7 +689,7 @@ def _sweep_markdown(summary: Summary) -> list[str]:
                     cells.append("-")
                     continue
                 placed = "" if p.placed is None else f"; placed {100 * p.placed:.0f}%"
-                cells.append(f"{_sweep_rate(p)}{placed}; {_sweep_time(p)}")
+                cells.append(f"{_rate(p)}{placed}; {_sweep_time(p)}")
             lines.append(f"| {planner} | " + " | ".join(cells) + " |")
     return lines
 
@@ -714,26 +726,28 @@ def _straight_by_scenario(summary: Summary, scenarios: list[str]) -> dict[str, t
 
 
 def summary_table(summary: Summary, *, title: str = "planner comparison") -> Table:
-    """A rich table: per planner the success rate with its 95 % interval and the median (p95) of the
-    headline metrics."""
+    """A rich table: per planner the success rate with its 95 % Wilson interval and the median (p95) of the
+    headline metrics with their number of values; the caption says which interval is which (`INTERVALS`)."""
     from rich.markup import escape
     from rich.table import Table
 
     defs = {d.key: d for d in _DEFS}
     keys = [k for k in _TABLE_KEYS if k in summary.metric_keys()]
     keys += [k for k in ("task_success_rate", "cycle_time_s") if k in summary.metric_keys()]
-    table = Table(title=title)
+    table = Table(title=title, caption=INTERVALS)
     table.add_column("planner")
     table.add_column(escape("success\n(runs) [95% CI]"), justify="right")
     for k in keys:
         unit = defs[k].unit
-        table.add_column(escape(f"{k}\nmedian (p95)" + (f" [{unit}]" if unit else "")), justify="right")
+        table.add_column(escape(f"{k}\nmedian (p95)" + (f" [{unit}]" if unit else "") + "\nn"), justify="right")
     pairs = any(r.common_pair for r in summary.overall)
     if pairs:
         table.add_column("closest pair\n(most often)")
     for r in summary.overall:
         cells = [
-            f"{_fmt(r.stats[k].median, defs[k].unit)} ({_fmt(r.stats[k].p95, defs[k].unit)})" if r.stats[k].n else "-"
+            f"{_fmt(r.stats[k].median, defs[k].unit)} ({_fmt(r.stats[k].p95, defs[k].unit)})\nn={r.stats[k].n}"
+            if r.stats[k].n
+            else "-"
             for k in keys
         ]
         if pairs:
@@ -744,7 +758,8 @@ def summary_table(summary: Summary, *, title: str = "planner comparison") -> Tab
 
 def sweep_tables(summary: Summary) -> list[Table]:
     """Rich tables of the sweep points, one per swept key of a scenario: a row per planner, a column per
-    level, each cell the success rate (runs) with its 95 % Wilson interval over the median time."""
+    level, each cell the success rate (runs) with its 95 % Wilson interval over the median time with n and
+    its bootstrap interval (the caption: `INTERVALS`)."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -754,7 +769,10 @@ def sweep_tables(summary: Summary) -> list[Table]:
         levels = list(dict.fromkeys(p.value_text for p in pts))
         cell = {(p.planner, p.value_text): p for p in pts}
         time_key = pts[0].time_key
-        table = Table(title=escape(f"{scenario}: success (runs) [95% Wilson CI] / median {time_key}, by {key}"))
+        table = Table(
+            title=escape(f"{scenario}: success (runs) [95% CI] / median {time_key} (n) [95% CI], by {key}"),
+            caption=INTERVALS,
+        )
         table.add_column("planner")
         for lv in levels:
             table.add_column(escape(f"{lv}\n(nominal)" if lv == levels[0] else lv), justify="right")
@@ -762,7 +780,7 @@ def sweep_tables(summary: Summary) -> list[Table]:
             cells = []
             for lv in levels:
                 p = cell.get((planner, lv))
-                cells.append("-" if p is None else escape(f"{_sweep_rate(p)}\n{_sweep_time(p)}"))
+                cells.append("-" if p is None else escape(f"{_rate(p)}\n{_sweep_time(p)}"))
             table.add_row(planner, *cells)
         tables.append(table)
     return tables

@@ -1,14 +1,22 @@
-"""The statistics of a comparison, apart from what they are applied to: bootstrap confidence intervals
-and paired tests (Wilcoxon signed-rank on paired values, an exact sign test on paired outcomes), and the
-Wilson score interval of a success rate from few runs.
+"""The statistics of a comparison, apart from what they are applied to: one interval method per kind of
+quantity, and paired tests (Wilcoxon signed-rank on paired values, an exact sign test on paired outcomes).
 
-Why these: planning times and durations are skewed and far from normal, so intervals come from a
-percentile bootstrap of the median (`scipy.stats.bootstrap`, vectorised, seeded: the same values give
-the same interval), and paired differences are tested by rank (Wilcoxon), not by a t-test; success
-pairs by an exact binomial test on the pairs where only one side succeeded (McNemar's exact form).
-A sweep has a handful of runs per level (3 seeds): there a percentile bootstrap of a success rate is
-[0 %, 0 %], [100 %, 100 %] or [0 %, 100 %] and says nothing, so sweep levels use the Wilson score interval
-(`wilson_ci`: 3/3 gives [44 %, 100 %]).
+Why these:
+- a success rate (k successes of n runs) gets the Wilson score interval (`wilson_ci`), wherever it is
+  shown: summary tables, summary.csv, sweep tables, plots. A comparison has few runs per planner and
+  scenario (2 to 30), and the bootstrap of a proportion cannot see beyond its sample: 2/2 gives
+  [100 %, 100 %], 2/4 gives [0 %, 100 %]. Wilson's interval stays inside [0, 1], does not collapse at 0/n
+  or n/n (2/2 gives [34 %, 100 %], 3/3 [44 %, 100 %]) and keeps close to its nominal 95 % coverage for
+  small n (Brown, Cai & DasGupta 2001), where Clopper-Pearson is conservative (wider than it needs be).
+- a median (planning time, duration, any continuous metric) gets a percentile bootstrap interval
+  (`bootstrap_ci`, `scipy.stats.bootstrap`, vectorised, seeded: the same values give the same interval),
+  because those values are skewed and far from normal. It needs two values: one value has no spread to
+  resample, so it gets no interval. With few values it is narrow for what it knows, so n is printed
+  beside every median.
+- paired differences are tested by rank (Wilcoxon), not by a t-test; paired successes by an exact
+  binomial test on the pairs where only one side succeeded (McNemar's exact form).
+
+`INTERVALS` is the sentence every report prints to say so.
 """
 
 from __future__ import annotations
@@ -19,13 +27,14 @@ import math
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, overload
+from typing import Any, overload
 
 import numpy as np
 
 __all__ = [
     "BOOTSTRAP_RESAMPLES",
     "CONFIDENCE",
+    "INTERVALS",
     "MIN_DISCORDANT",
     "PairedTest",
     "bootstrap_ci",
@@ -40,6 +49,11 @@ CONFIDENCE = 0.95  # of every interval
 BOOTSTRAP_RESAMPLES = 2000
 MIN_DISCORDANT = 6  # fewer non-tied pairs give no p: with 5, the smallest exact two-sided p is 2/2^5 > 0.05
 TIE_ABS, TIE_REL = 1e-9, 1e-6  # see is_tie
+INTERVALS = (
+    f"Intervals: success rates: {100 * CONFIDENCE:.0f} % Wilson score intervals; medians: "
+    f"{100 * CONFIDENCE:.0f} % percentile bootstrap ({BOOTSTRAP_RESAMPLES} resamples), over the n runs shown "
+    "beside each (one run: no interval)."
+)
 
 
 @overload
@@ -63,9 +77,10 @@ def stable_seed(*parts: str) -> int:
 
 
 def wilson_ci(successes: int, n: int, *, confidence: float = CONFIDENCE) -> tuple[float, float] | None:
-    """The Wilson score interval of a success rate `successes / n` (None for n = 0): unlike the bootstrap
-    or the normal approximation it stays inside [0, 1] and does not shrink to a point at 0/n or n/n, so it
-    is honest for the few runs of one sweep level (Wilson 1927; Brown, Cai & DasGupta 2001)."""
+    """The Wilson score interval of a success rate `successes / n` (None for n = 0), the one interval of a
+    proportion in every report: unlike the bootstrap or the normal approximation it stays inside [0, 1] and
+    does not shrink to a point at 0/n or n/n, so it is honest for few runs (Wilson 1927; Brown, Cai &
+    DasGupta 2001)."""
     if n <= 0:
         return None
     if not 0 <= successes <= n:
@@ -94,23 +109,23 @@ def bootstrap_ci(
     values: Sequence[float] | np.ndarray,
     *,
     seed: int,
-    statistic: Literal["median", "mean"] = "median",
     resamples: int = BOOTSTRAP_RESAMPLES,
     confidence: float = CONFIDENCE,
 ) -> tuple[float, float] | None:
-    """The percentile-bootstrap interval of the median (or mean) of `values`: None for no value, [v, v]
-    for one; otherwise `resamples` resamples drawn by numpy's Generator seeded with `seed`, all at once
-    (scipy.stats.bootstrap, vectorised), so the same values and seed give the same interval."""
+    """The percentile-bootstrap interval of the median of continuous `values` (a proportion's interval is
+    `wilson_ci`): None for fewer than two values (one value has nothing to resample, and [v, v] would claim
+    a certainty it does not have), [v, v] when all are equal; otherwise `resamples` resamples drawn by
+    numpy's Generator seeded with `seed`, all at once (scipy.stats.bootstrap, vectorised), so the same
+    values and seed give the same interval."""
     a = np.asarray(values, dtype=float)
-    if a.size == 0:
+    if a.size < 2:
         return None
-    if a.size == 1 or bool(np.all(a == a[0])):
+    if bool(np.all(a == a[0])):
         return float(a[0]), float(a[0])
     bootstrap, rng_kw = _bootstrap()
-    stat = np.median if statistic == "median" else np.mean
     res = bootstrap(
         (a,),
-        stat,
+        np.median,
         n_resamples=resamples,
         vectorized=True,
         method="percentile",
