@@ -120,7 +120,7 @@ def test_a_warehouse_cube_lost_on_the_way_is_seen_again_where_it_fell_and_placed
             w.set_object_pose(held, [-0.62, -0.05, 0.026], [0, 0, 0, 1])  # on the table, away from the others
 
     with World(s, seed=3, renderer=RENDERER) as world:
-        world.observe(snatch, every_s=0.05)
+        world.disturb(snatch, every_s=0.05)
         outcomes = {o.id: o for o in run_warehouse(Cell(s, world))}
     assert len(snatched) == 1
     assert outcomes[snatched[0]].placed, outcomes[snatched[0]].error

@@ -159,7 +159,7 @@ def test_an_object_lost_on_the_way_up_fails_the_ascent_by_the_finger_position():
             w.set_object_pose(held, [-0.80, -0.65, 0.06], [0, 0, 0, 1])  # out of the camera's view
 
     with World(s, seed=1) as world:
-        world.observe(snatch, every_s=0.05)
+        world.disturb(snatch, every_s=0.05)
         outcomes = {o.id: o for o in run_robocup(Cell(s, world))}
     assert len(snatched) == 1
     lost = outcomes[snatched[0]]

@@ -11,7 +11,7 @@ from twin.camera import OVERVIEW_EYE, OVERVIEW_TARGET, Intrinsics, look_at
 from twin.errors import ConfigError
 
 if TYPE_CHECKING:
-    from twin.world import World
+    from twin.world import World, WorldView
 
 __all__ = ["Recorder"]
 
@@ -19,7 +19,10 @@ _SUFFIXES = (".mp4", ".gif")
 
 
 class Recorder:
-    """Attach to a world with `Recorder(path).attach(world)`; `save()` writes the file."""
+    """Attach to a world with `Recorder(path).attach(world)`; `save()` writes the file.
+
+    It sees the world only through the read-only `WorldView` an observer gets, so a recorded run is the
+    run without the recorder (tests/test_record_parity.py)."""
 
     def __init__(self, path: str | Path, *, fps: float = 10.0, width: int = 480, height: int = 360):
         self.path = Path(path)
@@ -33,10 +36,10 @@ class Recorder:
 
     def attach(self, world: World) -> Recorder:
         world.observe(self._grab, every_s=1.0 / self.fps)
-        self._grab(world)
+        self._grab(world.view())
         return self
 
-    def _grab(self, world: World) -> None:
+    def _grab(self, world: WorldView) -> None:
         self.frames.append(world.render(self.T, self.intr, near_m=0.05, far_m=6.0).rgb)
 
     def save(self) -> Path:

@@ -61,6 +61,7 @@ __all__ = [
     "ContactPoint",
     "ObjectState",
     "World",
+    "WorldView",
     "marker_pose_in_base",
 ]
 
@@ -130,6 +131,12 @@ def _flush_c_stdout() -> None:
 # Implicit cylinders: PyBullet otherwise meshes every cylinder into a polygon, and its geometry then
 # differs from the FCL planning scene's exact cylinders by up to 2 mm.
 _URDF_FLAGS = pb.URDF_USE_INERTIA_FROM_FILE | pb.URDF_USE_IMPLICIT_CYLINDER
+# PyBullet's EGL renderer draws no shadows in the first two frames a physics client renders (measured: one
+# camera rendered 6 times gives frames 1-2 without shadows, 3-6 identical with them; other cameras or sizes
+# count the same; `reset()` keeps the count). A frame's colours then depended on how many frames anyone had
+# rendered before it: a recorder's frames made a run's first capture a shadowed one. `World.render` renders
+# these frames first, unseen, so every frame it returns depends on the scene and the camera alone.
+_EGL_WARM_UP_FRAMES = 2
 # `world.sleep_at_rest`: a body sleeps once |v|^2 + |w|^2 (m/s, rad/s) has stayed below this for Bullet's 2 s
 _SLEEP_MOTION = 1e-5
 
@@ -207,8 +214,10 @@ class World:
         self._gui = settings.world.gui if gui is None else bool(gui)
         self._cid = -1
         self._egl = False
+        self._egl_warm = False  # the renderer has rendered its warm-up frames (see _EGL_WARM_UP_FRAMES)
         self._steps = 0
-        self._observers: list[tuple[int, Callable[[World], None]]] = []
+        # called while stepping: (every n steps, fn, whether fn gets the world itself or a read-only view)
+        self._observers: list[tuple[int, Callable[[Any], None], bool]] = []
         self.dt = 1.0 / settings.world.physics_hz
         try:
             self._cid = pb.connect(pb.GUI if self._gui else pb.DIRECT)
@@ -497,9 +506,9 @@ class World:
                 pb.stepSimulation(physicsClientId=c)
                 self._steps += 1
                 if self._observers:
-                    for every, fn in self._observers:
+                    for every, fn, full_access in self._observers:
                         if self._steps % every == 0:
-                            fn(self)
+                            fn(self if full_access else self.view())
 
     def _track(self) -> None:
         """One physics step of the faulty controller (`robot.tracking_*`): the target it sends follows the
@@ -511,9 +520,24 @@ class World:
         target = t.lagged + (t.rng.normal(0.0, t.noise_rad, 6) if t.noise_rad > 0 else 0.0)
         self._send_joint_targets(target, (t.lagged - previous) / self.dt)
 
-    def observe(self, fn: Callable[[World], None], *, every_s: float) -> None:
-        """Call `fn(world)` every `every_s` simulated seconds while stepping (recorders, GUI pacing)."""
-        self._observers.append((max(1, int(round(every_s / self.dt))), fn))
+    def observe(self, fn: Callable[[WorldView], None], *, every_s: float) -> None:
+        """Call `fn(view)` every `every_s` simulated seconds while stepping (recorders, viewers, GUI pacing).
+
+        `view` is the world's `WorldView`: it reads state and renders, and can change neither the
+        simulation nor what the sensors see, so a run with observers gives the run without them."""
+        self._observers.append((self._every(every_s), fn, False))
+
+    def view(self) -> WorldView:
+        """A read-only view of this world: what observers get."""
+        return WorldView(self)
+
+    def disturb(self, fn: Callable[[World], None], *, every_s: float) -> None:
+        """Call `fn(world)` every `every_s` simulated seconds while stepping, with full access: test setups
+        and fault injection that are meant to change the run (e.g. snatching a held object)."""
+        self._observers.append((self._every(every_s), fn, True))
+
+    def _every(self, every_s: float) -> int:
+        return max(1, int(round(every_s / self.dt)))
 
     def reset(self) -> None:
         """Back to the state after construction: robot at home, objects at their sampled poses.
@@ -764,6 +788,8 @@ class World:
         from twin.camera import RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix
 
         c = self._check()
+        if self._egl and not self._egl_warm:
+            self._warm_up_renderer()
         with stage("rendering"), _quiet_stdout(self._egl):
             _, _, rgba, zbuf, _ = pb.getCameraImage(
                 intrinsics.width,
@@ -777,6 +803,25 @@ class World:
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(intrinsics.height, intrinsics.width, 4)[:, :, :3].copy()
         zb = np.asarray(zbuf, dtype=np.float64).reshape(intrinsics.height, intrinsics.width)
         return RGBDFrame(rgb, depth_from_zbuffer(zb, near_m, far_m), intrinsics)
+
+    def _warm_up_renderer(self) -> None:
+        """Render the EGL renderer's shadowless first frames (`_EGL_WARM_UP_FRAMES`), 1x1, unseen."""
+        from twin.camera import Intrinsics, gl_projection_matrix, gl_view_matrix, look_at
+
+        view = gl_view_matrix(look_at((1.0, 0.0, 1.0), (0.0, 0.0, 0.0)))
+        projection = gl_projection_matrix(Intrinsics(1, 1, 1.0, 1.0), 0.05, 5.0)
+        with stage("rendering"), _quiet_stdout():
+            for _ in range(_EGL_WARM_UP_FRAMES):
+                pb.getCameraImage(
+                    1,
+                    1,
+                    viewMatrix=view,
+                    projectionMatrix=projection,
+                    renderer=pb.ER_BULLET_HARDWARE_OPENGL,
+                    flags=pb.ER_NO_SEGMENTATION_MASK,
+                    physicsClientId=self._cid,
+                )
+        self._egl_warm = True
 
     def link_matrix(self, link_name: str) -> np.ndarray:
         """(4, 4) pose of a robot link frame in the base frame."""
@@ -870,3 +915,70 @@ class World:
         if link_b is not None:
             kw["linkIndexB"] = link_b
         return self._points(pb.getClosestPoints(body_a, body_b, max_distance_m, physicsClientId=c, **kw))
+
+
+class WorldView:
+    """A read-only view of a `World`: what an observer (`World.observe`: a recorder, a viewer) gets.
+
+    It reads state and renders; it cannot step, command the robot, move bodies or capture (a capture
+    draws sensor noise from the world's stream). Its renders go through `World.render`, whose frames
+    depend on the scene and the camera alone, so rendering here changes no later sensor frame.
+    """
+
+    __slots__ = ("_world",)
+
+    def __init__(self, world: World) -> None:
+        self._world = world
+
+    @property
+    def seed(self) -> int:
+        return self._world.seed
+
+    @property
+    def dt(self) -> float:
+        return self._world.dt
+
+    @property
+    def sim_time(self) -> float:
+        """Seconds simulated since the world was built or last reset."""
+        return self._world.sim_time
+
+    @property
+    def renderer(self) -> str:
+        return self._world.renderer
+
+    def joint_positions(self) -> np.ndarray:
+        """(6,) arm joint angles, rad."""
+        return self._world.joint_positions()
+
+    def gripper_opening(self) -> float:
+        """The distance between the finger pads, m."""
+        return self._world.gripper_opening()
+
+    def body_ids(self) -> dict[str, int]:
+        """Every body by name: 'robot', fixture names, object names, 'aruco_marker'."""
+        return self._world.body_ids()
+
+    def object_ids(self) -> list[int]:
+        """Body ids of the scene objects, in config order."""
+        return self._world.object_ids()
+
+    def objects(self) -> list[ObjectState]:
+        """Ground truth of every object, in config order."""
+        return self._world.objects()
+
+    def object_pose(self, body_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,), quaternion xyzw (4,)) of an object."""
+        return self._world.object_pose(body_id)
+
+    def link_pose(self, link_name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,), quaternion xyzw (4,)) of a robot link frame."""
+        return self._world.link_pose(link_name)
+
+    def link_matrix(self, link_name: str) -> np.ndarray:
+        """(4, 4) pose of a robot link frame in the base frame."""
+        return self._world.link_matrix(link_name)
+
+    def render(self, T_world_camera: np.ndarray, intrinsics: Intrinsics, *, near_m: float, far_m: float) -> RGBDFrame:
+        """An RGB-D frame from an OpenCV-convention camera pose (4, 4): `World.render`."""
+        return self._world.render(T_world_camera, intrinsics, near_m=near_m, far_m=far_m)
