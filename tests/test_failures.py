@@ -104,3 +104,17 @@ def test_a_task_row_takes_the_failure_its_failed_stage_named(monkeypatch) -> Non
     assert row["metrics"]["max_acc_ratio"] == 1.0 and row["metrics"]["max_vel_ratio"] == 0.5
     summary = RunSummary("warehouse", 0, "nmpc", outcomes[::2], 30.0, 10.0, metrics=metrics)
     assert worker.execute_run(task)["failure"] == "grasp_lost"  # no name given: from the text
+
+
+def test_a_long_reason_on_screen_is_cut_at_a_word_and_says_so() -> None:
+    from twin.cli import progress_line
+
+    reason = "descent: toppra.movel: collision: the trajectory collides (right_finger with obstacle, " + (
+        "densified sample 16, checked every 0.01 rad / 0.01 m)"
+    )
+    row = {"run_id": "ompl.rrt|warehouse-task|seed=0|ab", "status": "incomplete", "success": False, "reason": reason}
+    short = progress_line(row, 3, 26, width=100)
+    assert short.endswith(" ...)") and len(short) < len(reason) + 60
+    kept = short.split(" (", 1)[1][: -len(" ...)")]
+    assert reason.startswith(kept) and reason[len(kept)] == " "  # cut between words, never inside "0.01"
+    assert progress_line(row, 3, 26).endswith("0.01 m))")  # a reason that fits is shown whole

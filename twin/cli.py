@@ -13,6 +13,7 @@ import math
 import os
 import re
 import sys
+import textwrap
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -432,6 +433,15 @@ def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:
         print(f"{verb} {n} runs: {reason}")
 
 
+def progress_line(row: dict[str, Any], done: int, total: int, *, width: int = 160) -> str:
+    """'[3/26] run_id: status (reason)' for a finished run: a long reason is cut at a word, never in the
+    middle of a value, and ends in ' ...' when cut (the row in results.jsonl keeps all of it)."""
+    line = f"[{done}/{total}] {row['run_id']}: {row['status']}"
+    if not row.get("success") and row.get("reason"):
+        line += f" ({textwrap.shorten(str(row['reason']), width, placeholder=' ...')})"
+    return line
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     from rich.console import Console
 
@@ -462,10 +472,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         return EXIT_OK
 
     def progress(row: dict[str, Any], done: int, total: int) -> None:
-        line = f"[{done}/{total}] {row['run_id']}: {row['status']}"
-        if not row.get("success") and row.get("reason"):
-            line += f" ({row['reason'][:100]})"
-        print(line, flush=True)
+        print(progress_line(row, done, total), flush=True)
 
     result = run_comparison(
         args.config,

@@ -489,6 +489,7 @@ class CheckedPlanner:
         # the step's time is the wall time of everything the planner did for it, whatever it reports itself
         out = replace(out, solve_time_s=elapsed, info=dict(out.info, reported_solve_time_s=out.solve_time_s))
         kind = "fallback segment" if out.fallback else "segment"
+        t0 = time.perf_counter()  # the judge's time: limits and FCL
         # the limits, with the motion that led into the segment (velocity and acceleration carry over)
         excess = limit_excess(
             stitched(self._last, traj), self._request.limits, from_rest=self._last is None, to_rest=False
@@ -496,6 +497,7 @@ class CheckedPlanner:
         self._ratios = _worst(self._ratios, excess)
         over = _over_limits(excess, jerk=jerk_limited(self.inner))
         if over is not None:
+            self._check_time_s += time.perf_counter() - t0
             self._segments += 1
             log.warning("%s: %s %d exceeds the joint limits; not executed", self.name, kind, self._segments)
             return MotionResult(
@@ -504,7 +506,6 @@ class CheckedPlanner:
                 info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
             )
         col = self.context.settings.collision
-        t0 = time.perf_counter()
         hit = first_collision(
             traj,
             self._scene,
