@@ -174,8 +174,8 @@ def test_equals_form_and_abbreviations_still_work(tmp_path):
         "--planner",
         "ruckig.movej",
         f"--start={NEG_START}",
-        "--goal-p",
-        "-0.45,0.2,0.3,3.14159,0,0",
+        "--goal-posi",  # --goal-position (--goal-p is ambiguous: --goal-pose too)
+        "-0.45,0.2,0.3",
         "--json",
         str(out),
     )

@@ -25,6 +25,7 @@ from twin.errors import TwinError
 __all__ = ["build_parser", "main"]
 
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_USAGE = 0, 1, 2
+EXIT_NOT_PLACED = EXIT_NO_SOLUTION  # `twin run`: an object did not end in its bin
 
 
 # a comma-separated list of numbers as a user types it, e.g. "-0.5,-1.5708,1.5708" (inf/nan included, so
@@ -103,6 +104,10 @@ def _pose_vector(text: str) -> list[float]:
     return _floats(text, 6, "pose x,y,z,roll,pitch,yaw (m, rad)")
 
 
+def _position_vector(text: str) -> list[float]:
+    return _floats(text, 3, "position x,y,z (m)")
+
+
 def _seed(text: str) -> int:
     try:
         value = int(text)
@@ -118,6 +123,7 @@ def _seed(text: str) -> int:
 # argument types whose values are comma-separated numbers: their options accept a leading minus sign
 _joint_vector.is_vector = True  # type: ignore[attr-defined]
 _pose_vector.is_vector = True  # type: ignore[attr-defined]
+_position_vector.is_vector = True  # type: ignore[attr-defined]
 
 
 def _add_config_args(p: argparse.ArgumentParser) -> None:
@@ -152,21 +158,46 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("plan", help="plan one motion query with a named planner")
     _add_config_args(p)
-    p.add_argument("--planner", required=True, help="registered planner name, e.g. ruckig.movej (see `twin planners`)")
+    p.add_argument(
+        "--planner",
+        required=True,
+        help="registered planner name, e.g. ruckig.movej (see `twin planners`); its parameters: "
+        "--set planners.transfer.params.KEY=VALUE",
+    )
     p.add_argument("--start", required=True, type=_joint_vector, help="six comma-separated joint angles, rad")
     goal = p.add_mutually_exclusive_group(required=True)
     goal.add_argument("--goal", type=_joint_vector, help="six comma-separated joint angles, rad")
     goal.add_argument(
         "--goal-pose", type=_pose_vector, help="tcp pose in the base frame: x,y,z,roll,pitch,yaw (m, rad)"
     )
+    goal.add_argument(
+        "--goal-position",
+        type=_position_vector,
+        help="tcp position in the base frame, orientation free (a task's transfer goal): x,y,z (m)",
+    )
+    p.add_argument(
+        "--position-tolerance",
+        type=float,
+        default=None,
+        metavar="M",
+        help="with --goal-position: how near the tcp must end, m (default: the config's task.transfer_tolerance_m)",
+    )
     p.add_argument("--time-limit", type=float, default=1.0, help="planning time limit, s (default 1)")
+    p.add_argument(  # also here, so that `twin plan ... -v` works; SUPPRESS keeps `twin -v plan` as it was
+        "-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress and the scene's objects"
+    )
     p.add_argument(
         "--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here"
     )
 
     p = sub.add_parser("run", help="run a sorting task end to end (perception to placed objects) and judge it")
     _add_config_args(p)
-    p.add_argument("--planner", default=None, help="transfer planner name (replaces planners.transfer)")
+    p.add_argument(
+        "--planner",
+        default=None,
+        help="transfer planner name: replaces the config's planners.transfer block, whose params and retimer were "
+        "the old planner's; give the new one's with --set planners.transfer.params.KEY=VALUE (checked by it)",
+    )
     p.add_argument("--gui", action="store_true", help="open PyBullet's window")
     p.add_argument(
         "--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera"
@@ -264,10 +295,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _settings(args: argparse.Namespace) -> Any:
-    from twin.config import load_config
+def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) -> Any:
+    """The config with `--set` overrides; `transfer_planner` (`--planner`) is applied as an override of the
+    whole `planners.transfer` block before them, so `--set planners.transfer.params.K=V` reaches it and is
+    validated by its own model (twin.config.planner_overrides)."""
+    from twin.config import load_config, planner_overrides
 
-    settings = load_config(args.config, args.overrides)
+    overrides = (
+        args.overrides if transfer_planner is None else planner_overrides("transfer", transfer_planner, args.overrides)
+    )
+    settings = load_config(args.config, overrides)
     if args.seed is not None:
         settings = settings.model_copy(update={"seed": args.seed})
     return settings
@@ -327,16 +364,44 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _cmd_plan(args: argparse.Namespace) -> int:
-    from twin.planning import limits_from_settings, plan
-    from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
+def _plan_goal(args: argparse.Namespace, settings: Any) -> Any:
+    """The goal of `twin plan`: joints, a tcp pose, or a tcp position within a tolerance (orientation free)."""
+    from twin.errors import InvalidRequestError
+    from twin.types import JointGoal, Pose, PoseGoal
 
-    settings = _settings(args)
+    if args.position_tolerance is not None and args.goal_position is None:
+        raise InvalidRequestError("--position-tolerance goes with --goal-position (a joint or pose goal is exact)")
     if args.goal is not None:
-        goal: Any = JointGoal(args.goal)
-    else:
+        return JointGoal(args.goal)
+    if args.goal_pose is not None:
         x, y, z, roll, pitch, yaw = args.goal_pose
-        goal = PoseGoal(Pose.from_xyz_rpy((x, y, z), (roll, pitch, yaw)))
+        return PoseGoal(Pose.from_xyz_rpy((x, y, z), (roll, pitch, yaw)))
+    tol = settings.task.transfer_tolerance_m if args.position_tolerance is None else args.position_tolerance
+    if not (math.isfinite(tol) and tol > 0):
+        raise InvalidRequestError(f"--position-tolerance must be a positive number of metres, got {tol}")
+    # the orientation is free; the pose's (tool pointing down, as a task's transfer ends) only tells a planner
+    # that starts from an IK solution which one to try first
+    return PoseGoal(
+        Pose.from_xyz_rpy(tuple(args.goal_position), (math.pi, 0.0, 0.0)),
+        position_tolerance_m=tol,
+        orientation_tolerance_rad=None,
+    )
+
+
+def _scene_line(scene: Any) -> str:
+    """The planning scene's objects on one line; the perceived ones (`known: false`) marked."""
+    boxes = scene.boxes()
+    names = [f"{n} (known: false, as a box)" if n in boxes else n for n in scene.names()]
+    return f"scene: {', '.join(names) or 'empty'}"
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from twin.collision import PlanningScene
+    from twin.planning import limits_from_settings, plan
+    from twin.types import MotionRequest
+
+    settings = _settings(args, transfer_planner=args.planner)
+    goal = _plan_goal(args, settings)
     if not args.time_limit > 0:
         from twin.errors import InvalidRequestError
 
@@ -348,7 +413,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         time_limit_s=args.time_limit,
         seed=settings.seed,
     )
-    result = plan(settings, args.planner, request)
+    # the cell `twin compare` and `twin problems export` plan in: obstacles marked `known: false` included
+    scene = PlanningScene.from_settings(settings)
+    if getattr(args, "verbose", False):
+        print(_scene_line(scene))
+    result = plan(settings, settings.planners["transfer"], request, scene=scene)
     traj = result.trajectory
     summary = {
         "planner": args.planner,
@@ -378,15 +447,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from twin.timing import format_breakdown, process_age_s
 
     startup = process_age_s()  # interpreter start, imports and argument parsing, before the run's own clock
-    settings = _settings(args)
+    settings = _settings(args, transfer_planner=args.planner)
     console = Console(stderr=True)
     with Progress(
         SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console, transient=True
     ) as progress:
         bar = progress.add_task(f"{settings.name} seed {settings.seed}: starting", total=None)
-        summary = run_task(
+        summary = run_task(  # `--planner` is in `settings.planners.transfer` already
             settings,
-            planner=args.planner,
             gui=args.gui,
             record=args.record,
             config_name=str(args.config),
@@ -422,7 +490,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         f" ({summary.sim_time_s / total:.1f}x real time over the whole command, {total:.1f} s)"
     )
     print(f"time: {format_breakdown(timings, total)}")
-    return EXIT_OK
+    return EXIT_OK if all(o.placed for o in summary.objects) else EXIT_NOT_PLACED
 
 
 def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:

@@ -27,7 +27,7 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import fcl
 import numpy as np
@@ -57,7 +57,11 @@ from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 if TYPE_CHECKING:
     from twin.config import Settings
 
-__all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene"]
+__all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "UnknownFixtures"]
+
+# how a scene holds the fixtures marked `known: false`: as boxes at their true poses (what a perfect detector
+# reports), or not at all (a task's cell, which perceives them)
+UnknownFixtures = Literal["box", "ignore"]
 
 log = logging.getLogger("twin")
 
@@ -238,26 +242,34 @@ class PlanningScene:
         return new
 
     @classmethod
-    def from_settings(cls, settings: Settings) -> PlanningScene:
-        """Robot from settings.robot.urdf (gripper fully open), fixtures from settings.world.fixtures,
-        padding from settings.collision.padding_m, the sphere filter from settings.collision.sphere_filter; the
-        home posture is an exclusion reference.
+    def from_settings(cls, settings: Settings, *, unknown_fixtures: UnknownFixtures = "box") -> PlanningScene:
+        """The cell of a config: robot from settings.robot.urdf (gripper fully open), fixtures from
+        settings.world.fixtures, padding from settings.collision.padding_m, the sphere filter from
+        settings.collision.sphere_filter; the home posture is an exclusion reference.
 
-        Fixtures marked `known: false` (obstacles the robot has to perceive) are left out: a task adds
-        what perception found with `add_box_bounds`.
+        Fixtures marked `known: false` (obstacles the robot has to perceive) are, with `unknown_fixtures="box"`
+        (the default), in the scene as a perfect detector reports them: boxes at their true poses
+        (`add_unknown_fixtures`). That is the cell `twin plan`, `twin compare`, problem-set export and the
+        planner contract plan in, so one query gets one answer everywhere. A task perceives them instead:
+        its cell asks for `unknown_fixtures="ignore"` and adds what perception found with `add_box_bounds`.
         """
+        if unknown_fixtures not in ("box", "ignore"):
+            raise InvalidRequestError(f"unknown_fixtures must be 'box' or 'ignore', got {unknown_fixtures!r}")
         fixtures = [
             FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
             for f in settings.world.fixtures
             if f.known
         ]
-        return cls(
+        scene = cls(
             settings.resolve(settings.robot.urdf),
             fixtures=fixtures,
             padding_m=settings.collision.padding_m,
             reference_configs=[settings.robot.home],
             sphere_filter=settings.collision.sphere_filter,
         )
+        if unknown_fixtures == "box":
+            scene.add_unknown_fixtures(settings)
+        return scene
 
     # =============================================================================================
     # construction helpers

@@ -38,6 +38,7 @@ from twin.errors import ConfigError, TwinError
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
+    from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
     from twin.kinematics import UR5e
     from twin.types import MotionRequest
@@ -123,7 +124,9 @@ def quiet_imports() -> None:
         os.close(devnull)
 
 
-def cell_for(config: str, overrides: tuple[str, ...], unknown_fixtures: str, problems: str | None = None) -> _Cell:
+def cell_for(
+    config: str, overrides: tuple[str, ...], unknown_fixtures: UnknownFixtures, problems: str | None = None
+) -> _Cell:
     """The static cell of a scene config (built on first use in this process, then reused); with
     `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`)."""
     key = (config, overrides, unknown_fixtures, problems)
@@ -149,9 +152,9 @@ def cell_for(config: str, overrides: tuple[str, ...], unknown_fixtures: str, pro
         # "contacts seen in physics" a measure of the trajectory, not of objects the planner never saw
         no_objects = s.world.objects.model_copy(update={"items": []})
         s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
-        scene = PlanningScene.from_settings(s)  # without fixtures marked `known: false`
-        if unknown_fixtures == "box":  # no perception step in a motion query: report them perfectly
-            scene.add_unknown_fixtures(s)
+        # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
+        # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
+        scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
         cell = _CELLS[key] = _Cell(settings=s, scene=scene, kin=UR5e())
     return cell
 

@@ -13,6 +13,7 @@ them (URDFs) are found next to the config first and in twin's shipped data secon
 from __future__ import annotations
 
 import difflib
+import json
 import math
 import re
 from collections.abc import Iterable
@@ -32,6 +33,7 @@ __all__ = [
     "format_validation",
     "load_config",
     "one_line",
+    "planner_overrides",
     "read_yaml",
     "settings_from_dict",
     "short_repr",
@@ -241,6 +243,22 @@ def _read_chain(
         data = _merge(base, data)
         dirs += tuple(d for d in base_dirs if d not in dirs)
     return data, dirs
+
+
+def planner_overrides(group: str, name: str, overrides: Iterable[str] = ()) -> list[str]:
+    """`overrides` with `planners.<group>` first made a new block `{name: <name>}`, for `load_config`: how
+    `twin run --planner NAME` (group `transfer`) swaps a planner. The config's params and retimer of that
+    group belonged to the planner it had, so they go; `--set planners.<group>.params.KEY=VALUE` (or
+    `.retimer=...`) overrides, applied after, give the new planner's, and the loaded block is validated by
+    that planner's own model like any other. An override that names the group's planner too is a
+    ConfigError (two answers to one question)."""
+    overrides = list(overrides)
+    block = f"planners.{group}"
+    for o in overrides:
+        key = ".".join(p.strip() for p in o.split("=", 1)[0].split("."))  # as `apply_override` reads it
+        if key in (block, f"{block}.name"):
+            raise ConfigError(f"--planner {name} and --set {short_repr(o)} both choose the {group} planner; give one")
+    return [f"{block}={json.dumps({'name': name})}", *overrides]
 
 
 def apply_override(data: dict[str, Any], override: str) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import zlib
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -21,6 +21,9 @@ from twin.errors import ConfigError
 from twin.problems.model import ProblemSet
 from twin.problems.queries import problem_of_query
 from twin.problems.world import robot_spec, world_of_scene
+
+if TYPE_CHECKING:
+    from twin.collision.scene import UnknownFixtures
 
 __all__ = ["export_problem_set"]
 
@@ -34,7 +37,7 @@ def export_problem_set(
     random: dict[str, Any] | None = None,
     time_limit_s: float = 1.0,
     overrides: Iterable[str] = (),
-    unknown_fixtures: str = "box",
+    unknown_fixtures: UnknownFixtures = "box",
 ) -> ProblemSet:
     """`count` random queries in the cell of `config` (a path or a shipped config's name), drawn with
     `seed` as the compare scenario `name` (default: the config's name) would draw them with `random`

@@ -167,8 +167,7 @@ def planning_scene(ps: ProblemSet, settings: Settings) -> PlanningScene:
     (attached to the TCP) and the gripper opening the set states."""
     from twin.collision import PlanningScene
 
-    scene = PlanningScene.from_settings(settings)  # the known fixtures
-    scene.add_unknown_fixtures(settings)  # the perceived boxes, as a perfect detector reports them
+    scene = PlanningScene.from_settings(settings)  # the known fixtures, the perceived ones as boxes
     if ps.robot.gripper_opening_m is not None and not math.isclose(
         ps.robot.gripper_opening_m, scene.gripper_opening, abs_tol=1e-9
     ):

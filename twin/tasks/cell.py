@@ -158,7 +158,8 @@ class Cell:
             self.planners = stage_planners(self.settings, self.planner_override)
         self.context = make_context(self.settings)
         self.kin = self.context.kinematics
-        self.scene = PlanningScene.from_settings(self.settings)
+        # the cell knows its fixtures; obstacles marked `known: false` are what the task perceives and adds
+        self.scene = PlanningScene.from_settings(self.settings, unknown_fixtures="ignore")
         self.limits = limits_from_settings(self.settings)
         self.held_body: int | None = (
             None  # the simulated safety monitor's (judge.body_between_fingers); no task decides with it

@@ -92,8 +92,7 @@ def check_planner(
         from twin.errors import InvalidRequestError
 
         raise InvalidRequestError(f"queries must be at least 1, got {n}")
-    scene = PlanningScene.from_settings(settings)
-    scene.add_unknown_fixtures(settings)  # obstacles perception would report, reported perfectly
+    scene = PlanningScene.from_settings(settings)  # with the obstacles perception would report, as boxes
     checker = _Checker(
         checked,
         block.name,
