@@ -40,8 +40,7 @@ def scenes(tmp: Path) -> dict[str, PlanningScene]:
     s = load_config("robocup")
     out["robocup"] = PlanningScene.from_settings(s)
     w = load_config("warehouse")
-    wh = PlanningScene.from_settings(w)
-    wh.add_unknown_fixtures(w)
+    wh = PlanningScene.from_settings(w)  # the wall (known: false) as a box
     wh.attach_box("cube", [CUBE_M] * 3, pose_from_xyz_rpy((0.0, 0.01, 0.0), (0.0, 0.0, 0.3)))
     out["warehouse"] = wh.padded(0.005)
     urdf = tmp / "mixed.urdf"

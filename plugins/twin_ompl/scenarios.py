@@ -48,8 +48,7 @@ class QueryCell:
     def __init__(self, name: str):
         self.name = name
         self.settings: Settings = load_config(name)
-        self.scene = PlanningScene.from_settings(self.settings)
-        self.scene.add_unknown_fixtures(self.settings)
+        self.scene = PlanningScene.from_settings(self.settings)  # the obstacles as boxes, as compare plans
         if name == "warehouse":
             self.scene.attach_box("cube", [CUBE_M] * 3, np.eye(4))
         self.ctx = make_context(self.settings)
