@@ -2,9 +2,19 @@
 # Set up twin on a fresh Debian machine with Python 3.11: the Debian packages its dependencies need,
 # a virtual environment in .venv, and twin with every built-in backend (OMPL, CasADi, open3d, Ray,
 # matplotlib) and the test tools.
-# Safe to run again: it only installs what is missing.
+# Safe to run again: it only installs what is missing (or what differs from the pinned versions).
+#
+# Versions: by default every package is installed at the version constraints.txt pins (what CI passed
+# with), so two machines set up a month apart run the same code. TWIN_RESOLVE=latest ./setup.sh resolves
+# the newest releases instead (to try them, or where a pin has no build for the platform).
 set -euo pipefail
 cd "$(dirname "$0")"
+case "${TWIN_RESOLVE:-locked}" in
+  locked) pins=(-c constraints.txt) ;;  # also moves an installed package back to its pin
+  latest) pins=(--upgrade --upgrade-strategy eager) ;;  # also moves installed packages to the newest
+  *) echo "setup: TWIN_RESOLVE must be 'locked' (the default: constraints.txt) or 'latest', got '$TWIN_RESOLVE'" >&2
+     exit 2 ;;
+esac
 
 # libusb-1.0-0: open3d; libegl1 + libgl1-mesa-dri: PyBullet's headless EGL renderer; libgomp1: OpenMP.
 debs=(libusb-1.0-0 libegl1 libgl1-mesa-dri libgomp1)
@@ -21,8 +31,16 @@ PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 "$PY" -c 'import sys; assert sys.version_info[:2] >= (3, 11), "twin needs Python 3.11+"'
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
-.venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v -i "warning" || true
-.venv/bin/python -m pip install -q -e ".[all,test]" 2>&1 | grep -v -i "warning" || true
+pip_install() {  # pip's own warnings hidden; its failure ends the setup with a hint
+  if ! .venv/bin/python -m pip install -q "$@" "${pins[@]}" 2>&1 | { grep -v -i "warning" || true; }; then
+    echo "setup: pip install $* failed" >&2
+    [ "${TWIN_RESOLVE:-locked}" = locked ] && echo "setup: constraints.txt pins the versions CI runs (Linux x86_64, Python 3.11);" \
+      "TWIN_RESOLVE=latest ./setup.sh resolves the newest releases instead" >&2
+    exit 1
+  fi
+}
+pip_install --upgrade pip
+pip_install -e ".[all,test]"
 .venv/bin/python -c "import twin, pybullet, fcl, ruckig, toppra, ompl, casadi, open3d, ray, matplotlib" \
   || { echo "setup: install failed" >&2; exit 1; }
-echo "setup: ready (.venv)"
+echo "setup: ready (.venv, versions: ${TWIN_RESOLVE:-locked})"

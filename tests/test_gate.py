@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from twin.compare import compare_spec_from_dict, read_results, run_comparison
-from twin.compare.gate import GateReport, Tolerance, gate, load_baseline
+from twin.compare.gate import GateReport, Tolerance, check_shares_runs, gate, load_baseline, load_baseline_environment
 from twin.errors import ConfigError
 
 
@@ -161,6 +161,55 @@ def test_no_shared_run_id_is_a_config_error():
     assert "\n" not in str(e.value)
 
 
+def test_a_baseline_that_shares_no_run_is_named_with_both_counts_before_anything_runs():
+    ids = [r["run_id"] for r in sweep()]
+    assert check_shares_runs(sweep()[:5], ids, baseline="old/results.jsonl") == 5
+    other = [{**r, "run_id": r["run_id"] + "x"} for r in sweep()[:7]]
+    other.append(sweep()[0] | {"status": "skipped"})  # a skipped row is no run, even with a shared id
+    with pytest.raises(ConfigError) as e:
+        check_shares_runs(other, ids, baseline="old/results.jsonl")
+    text = str(e.value)
+    assert "\n" not in text and text.startswith("baseline old/results.jsonl shares no run with this sweep")
+    assert "none of its 7 run ids is among this sweep's 20" in text
+
+
+# ---- where the sweeps ran -------------------------------------------------------------------------
+def _env(**cpu: Any) -> dict[str, Any]:
+    return {
+        "twin": {"version": "0.1.0", "commit": "c" * 40, "dirty": False},
+        "python": {"version": "3.11.7", "implementation": "CPython"},
+        "packages": {"numpy": "2.4.6", "ompl": "2.0.1"},
+        "cpu": {"model": "AMD EPYC", "cores": 2, "usable_cores": 2, **cpu},
+        "hostname": "ci",
+    }
+
+
+def test_the_report_names_what_changed_where_the_sweeps_ran_and_the_verdict_stands():
+    base = copy.deepcopy(sweep())
+    for r in base:  # a baseline made on a faster machine: planning took a third of the time
+        r["timing"]["planning_time_s"] /= 3
+    slower = _env(model="Intel Celeron", cores=4)
+    slower["packages"]["numpy"] = "2.5.0"
+    report = gate(sweep(), base, environment=slower, baseline_environment=_env())
+    assert regressed(report) == regressed(gate(sweep(), base))  # the environment never changes the verdict
+    assert report.environment_compared
+    assert report.environment_changes == [
+        "numpy: 2.4.6 -> 2.5.0",
+        "CPU: AMD EPYC -> Intel Celeron",
+        "cores: 2 (2 usable) -> 4 (2 usable)",
+    ]
+    text = report.render()
+    assert "environment changed since the baseline" in text
+    assert "- CPU: AMD EPYC -> Intel Celeron" in text and "- numpy: 2.4.6 -> 2.5.0" in text
+    assert json.loads(json.dumps(report.to_json()))["environment_changes"] == report.environment_changes
+
+    same = gate(sweep(), sweep(), environment=_env(), baseline_environment=_env())
+    assert same.environment_changes == [] and "environment: as the baseline's" in same.render()
+    unknown = gate(sweep(), sweep(), environment=_env(), baseline_environment=None)
+    assert not unknown.environment_compared and "the baseline recorded none" in unknown.render()
+    assert "environment" not in gate(sweep(), sweep()).render()  # no records given: nothing said
+
+
 def test_without_data_a_check_is_not_applicable():
     new = [row("a", i, success=False) for i in range(3)]
     report = gate(new, [row("a", i, success=False) for i in range(3)])
@@ -285,3 +334,63 @@ def test_a_rerun_of_a_real_sweep_passes_its_baseline_and_a_doctored_baseline_fai
         r["metrics"]["duration_s"] *= 0.5
     report = gate(read_results(second.results_path), shorter)
     assert not report.passed and regressed(report) == {("ruckig.movej", "duration_p95_s")}
+
+
+# ---- the command line ---------------------------------------------------------------------------------
+CLI_SWEEP = """
+name: gate-cli
+seeds: [0]
+execute: false
+planners: [ruckig.movej]
+scenarios:
+  - {name: w, scene: warehouse, random: {count: 2, goal: joint, straight: free}}
+"""
+
+
+def test_the_command_line_checks_the_baseline_before_the_sweep_and_names_environment_changes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+):
+    from twin.cli import main
+    from twin.environment import environment
+
+    cfg = tmp_path / "gate.yaml"
+    cfg.write_text(CLI_SWEEP)
+    first = tmp_path / "first"
+    assert main(["compare", str(cfg), "--out", str(first), "--workers", "0"]) == 0
+    recorded = json.loads((first / "compare.json").read_text())["environment"]
+    assert recorded["twin"] == environment()["twin"] and recorded["packages"] == environment()["packages"]
+    assert load_baseline_environment(first) == load_baseline_environment(first / "results.jsonl") == recorded
+    capsys.readouterr()
+
+    # an unrelated baseline: one line, exit 2, and not one run (no results.jsonl, no progress line)
+    unrelated = tmp_path / "unrelated.jsonl"
+    unrelated.write_text("".join(json.dumps(r) + "\n" for r in sweep()))
+    never = tmp_path / "never"
+    assert main(["compare", str(cfg), "--out", str(never), "--workers", "0", "--baseline", str(unrelated)]) == 2
+    out, err = capsys.readouterr()
+    assert len(err.strip().splitlines()) == 1, err
+    assert f"baseline {unrelated} shares no run with this sweep" in err
+    assert "none of its 20 run ids is among this sweep's 2" in err
+    assert not (never / "results.jsonl").exists() and "[1/" not in out
+
+    # a dry run says how many runs the baseline shares
+    base = str(first / "results.jsonl")
+    assert main(["compare", str(cfg), "--dry-run", "--baseline", base]) == 0
+    assert f"baseline {base}: shares 2 of this sweep's 2 runs" in capsys.readouterr().out
+
+    # the baseline ran elsewhere: the gate passes and says what differs
+    spec = json.loads((first / "compare.json").read_text())
+    spec["environment"]["packages"]["numpy"] = "1.26.4"
+    spec["environment"]["cpu"]["model"] = "Some Other CPU"
+    (first / "compare.json").write_text(json.dumps(spec))
+    assert main(["compare", str(cfg), "--out", str(tmp_path / "second"), "--workers", "0", "--baseline", base]) == 0
+    out = capsys.readouterr().out
+    assert "regression gate: passed" in out and "environment changed since the baseline" in out
+    assert f"- numpy: 1.26.4 -> {recorded['packages']['numpy']}" in out
+    assert f"- CPU: Some Other CPU -> {recorded['cpu']['model']}" in out
+
+    # a baseline from before twin recorded its environment
+    del spec["environment"]
+    (first / "compare.json").write_text(json.dumps(spec))
+    assert main(["compare", str(cfg), "--out", str(tmp_path / "third"), "--workers", "0", "--baseline", base]) == 0
+    assert "the baseline recorded none" in capsys.readouterr().out

@@ -8,6 +8,7 @@ value. Synthetic rows: no PyBullet, no planning.
 
 from __future__ import annotations
 
+import socket
 import sqlite3
 import subprocess
 import sys
@@ -27,12 +28,26 @@ PLANNERS = ["rrt", "straight", "slow one"]  # a label with a space is written as
 CASES = {"alpha": ["alpha#0", "alpha#1"], "beta": ["beta#0"]}
 SEEDS = [0, 1]
 TIME_LIMITS = {"alpha": 1.0, "beta": 2.5}
+# where the rows ran (a twin.environment record, as compare.json keeps it)
+ENVIRONMENT: dict[str, Any] = {
+    "twin": {"version": "0.1.0", "commit": "f" * 40, "dirty": False},
+    "python": {"version": "3.11.7", "implementation": "CPython"},
+    "packages": {"numpy": "2.4.6", "ompl": "1.7.0", "casadi": None},
+    "platform": {"description": "Linux-6.1-x86_64-with-glibc2.36"},
+    "cpu": {"model": "Test CPU 3000", "cores": 8, "usable_cores": 4, "flags": ["avx2", "fma"], "blas": "openblas 0.3"},
+    "hostname": "recorded-host",
+}
+CPUINFO = (
+    "CPU: Test CPU 3000\ncores: 8 (4 usable)\nSIMD flags: avx2 fma\nBLAS: openblas 0.3\n"
+    "OS: Linux-6.1-x86_64-with-glibc2.36\n"
+)
 OPTIONS: dict[str, Any] = {
     "name": NAME,
     "planners": PLANNERS,
     "host": "bench-host",
     "started": datetime(2024, 5, 6, 7, 8, 9),
     "time_limit_s": TIME_LIMITS,
+    "environment": ENVIRONMENT,
 }
 
 # (planner, case, seed) -> (status, failure, reason) of the runs that fail; every other run succeeds
@@ -158,7 +173,7 @@ def test_the_database_holds_one_experiment_per_scenario_and_every_run(
     db = make_db(tmp_path)
     with sqlite3.connect(db) as conn:
         experiments = conn.execute(
-            "SELECT name, timelimit, runcount, hostname, date, version FROM experiments"
+            "SELECT name, timelimit, runcount, hostname, date, version, cpuinfo, setup FROM experiments"
         ).fetchall()
         planners = [n for (n,) in conn.execute("SELECT name FROM plannerConfigs ORDER BY id")]
         status_enum = [d for (d,) in conn.execute("SELECT description FROM enums WHERE name='status' ORDER BY value")]
@@ -167,7 +182,9 @@ def test_the_database_holds_one_experiment_per_scenario_and_every_run(
         ("smoke.alpha", 1.0, 4, "bench-host", "2024-05-06 07:08:09"),
         ("smoke.beta", 2.5, 2, "bench-host", "2024-05-06 07:08:09"),
     ]
-    assert all(e[5].startswith("OMPL ") for e in experiments)
+    # the machine and the software come from the environment record: OMPL's version, cpuinfo, setup lines
+    assert [e[5:7] for e in experiments] == [("OMPL 1.7.0", CPUINFO)] * 2
+    assert all(f"twin 0.1.0 at {'f' * 40}\nPython: CPython 3.11.7\npackages: numpy 2.4.6" in e[7] for e in experiments)
     assert planners == ["rrt", "straight", "slow_one"]  # the skipped nmpc runs are no runs
     assert status_enum[:9] == [
         "Unknown status",
@@ -243,6 +260,21 @@ def test_export_writes_the_logs_and_the_database(tmp_path: Path) -> None:
     assert text.startswith("OMPL version ")
     # every planner lists the same run properties
     assert text.count("15 properties for each run\ntime REAL\nsolved BOOLEAN\nstatus ENUM\n") == 3
+
+
+def test_without_a_record_the_host_is_this_machine_and_an_empty_record_is_unknown(tmp_path: Path) -> None:
+    here = write_planner_arena_db(ALL_ROWS, tmp_path / "here.db", name=NAME)  # rows made by this process
+    unknown = write_planner_arena_db(ALL_ROWS, tmp_path / "unknown.db", name=NAME, environment={})
+    with sqlite3.connect(here) as a, sqlite3.connect(unknown) as b:
+        host, cpuinfo = a.execute("SELECT hostname, cpuinfo FROM experiments").fetchone()
+        assert b.execute("SELECT hostname, cpuinfo, version FROM experiments").fetchone() == (
+            "UNKNOWN",
+            None,
+            "OMPL twin-export",
+        )
+    assert host == socket.gethostname().replace(" ", "_") and cpuinfo.startswith("CPU: ") and "cores: " in cpuinfo
+    [log] = write_ompl_logs([r for r in ALL_ROWS if r["scenario"] == "beta"], tmp_path / "logs", environment={})
+    assert "Running on UNKNOWN\n" in log.read_text() and log.read_text().count("<<<|") == 1  # no cpuinfo block
 
 
 @pytest.mark.parametrize("write", [write_ompl_logs, write_planner_arena_db, export_planner_arena])

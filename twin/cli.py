@@ -1,7 +1,9 @@
 """The `twin` command line: a thin layer that parses, calls one library function, and reports.
 
 A user mistake (bad config, unknown name, bad value, missing file) prints one line and exits 2.
-`twin plan` exits 1 when the planner found no solution, `twin compare --baseline` when the gate fails.
+Exit 1 is a result that fell short, never a mistake: `twin plan` when the planner found no solution, `twin
+run` when an object was not placed (a script or CI job sees a failed run without reading the table),
+`twin compare --baseline` when the gate fails, `twin check-planner` when a rule breaks.
 """
 
 from __future__ import annotations
@@ -443,6 +445,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
+    from twin.environment import environment
     from twin.tasks import run_task
     from twin.timing import format_breakdown, process_age_s
 
@@ -468,6 +471,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         data = summary.to_json()
         data["timings"] = timings
         data["command_wall_time_s"] = total
+        data["environment"] = environment()  # where it ran: twin's commit, Python, backends, machine
         _write_json(args.json_path, data)
     table = Table(title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}")
     for col in ("object", "class", "colour", "target", "placed", "cycle s", "pose err mm", "error"):
@@ -514,16 +518,21 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from twin.compare import plan_comparison, run_comparison
-    from twin.compare.gate import Tolerance, gate, load_baseline
+    from twin.compare.gate import Tolerance, check_shares_runs, gate, load_baseline, load_baseline_environment
     from twin.compare.report import summary_table, sweep_tables
+    from twin.compare.runner import recorded_environment
     from twin.errors import ConfigError
 
     if args.tolerance is not None and args.baseline is None:
         raise ConfigError("--tolerance goes with --baseline (the results the sweep is gated against)")
     tolerance = Tolerance.parse(args.tolerance) if args.tolerance is not None else Tolerance()
     baseline = load_baseline(args.baseline) if args.baseline is not None else None  # a typo fails before the sweep
+    shared = 0
+    if baseline is not None or args.dry_run:
+        dry = plan_comparison(args.config, overrides=args.overrides)  # knows every run id; runs nothing
+        if baseline is not None:  # an unrelated baseline fails now, not after the whole sweep ran
+            shared = check_shares_runs(baseline, (r.run_id for r in dry.runs), baseline=args.baseline)
     if args.dry_run:
-        dry = plan_comparison(args.config, overrides=args.overrides)
         cases = dry.cases()
         print(
             f"{Path(args.config).name}: {dry.total} runs ({len(dry.spec.planners)} planners, "
@@ -537,6 +546,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         for name, n in dry.per_scenario().items():
             print(f"  {name:32s} {n:6d}  {cases[name]:4d}")
         _print_skipped(dry.skipped, "would skip")
+        if baseline is not None:
+            print(f"baseline {args.baseline}: shares {shared} of this sweep's {dry.total} runs")
         return EXIT_OK
 
     def progress(row: dict[str, Any], done: int, total: int) -> None:
@@ -565,10 +576,21 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if args.export_ompl is not None:
         from twin.compare.ompl_export import export_planner_arena
 
-        files = export_planner_arena(result.rows, args.export_ompl, name=result.spec_name)
+        files = export_planner_arena(
+            result.rows,
+            args.export_ompl,
+            name=result.spec_name,
+            environment=recorded_environment(result.results_path) or {},
+        )
         print("Planner Arena export: " + ", ".join(str(f) for f in files))
     if baseline is not None:
-        report = gate(result.rows, baseline, tolerance)
+        report = gate(
+            result.rows,
+            baseline,
+            tolerance,
+            environment=recorded_environment(result.results_path),
+            baseline_environment=load_baseline_environment(args.baseline),
+        )
         print(report.render())
         return EXIT_OK if report.passed else EXIT_NO_SOLUTION
     return EXIT_OK

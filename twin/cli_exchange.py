@@ -135,7 +135,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from twin.compare.ompl_export import export_planner_arena
-    from twin.compare.runner import RESULTS_FILE, latest_rows, read_results
+    from twin.compare.runner import RESULTS_FILE, latest_rows, read_results, recorded_environment
     from twin.errors import ConfigError
 
     src = Path(args.results)
@@ -144,7 +144,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ConfigError(f"no results file at {path} (give a results.jsonl or the folder that holds one)")
     rows = latest_rows(read_results(path))
     name = args.name or path.resolve().parent.name
-    files = export_planner_arena(rows, args.out, name=name)
+    # where the rows ran, as their sweep recorded it; not this machine (unknown when nothing was recorded)
+    files = export_planner_arena(rows, args.out, name=name, environment=recorded_environment(path) or {})
     print(f"{len(rows)} runs -> " + ", ".join(str(f) for f in files))
     return EXIT_OK
 

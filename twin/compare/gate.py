@@ -15,7 +15,13 @@ baseline sweep? Why it works the way it does:
   reported as slower, and one that fails a query it solved before is reported once, by its success rate;
 * the tolerances are loose where the quantity is noise and tight where it is not: success and duration
   are (nearly) deterministic for the same run id, planning time is wall-clock time on a shared CI machine
-  (see `Tolerance`).
+  (see `Tolerance`);
+* a sweep records where it ran (`twin.environment`, in the compare.json beside its results.jsonl), and the
+  report names every difference that can move a result (twin commit, Python, a backend's version, CPU
+  model, core count), so a slower p95 on another machine is not mistaken for a code regression. It never
+  fails the gate: the verdict is about the numbers, the lines say what else changed;
+* `check_shares_runs` is the same pairing before anything runs: the CLI asks the dry run's planner for the
+  sweep's run ids, so an unrelated baseline is a ConfigError at once, not after the whole sweep.
 
 Rows are the dicts of results.jsonl (`twin.compare.worker`); rows with status 'skipped' are no runs.
 """
@@ -23,17 +29,27 @@ Rows are the dicts of results.jsonl (`twin.compare.worker`); rows with status 's
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-from twin.compare.runner import RESULTS_FILE, latest_rows, read_results
+from twin.compare.runner import RESULTS_FILE, latest_rows, read_results, recorded_environment
+from twin.environment import environment_changes
 from twin.errors import ConfigError
 
-__all__ = ["DEFAULT_TOLERANCE", "GateCheck", "GateReport", "Tolerance", "gate", "load_baseline"]
+__all__ = [
+    "DEFAULT_TOLERANCE",
+    "GateCheck",
+    "GateReport",
+    "Tolerance",
+    "check_shares_runs",
+    "gate",
+    "load_baseline",
+    "load_baseline_environment",
+]
 
 Quantity = Literal["success_rate", "planning_time_p95_s", "duration_p95_s"]
 Verdict = Literal["ok", "regressed", "n/a"]
@@ -161,13 +177,18 @@ class GateCheck:
 @dataclass(frozen=True)
 class GateReport:
     """The gate's outcome: a check per (planner, quantity), how many runs were paired, and how many had
-    no partner (only in this sweep / only in the baseline: reported, never failing by themselves)."""
+    no partner (only in this sweep / only in the baseline: reported, never failing by themselves).
+    `environment_changes`: one line per difference between where the baseline ran and where this sweep
+    ran (`twin.environment.environment_changes`), or a line saying the baseline recorded none;
+    `environment_compared`: both records were there to compare. Neither changes the verdict."""
 
     checks: list[GateCheck]
     matched: int
     only_new: int
     only_baseline: int
     tolerance: Tolerance = field(default=DEFAULT_TOLERANCE)
+    environment_changes: list[str] = field(default_factory=list)
+    environment_compared: bool = False
 
     @property
     def passed(self) -> bool:
@@ -192,6 +213,7 @@ class GateReport:
             f"runs compared: {self.matched} in both sweeps, {self.only_new} only in this sweep, "
             f"{self.only_baseline} only in the baseline (unpaired runs are not checked)",
             f"tolerance: {self.tolerance.describe()}",
+            *self._environment_lines(),
             "",
         ]
         header = ["planner", "quantity", "n", "baseline", "now", "change", "limit", "verdict"]
@@ -229,8 +251,20 @@ class GateReport:
                 lines.append(f"- {c.planner}: {_LABEL[c.quantity]} {base} -> {now} (limit {limit}, n={c.n})")
         return "\n".join(lines) + "\n"
 
+    def _environment_lines(self) -> list[str]:
+        if self.environment_compared and not self.environment_changes:
+            return ["environment: as the baseline's (twin commit, Python, backends, CPU model, cores)"]
+        if not self.environment_compared:
+            return self.environment_changes
+        return [
+            "environment changed since the baseline (the verdict stands; a timing change may come from this, "
+            "not from the code):",
+            *(f"- {line}" for line in self.environment_changes),
+        ]
+
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict: passed, the run counts, the tolerance and every check (with its change)."""
+        """A JSON-ready dict: passed, the run counts, the tolerance, every check (with its change) and what
+        changed in the environment."""
         return {
             "passed": self.passed,
             "matched": self.matched,
@@ -238,6 +272,8 @@ class GateReport:
             "only_baseline": self.only_baseline,
             "tolerance": asdict(self.tolerance),
             "checks": [c.to_json() for c in self.checks],
+            "environment_compared": self.environment_compared,
+            "environment_changes": list(self.environment_changes),
         }
 
 
@@ -249,12 +285,15 @@ _LABEL: dict[str, str] = {
 
 
 # ---- the gate -------------------------------------------------------------------------------------
+def _baseline_file(path: str | Path) -> Path:
+    p = Path(path)
+    return p / RESULTS_FILE if p.is_dir() and (p / RESULTS_FILE).is_file() else p
+
+
 def load_baseline(path: str | Path) -> list[dict[str, Any]]:
     """The rows of a baseline sweep: its results.jsonl, or the output folder that holds one. A missing
     file, or one that holds no result rows, raises ConfigError in one line."""
-    p = Path(path)
-    if p.is_dir() and (p / RESULTS_FILE).is_file():
-        p = p / RESULTS_FILE
+    p = _baseline_file(path)
     if not p.is_file():
         what = "is a folder without a " + RESULTS_FILE if p.is_dir() else "does not exist"
         raise ConfigError(f"baseline {p} {what}; pass the {RESULTS_FILE} of an earlier `twin compare` run")
@@ -275,18 +314,45 @@ def load_baseline(path: str | Path) -> list[dict[str, Any]]:
     return rows
 
 
+def load_baseline_environment(path: str | Path) -> dict[str, Any] | None:
+    """Where the baseline ran: the environment recorded in the compare.json beside its results.jsonl
+    (`path` as `load_baseline` takes it); None when there is none."""
+    return recorded_environment(_baseline_file(path))
+
+
+def check_shares_runs(baseline_rows: Iterable[dict[str, Any]], run_ids: Iterable[str], *, baseline: str | Path) -> int:
+    """How many of the sweep's `run_ids` the baseline holds (its 'skipped' rows are no runs); ConfigError in
+    one line, naming the baseline and both counts, when it holds none: a gate that compares nothing must
+    not pass, and this says so before the sweep runs rather than after it."""
+    ids = set(run_ids)
+    old = {r.get("run_id") for r in latest_rows(baseline_rows) if r.get("status") != "skipped"}
+    shared = len(ids & old)
+    if not shared:
+        raise ConfigError(
+            f"baseline {baseline} shares no run with this sweep: none of its {len(old)} run ids is among this "
+            f"sweep's {len(ids)} (a run id hashes the planner block, scenario, scene config and seed); was it "
+            "made from another config?"
+        )
+    return shared
+
+
 def gate(
     rows: Iterable[dict[str, Any]],
     baseline_rows: Iterable[dict[str, Any]],
     tolerance: Tolerance = DEFAULT_TOLERANCE,
+    *,
+    environment: Mapping[str, Any] | None = None,
+    baseline_environment: Mapping[str, Any] | None = None,
 ) -> GateReport:
     """Compare this sweep's rows with a baseline's, run id by run id (the last row of each id on each
     side; 'skipped' rows are no runs), and check per planner, over the paired runs: the success rate
     (may drop by `tolerance.success_drop`), the p95 planning time over runs that finished a plan on both
     sides, and the p95 duration over runs successful on both sides (may grow as `Tolerance` says).
 
-    Planners are checked in the order they first appear in `rows`. Raises ConfigError when no run id of
-    this sweep is in the baseline."""
+    `environment`, `baseline_environment`: where each sweep ran (`twin.environment.environment()`
+    records); the report lists what differs, or says that the baseline recorded nothing, and the verdict
+    does not depend on it. Planners are checked in the order they first appear in `rows`. Raises
+    ConfigError when no run id of this sweep is in the baseline."""
     new = {r["run_id"]: r for r in latest_rows(rows) if r.get("status") != "skipped"}
     old = {r["run_id"]: r for r in latest_rows(baseline_rows) if r.get("status") != "skipped"}
     paired = [rid for rid in new if rid in old]
@@ -319,12 +385,21 @@ def gate(
             and (d1 := _num(n, "metrics", "duration_s")) is not None
         ]
         checks.append(_growth_check(planner, "duration_p95_s", durations, tolerance.duration, 0.0))
+    compared = environment is not None and baseline_environment is not None
+    changes = environment_changes(baseline_environment, environment) if compared else []
+    if environment is not None and baseline_environment is None:
+        changes = [
+            "environment: the baseline recorded none (no compare.json beside it, or made by an older twin), so a "
+            "timing change may come from the machine or the backends as well as from the code"
+        ]
     return GateReport(
         checks=checks,
         matched=len(paired),
         only_new=len(new) - len(paired),
         only_baseline=sum(1 for rid in old if rid not in new),
         tolerance=tolerance,
+        environment_changes=changes,
+        environment_compared=compared,
     )
 
 

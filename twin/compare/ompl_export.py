@@ -20,6 +20,11 @@ Each run is one twin row (skipped rows are left out; of a repeated run id the la
 experiments are in file-name order, the order a shell glob (`ompl_benchmark_statistics *.log`) passes
 the logs in, so both databases number experiments alike.
 
+Where the runs ran comes from one record, `twin.environment` (the one `twin compare` keeps in compare.json
+beside the rows): the host ('Running on', `hostname`), the OMPL version ('OMPL version', `version`), the
+machine (CPU, cores, SIMD, BLAS, OS) as the optional cpuinfo block after the setup block that OMPL's
+script stores as `cpuinfo`, and twin's commit, Python and the backends' versions as setup lines.
+
 The run properties (`RUN_PROPERTIES`) are OMPL's standard ones where twin measures the same thing
 (`time`, `solved`, `status`, `solution length` in joint space, `solution clearance`, `solution
 smoothness`) and twin's own, prefixed `twin_` so they never clash with OMPL's. OMPL's `status` enum
@@ -40,11 +45,9 @@ each name, so every log of one export lists the same values (`twin_case`: every 
 
 from __future__ import annotations
 
-import importlib.metadata
 import logging
 import math
 import re
-import socket
 import sqlite3
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import closing
@@ -55,6 +58,8 @@ from typing import Any, Literal
 
 from twin.compare.metrics import FAILURES, failure_of_row
 from twin.compare.runner import latest_rows
+from twin.environment import environment as this_environment
+from twin.environment import machine_lines, software_lines
 from twin.errors import ConfigError
 
 __all__ = [
@@ -97,7 +102,8 @@ FAILURE_NONE = "none"  # twin_failure of a successful run
 
 _PREFIX = "twin"
 _MEMORY_LIMIT_MB = 0.0  # twin sets no memory limit
-_NO_VERSION = "twin-export"  # the version written when OMPL is not installed
+_NO_VERSION = "twin-export"  # the version written when the record has no OMPL
+_NO_HOST = "UNKNOWN"  # OMPL's own host of a log that names none
 
 
 def ompl_status(row: Row) -> str:
@@ -181,6 +187,7 @@ class _ExperimentLog:
     host: str
     date: str
     setup: tuple[str, ...]
+    cpuinfo: tuple[str, ...]  # the machine (twin.environment.machine_lines); () writes no block
     seed: str
     time_limit_s: float
     memory_limit_mb: float
@@ -192,6 +199,11 @@ class _ExperimentLog:
     @property
     def setup_text(self) -> str:
         return "".join(f"{line}\n" for line in self.setup)
+
+    @property
+    def cpuinfo_text(self) -> str | None:
+        """The cpuinfo block as the script stores it (None when the log has none)."""
+        return "".join(f"{line}\n" for line in self.cpuinfo) if self.cpuinfo else None
 
     @property
     def version_text(self) -> str:
@@ -208,6 +220,7 @@ class _ExperimentLog:
             "<<<|",
             *self.setup,
             "|>>>",
+            *(["<<<|", *self.cpuinfo, "|>>>"] if self.cpuinfo else []),
             f"{self.seed} is the random seed",
             f"{self.time_limit_s!r} seconds per run",
             f"{self.memory_limit_mb!r} MB per run",
@@ -248,11 +261,15 @@ def _enum_label(value: Any) -> str:
     return " ".join(str(value).replace("|", "/").split())
 
 
-def _ompl_version() -> str:
-    try:
-        return _token(importlib.metadata.version("ompl"))
-    except importlib.metadata.PackageNotFoundError:
-        return _NO_VERSION
+def _ompl_version(env: Mapping[str, Any]) -> str:
+    packages = env.get("packages")
+    version = packages.get("ompl") if isinstance(packages, Mapping) else None
+    return _token(str(version)) if version else _NO_VERSION
+
+
+def _block_line(text: str) -> str:
+    """A line of a <<<| ... |>>> block: one that began with a block marker would end the block early."""
+    return f" {text}" if text.startswith(("<<<|", "|>>>")) else text
 
 
 def _seed_token(seeds: Iterable[Any]) -> str:
@@ -279,8 +296,10 @@ def _experiments(
     host: str | None,
     started: datetime | None,
     time_limit_s: float | Mapping[str, float] | None,
+    environment: Mapping[str, Any] | None,
 ) -> list[_ExperimentLog]:
-    """The rows as one experiment per scenario, sorted by name. ConfigError when no row is left."""
+    """The rows as one experiment per scenario, sorted by name. ConfigError when no row is left.
+    `environment`: where the rows ran (None: this process, `twin.environment.environment()`; {}: unknown)."""
     all_rows = latest_rows(rows)
     kept = [r for r in all_rows if r.get("status") != "skipped"]
     if not kept:
@@ -293,8 +312,11 @@ def _experiments(
         if p.type == "ENUM"
     }
     enums = tuple(labels.items())
-    version = _ompl_version()
-    host = _token(host or socket.gethostname())
+    env = this_environment() if environment is None else environment
+    version = _ompl_version(env)
+    host = _token(host or str(env.get("hostname") or _NO_HOST))
+    cpuinfo = tuple(_block_line(line) for line in machine_lines(env))
+    software = tuple(_block_line(line) for line in software_lines(env))
     date = (started or datetime.now()).strftime("%Y-%m-%d %H:%M:%S")
     order = {p: i for i, p in enumerate(planners or ())}
 
@@ -335,6 +357,7 @@ def _experiments(
             f"planners: {', '.join(ranked)}",
             f"runs: {len(srows)}",
             f"time limit per run: {'not recorded in the rows' if limit is None else f'{limit:g} s'}",
+            *software,
             "exported from twin result rows by twin.compare.ompl_export",
         )
         out[exp_name] = _ExperimentLog(
@@ -343,6 +366,7 @@ def _experiments(
             host=host,
             date=date,
             setup=setup,
+            cpuinfo=cpuinfo,
             seed=_seed_token(seeds) or "0",
             time_limit_s=0.0 if limit is None else limit,
             memory_limit_mb=_MEMORY_LIMIT_MB,
@@ -426,7 +450,7 @@ def _insert_experiment(c: sqlite3.Cursor, e: _ExperimentLog) -> None:
             e.run_count,
             e.version_text,
             e.host,
-            None,
+            e.cpuinfo_text,
             e.date,
             e.seed,
             e.setup_text,
@@ -479,16 +503,27 @@ def write_ompl_logs(
     host: str | None = None,
     started: datetime | None = None,
     time_limit_s: float | Mapping[str, float] | None = None,
+    environment: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """Write one OMPL benchmark log per scenario, `out_dir/<name>.<scenario>.log`, so OMPL's tools
     (`ompl_benchmark_statistics`, Planner Arena) read twin's results like their own.
 
     `rows`: result rows (results.jsonl). `planners`: labels in the order to list them (others follow as
-    they come). `host`, `started`: the 'Running on' and 'Starting at' lines (default: this machine,
-    now). `time_limit_s`: the limit per run, one for all or per scenario (default: the largest the rows
-    record; 0 when none does). Raises ConfigError for no rows or an unwritable folder.
+    they come). `host`, `started`: the 'Running on' and 'Starting at' lines (default: the environment's
+    host, now). `time_limit_s`: the limit per run, one for all or per scenario (default: the largest the
+    rows record; 0 when none does). `environment`: where the rows ran, a `twin.environment` record (the
+    sweep's compare.json has it); None: this process's; {}: unknown (host UNKNOWN, no cpuinfo block).
+    Raises ConfigError for no rows or an unwritable folder.
     """
-    exps = _experiments(rows, name=name, planners=planners, host=host, started=started, time_limit_s=time_limit_s)
+    exps = _experiments(
+        rows,
+        name=name,
+        planners=planners,
+        host=host,
+        started=started,
+        time_limit_s=time_limit_s,
+        environment=environment,
+    )
     paths = _write_logs(exps, out_dir)
     log.info("wrote %d OMPL benchmark logs to %s", len(paths), out_dir)
     return paths
@@ -503,11 +538,20 @@ def write_planner_arena_db(
     host: str | None = None,
     started: datetime | None = None,
     time_limit_s: float | Mapping[str, float] | None = None,
+    environment: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write the SQLite database `ompl_benchmark_statistics` would make from `write_ompl_logs`' logs (the
     file Planner Arena opens), without OMPL installed. An existing file is replaced. Arguments as there;
     raises ConfigError for no rows or an unwritable path."""
-    exps = _experiments(rows, name=name, planners=planners, host=host, started=started, time_limit_s=time_limit_s)
+    exps = _experiments(
+        rows,
+        name=name,
+        planners=planners,
+        host=host,
+        started=started,
+        time_limit_s=time_limit_s,
+        environment=environment,
+    )
     return _write_db(exps, db_path)
 
 
@@ -520,10 +564,19 @@ def export_planner_arena(
     host: str | None = None,
     started: datetime | None = None,
     time_limit_s: float | Mapping[str, float] | None = None,
+    environment: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """Write both, the logs and `out_dir/<name>.db`, from one reading of the rows (so they agree to the
     date); returns the logs' paths, then the database's. Raises ConfigError as the two do."""
-    exps = _experiments(rows, name=name, planners=planners, host=host, started=started, time_limit_s=time_limit_s)
+    exps = _experiments(
+        rows,
+        name=name,
+        planners=planners,
+        host=host,
+        started=started,
+        time_limit_s=time_limit_s,
+        environment=environment,
+    )
     paths = _write_logs(exps, out_dir)
     paths.append(_write_db(exps, Path(out_dir) / f"{_token(name)}.db"))
     log.info("wrote %d OMPL benchmark logs and the Planner Arena database %s", len(paths) - 1, paths[-1])

@@ -43,6 +43,7 @@ from twin.compare.spec import (
     run_key,
 )
 from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, quiet_imports, worker_init
+from twin.environment import environment
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "latest_rows",
     "plan_comparison",
     "read_results",
+    "recorded_environment",
     "run_comparison",
     "tasks_available",
 ]
@@ -262,6 +264,19 @@ def _previous_definitions(path: Path) -> dict[str, Any] | None:
         return None
     defs = data.get("definitions") if isinstance(data, dict) else None
     return defs if isinstance(defs, dict) else None
+
+
+def recorded_environment(results: str | Path) -> dict[str, Any] | None:
+    """The environment a sweep recorded (twin.environment) in the compare.json beside its results.jsonl
+    (`results` is that file or its folder); None when there is none (a sweep from before twin recorded one,
+    or rows copied without their folder)."""
+    p = Path(results)
+    try:
+        data = json.loads(((p if p.is_dir() else p.parent) / SPEC_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    env = data.get("environment") if isinstance(data, dict) else None
+    return env if isinstance(env, dict) else None
 
 
 class _Appender:
@@ -561,7 +576,10 @@ def run_comparison(
         raise ConfigError(f"cannot create the output folder {out}: {e.strerror}") from None
     if resume:
         read_results(results, repair=True)  # a line cut short by a crash goes before anything is appended
-    spec_path.write_text(json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs}, indent=1))
+    # where this sweep ran (twin, Python, backends, machine): the gate names what changed since its baseline
+    spec_path.write_text(
+        json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs, "environment": environment()}, indent=1)
+    )
 
     finished = {row["run_id"]: row for row in existing if row["run_id"] in wanted and row.get("status") != "error"}
     retried = sum(1 for row in existing if row["run_id"] in wanted and row.get("status") == "error")
