@@ -348,7 +348,12 @@ def test_batch_results_equal_single_calls(settings):
     single_hit = np.array([s.in_collision(q) for q in qs])
     single_d = np.array([s.min_distance(q).distance for q in qs])
     assert np.array_equal(s.in_collision_batch(qs), single_hit)
-    assert np.array_equal(s.min_distance_batch(qs), single_d)
+    # The link poses come from two computations (batched `_frames`, single `_frames_one`), equal here but
+    # free to differ by an ulp on another BLAS kernel or SIMD path; FCL's GJK distance is not that stable:
+    # a 1-ulp change of q moved 1.5 % of these distances, by up to 9e-5 m (measured, 3000 configurations).
+    # So: nearly all equal to 1e-12 m, every one within 0.5 mm (a batch row mixed up is centimetres off).
+    gap = np.abs(s.min_distance_batch(qs) - single_d)
+    assert np.mean(gap <= 1e-12) >= 0.95 and gap.max() <= 5e-4, (np.mean(gap <= 1e-12), gap.max())
     assert 0 < single_hit.sum() < len(qs)
 
 

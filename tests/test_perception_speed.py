@@ -157,7 +157,10 @@ def test_nearest_neighbors_answer_as_ckdtree_including_ties_and_the_bound():
         for bound in (math.inf, 0.0045, 0.5):
             d0, i0 = tree.query(queries, distance_upper_bound=bound)
             d1, i1 = index.query(queries, distance_upper_bound=bound)
-            assert np.array_equal(d0, d1) and np.array_equal(i0, i1), bound
+            assert np.array_equal(i0, i1), bound
+            # two libraries summing the same squares: bit for bit with these builds, a few ulp apart with
+            # one that fuses multiply-adds (near-ties go to cKDTree, so the indices are its own regardless)
+            np.testing.assert_allclose(d1, d0, rtol=4 * np.finfo(float).eps, atol=0, err_msg=str(bound))
 
 
 def test_trimmed_icp_on_the_fast_index_is_bit_identical():
@@ -174,7 +177,11 @@ def test_trimmed_icp_on_the_fast_index_is_bit_identical():
             T_ref, rmse_ref, it_ref, conv_ref = icp_reference(obs, tmpl, np.linalg.inv(guess), tolerance=tol)
             for target in (tmpl, cKDTree(tmpl), NearestNeighbors(tmpl)):
                 res = fast_icp(obs, target, np.linalg.inv(guess), tolerance=tol)
-                assert np.array_equal(res.T, T_ref) and res.rmse == rmse_ref
+                # the same arithmetic on distances from open3d instead of cKDTree, which may differ in the last
+                # bits (see the test above): poses (entries <= ~1) and RMSE to 1e-12, far below what one more or
+                # one other kept pair does (~1e-4), and the same iterations
+                np.testing.assert_allclose(res.T, T_ref, rtol=0, atol=1e-12)
+                assert res.rmse == pytest.approx(rmse_ref, rel=1e-12, abs=0)
                 assert (res.iterations, res.converged) == (it_ref, conv_ref)
 
 

@@ -81,7 +81,14 @@ def test_pose_from_xyz_rpy():
 
 def test_batched_quaternions_equal_single_ones():
     q = np.random.default_rng(RNG_SEED).normal(size=(100, 4))
-    np.testing.assert_array_equal(tf.quats_to_matrices(q), np.array([tf.quat_to_matrix(v) for v in q]))
+    # Two computations of the norm: 1-D np.linalg.norm is BLAS ddot, the batched one numpy's reduction along
+    # axis 1; how each rounds depends on the OpenBLAS kernel and numpy's SIMD path of the machine (AVX-512
+    # ddot: 84 of these 900 entries 1-4 ulp apart). The norms differ by up to ~3 ulp and the entry formulas
+    # (in [-1, 1]) amplify that by at most 4: 16 ulp of 1 (measured worst over 40,000 quaternions: 6 ulp).
+    # A wrong entry formula is off by ~0.1.
+    np.testing.assert_allclose(
+        tf.quats_to_matrices(q), np.array([tf.quat_to_matrix(v) for v in q]), rtol=0, atol=16 * np.finfo(float).eps
+    )
 
 
 def test_old_names_are_the_same_functions():

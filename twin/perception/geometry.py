@@ -176,10 +176,11 @@ class NearestNeighbors:
 
     With open3d installed the answers come from its nanoflann index (`open3d.core.nns`), 2-3x faster
     than cKDTree on this machine; both compute the squared distance the same way (the three squared
-    differences summed in order), so distances and indices agree. Where they may not - two points at
-    exactly the same distance (a tie, which the two trees break differently; it does happen with voxel
-    centroids of the regular pixel grid) or a distance at the upper bound itself - the query goes to
-    cKDTree. Without open3d every query goes to cKDTree. `data` is the (n, 3) float64 point array.
+    differences summed in order), so distances and indices agree (to the last bit with these builds; a
+    build that fuses multiply-adds may differ in it). Where they may not - two points at the same distance
+    to 1e-12 (a tie, which the two trees break differently; it does happen with voxel centroids of the
+    regular pixel grid) or a distance at the upper bound itself - the query goes to cKDTree. Without
+    open3d every query goes to cKDTree. `data` is the (n, 3) float64 point array.
     """
 
     def __init__(self, points: np.ndarray, *, tree: cKDTree | None = None) -> None:
@@ -219,7 +220,7 @@ class NearestNeighbors:
         nn = idx[:, 0].astype(np.intp)  # a copy
         d2_best = d2[:, 0]
         dist = np.sqrt(d2_best)  # cKDTree reports sqrt of the same squared distance
-        unsure = d2[:, 1] == d2_best  # a tie
+        unsure = d2[:, 1] <= d2_best * (1.0 + 1e-12)  # a tie, or one to rounding: cKDTree may order them otherwise
         if math.isfinite(distance_upper_bound):
             bound2 = distance_upper_bound * distance_upper_bound
             unsure |= np.abs(d2_best - bound2) <= 1e-12 * bound2
