@@ -186,6 +186,7 @@ def test_twin_run_places_nothing_with_it(acme_plugin, tmp_path):
     assert data["objects"] and not any(o["placed"] for o in data["objects"])
     assert {o["failure"] for o in data["objects"]} == {"limit_violation"}
     assert all("transfer: acme.hasty: limit_violation" in o["error"] for o in data["objects"])
+    assert data["environment"]["python"] and data["environment"]["cpu"]  # where it ran
     hasty = data["metrics"]["acme.hasty"]
     assert hasty["succeeded"] == 0 and hasty["max_acc_ratio"] > 2.0
     # the built-in planners of the other stages kept their limits

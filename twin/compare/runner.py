@@ -417,7 +417,62 @@ def _run_local(
             w.conn.close()
 
 
+def _shipped_config_names() -> dict[str, str]:
+    """{real path on this machine: file name} of every config twin ships (`twin.resources`)."""
+    from twin.resources import config_names, packaged_config
+
+    out: dict[str, str] = {}
+    for name in config_names():
+        p = packaged_config(name)
+        if p is not None:
+            out[str(p.resolve())] = p.name
+    return out
+
+
+def _run_on_node(task: RunTask, shipped_config: str | None) -> dict[str, Any]:
+    """`execute_run` on a Ray worker. A task's config is an absolute path on the driver; a config twin ships
+    (`shipped_config`, its file name) is the same file in this node's own install, wherever that is (a node
+    whose venv lives elsewhere would not find the driver's path). A user's own files are read at their path."""
+    if shipped_config is not None:
+        from dataclasses import replace
+
+        from twin.resources import packaged_config
+
+        found = packaged_config(shipped_config)
+        if found is None:  # an older twin on this node
+            return error_row(task, f"ConfigError: the twin on this node ships no config {shipped_config!r}")
+        task = replace(task, config=str(found))
+    return execute_run(task)
+
+
+def _ray_connect(ray: Any, address: str) -> None:
+    """`ray.init` on a running cluster; a refused connection or token is one line (ConfigError), not a trace.
+    Ray reports a wrong or missing token only as a failed connection (and C++ warnings naming
+    InvalidAuthToken), so the message says what to check for either."""
+    kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
+    auth_error = getattr(ray.exceptions, "AuthenticationError", ConnectionError)
+    try:
+        ray.init(address=address, **kw)
+    except (ConnectionError, auth_error, RuntimeError) as e:
+        text = " ".join(str(e).split())[:300].rstrip(".")
+        if os.environ.get("RAY_AUTH_MODE", "").lower() == "token":
+            hint = (
+                "is the cluster up (`ray status --address ADDRESS`), and is the token here (RAY_AUTH_TOKEN, "
+                "RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token) the cluster's (`ray get-auth-token` on the head)?"
+            )
+        else:
+            hint = (
+                "is the cluster up (`ray status --address ADDRESS`)? A cluster with token authentication wants "
+                "RAY_AUTH_MODE=token here too, with its token in ~/.ray/auth_token or RAY_AUTH_TOKEN"
+            )
+        raise ConfigError(f"cannot connect to the Ray cluster at {address}: {text}; {hint}") from None
+
+
 def _run_ray(todo: Sequence[RunTask], workers: int, address: str | None) -> Iterator[dict[str, Any]]:
+    """Run on Ray: on the cluster `address` (or RAY_ADDRESS) names, else on a local Ray of `workers` CPUs
+    started for this sweep and stopped after it. Only the driver writes results; every node needs the same
+    twin (`pip install 'twin[all]'`), nothing else of the driver's: shipped configs are found in each node's
+    own install. A run whose worker or node died is an error row (rerun by `--resume`), as locally."""
     try:
         import ray
     except ImportError as e:
@@ -426,20 +481,28 @@ def _run_ray(todo: Sequence[RunTask], workers: int, address: str | None) -> Iter
         ) from e
     started = False
     if not ray.is_initialized():
-        kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
         address = address or os.environ.get("RAY_ADDRESS")
         if address:
-            ray.init(address=address, **kw)
+            _ray_connect(ray, address)
+            if not ray.cluster_resources().get("CPU"):  # type: ignore[no-untyped-call]
+                log.warning("the Ray cluster at %s has no CPUs yet: runs wait for a node with CPUs to join", address)
         else:  # a local cluster of `workers` CPUs, started for this sweep and stopped after it
-            ray.init(num_cpus=workers, **kw)
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
         started = True
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(execute_run)
-        pending = [remote.remote(t) for t in todo]
+        shipped = _shipped_config_names()
+        remote = ray.remote(num_cpus=1, max_retries=0)(_run_on_node)
+        of_ref = {remote.remote(t, shipped.get(t.config)): t for t in todo}
+        pending = list(of_ref)
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
-                yield ray.get(ref)
+                try:
+                    row = ray.get(ref)
+                except ray.exceptions.RayError as e:  # the worker process or its node died mid-run
+                    first = (str(e).strip().splitlines() or [""])[0]
+                    row = error_row(of_ref[ref], f"{type(e).__name__}: {first}"[:500])
+                yield row
     finally:
         if started:
             ray.shutdown()
