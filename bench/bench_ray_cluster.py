@@ -40,7 +40,9 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from bench_compare import _difference  # noqa: E402 - the same row comparison as bench_compare
+from test_package import _build_wheel as build_wheel  # noqa: E402 - the wheel the packaging tests install
 
 VENV_BIN = Path(sys.executable).parent
 
@@ -67,20 +69,6 @@ def clean_env(**extra: str) -> dict[str, str]:
 
 
 # ---- the second node's virtualenv: only the wheel ---------------------------------------------------------
-def build_wheel(tmp: Path) -> Path:
-    """The wheel of a copy of the checkout (so the build writes nothing into it), as tests/test_package does."""
-    src = tmp / "src"
-    src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
-        shutil.copy2(ROOT / name, src / name)
-    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "generated", "build")
-    for name in ("twin", "plugins", "urdf", "configs"):
-        shutil.copytree(ROOT / name, src / name, symlinks=True, ignore=ignore)
-    run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-q", "--no-build-isolation", "-w", str(tmp)])
-    (wheel,) = tmp.glob("twin-*.whl")
-    return wheel
-
-
 def worker_venv(dest: Path, tmp: Path) -> tuple[Path, float]:
     """(the python of a virtualenv in `dest` holding the wheel of this checkout and its dependencies, seconds
     spent). An existing one (`--keep-venv`) gets only the new wheel."""
