@@ -23,8 +23,9 @@ requests in a reference scene and judges what comes back against the contract ev
 
 Every rule is judged twice: on what the plugin itself returns (`raw`: the plugin author's contract) and on
 what the runs get through `CheckedPlanner` (`checked`: twin's own checks refuse some breaches, such as a
-colliding trajectory or one beyond the joint limits, and pass others on, such as a planning-time overrun). A rule passes when both pass; a
-`PlanningError` with which CheckedPlanner refuses the plugin's output counts as refused, not as a crash.
+colliding trajectory or one beyond the joint limits, and pass others on, such as a planning-time
+overrun). A rule passes when both pass; a `PlanningError` with which CheckedPlanner refuses the plugin's
+output counts as refused, not as a crash.
 The planner is asked only for the goal kinds it declares (`goal_kinds`; nmpc: positions); a receding-
 horizon planner is driven through `CheckedPlanner.drive` on a kinematic plant, as `twin plan` does.
 Rules 2, 3 and 7 need a trajectory: a planner that solves none of the collision-free queries fails them.
