@@ -649,7 +649,7 @@ def plan_with(planner: Any, request: MotionRequest, scene: PlanningScene, contex
 
 
 def _checked(
-    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext, *, jerk: bool
+    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext, *, jerk: bool = True
 ) -> MotionResult:
     """The judge of a one-shot success: it starts at the start, ends on the goal, keeps the joint limits
     (jerk when `jerk`: the planner declares itself jerk-limited) and is collision-free; else a failure
