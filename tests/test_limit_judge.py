@@ -219,3 +219,38 @@ def test_twin_compare_rows_fail_it_with_the_ratios(acme_plugin, tmp_path):
     assert ruckig["success"] and 0.9 < ruckig["metrics"]["max_vel_ratio"] <= 1.0 + LIMIT_TOLERANCE
     summary = (tmp_path / "out" / "summary.md").read_text()
     assert "limit_violation" in summary
+
+
+# ---- the measure itself: what round-off may do, and what it may not hide -----------------------------------
+def _ruckig_swing(dt: float = 1e-3) -> Trajectory:
+    import ruckig
+
+    otg, inp, out = ruckig.Ruckig(6), ruckig.InputParameter(6), ruckig.Trajectory(6)
+    inp.current_position, inp.target_position = HOME.tolist(), FAR.tolist()
+    inp.max_velocity, inp.max_acceleration = LIMITS.max_joint_vel.tolist(), LIMITS.max_joint_acc.tolist()
+    inp.max_jerk = LIMITS.max_joint_jerk.tolist()
+    otg.calculate(inp, out)
+    t = np.linspace(0.0, out.duration, int(out.duration / dt) + 2)  # a last interval shorter than the rest
+    q, qd, qdd = (np.array(x) for x in zip(*(out.at_time(float(ti)) for ti in t), strict=True))
+    return Trajectory(t, q, qd, qdd)
+
+
+def test_position_round_off_is_not_a_violation_and_the_end_is_judged_where_it_is():
+    """A time-optimal motion on its limits, sampled every 1 ms, with 3 nrad of noise on its positions (what a
+    planner's own integration leaves): the third differences of 1 ms samples would read 1.1x the jerk limit;
+    the judge reads the limit. Its end is judged where the motion ends, not at the last sample it thins to."""
+    swing = _ruckig_swing()
+    noisy = Trajectory(
+        swing.t, swing.q + np.random.default_rng(0).uniform(-3e-9, 3e-9, swing.q.shape), swing.qd, swing.qdd
+    )
+    for traj in (swing, noisy):
+        excess = limit_excess(traj, LIMITS)
+        assert all(e.ratio <= 1.0 + LIMIT_TOLERANCE for e in excess.values()), excess
+        assert excess["jerk"].ratio > 0.99  # on its jerk limit: nothing hides a real excess
+    # the same motion 3 % faster everywhere breaks every limit, and the judge says so
+    fast = Trajectory(swing.t / 1.03, swing.q, swing.qd * 1.03, swing.qdd * 1.03**2)
+    assert {k for k, e in limit_excess(fast, LIMITS).items() if e.ratio > 1.0 + LIMIT_TOLERANCE} == {
+        "velocity",
+        "acceleration",
+        "jerk",
+    }
