@@ -250,6 +250,42 @@ def test_reset_returns_to_the_initial_state_bit_for_bit() -> None:
         np.testing.assert_array_equal(poses(world), expected)
 
 
+def test_a_reset_world_captures_what_a_new_world_captures_bit_for_bit() -> None:
+    """After captures (one prefetched), steps and a noisy controller's draws, `reset()` starts the sensor noise
+    and the controller noise over: the first capture of a reset world is the first capture of a new one."""
+    from twin.perception.capture import capture_frame, prefetch_next_capture
+
+    settings = load_config(
+        "robocup",
+        overrides=[
+            "camera.width=160",
+            "camera.height=120",
+            "camera.noise.scale=3",
+            "robot.tracking_noise_rad=0.002",
+            "robot.tracking_time_constant_s=0.02",
+        ],
+    )
+    assert settings.camera.noise.enabled and settings.camera.mount == "wrist"
+
+    def first_capture(world: World) -> list[np.ndarray]:
+        cap = capture_frame(world, settings, settle_s=0.1)
+        return [cap.frame.depth_m, cap.frame.rgb, cap.q, cap.T_base_camera_nominal, poses(world)]
+
+    with World(settings, seed=3, renderer="tiny") as fresh:
+        expected = first_capture(fresh)
+        second = first_capture(fresh)  # the same pose again: only the noise differs
+    assert not np.array_equal(expected[0], second[0]) and not np.array_equal(expected[2], second[2])
+    with World(settings, seed=3, renderer="tiny") as world:
+        first_capture(world)
+        world.step(50)
+        first_capture(world)
+        prefetch_next_capture(world, settings)
+        world.reset()
+        got = first_capture(world)
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 # ---- placement -------------------------------------------------------------------------------------
 def test_objects_never_overlap_at_spawn_and_centres_lie_in_the_region_over_20_seeds() -> None:
     settings = load_config("configs/robocup.yaml")

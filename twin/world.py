@@ -216,6 +216,9 @@ class World:
         self._egl = False
         self._egl_warm = False  # the renderer has rendered its warm-up frames (see _EGL_WARM_UP_FRAMES)
         self._steps = 0
+        # how many times `reset()` rebuilt the scene: per-world bookkeeping kept outside the world (the sensor
+        # noise streams of `twin.perception.capture`) starts over when it changes, as for a new world
+        self.generation = 0
         # called while stepping: (every n steps, fn, whether fn gets the world itself or a read-only view)
         self._observers: list[tuple[int, Callable[[Any], None], bool]] = []
         self.dt = 1.0 / settings.world.physics_hz
@@ -544,11 +547,18 @@ class World:
 
         The scene is rebuilt from scratch (same ids, same call sequence), so a reset world evolves
         bit-identically to a new one; restoring a saved state leaves solver caches behind (~40 um drift).
+        Everything a new world starts with starts over: the simulated time, the arm's and the gripper's
+        commands, a faulty controller's lag and noise stream (`robot.tracking_*`), and, through
+        `generation`, the sensor noise streams of its captures (the first capture after a reset draws what
+        a new world's first capture draws). What the caller attached stays: observers and disturbers
+        (`observe`, `disturb`; they count steps from the reset like from construction), and the renderer
+        (its warm-up frames are done; PyBullet keeps its frame count across a reset).
         """
         c = self._check()
         with _quiet_stdout(self._egl):
             pb.resetSimulation(physicsClientId=c)
             self._build_scene()
+        self.generation += 1
 
     def close(self) -> None:
         """Disconnect from PyBullet (idempotent)."""

@@ -68,13 +68,31 @@ def noise_rng(seed: int, stream: int = 0) -> np.random.Generator:
     return np.random.default_rng([int(seed), 0x5EED, int(stream)])
 
 
-# captures taken so far per world: each capture's noise is drawn from its own stream (a real sensor's noise
-# is new in every frame), the first from stream 0, and a run stays repeatable
-_captures_taken: weakref.WeakKeyDictionary[Any, int] = weakref.WeakKeyDictionary()
-# per world, the noise draws of its next capture (its index and them), started by `prefetch_next_capture`;
-# worlds whose frames left the plan (pixels without depth: the draws depend on the image) are not prefetched
-_next_draws: weakref.WeakKeyDictionary[Any, tuple[int, PrefetchedDraws]] = weakref.WeakKeyDictionary()
-_off_plan: weakref.WeakSet[Any] = weakref.WeakSet()
+@dataclass
+class _NoiseBook:
+    """A world's capture bookkeeping since it was built or last reset (`World.generation`).
+
+    `taken`: captures so far; each capture's noise is drawn from its own stream (a real sensor's noise is
+    new in every frame), the first from stream 0, and a run stays repeatable. `next_draws`: the noise draws
+    of the next capture (its index and them), started by `prefetch_next_capture`. `off_plan`: its frames
+    left the plan (pixels without depth: the draws depend on the image), so it is not prefetched.
+    """
+
+    generation: int
+    taken: int = 0
+    next_draws: tuple[int, PrefetchedDraws] | None = None
+    off_plan: bool = False
+
+
+_books: weakref.WeakKeyDictionary[Any, _NoiseBook] = weakref.WeakKeyDictionary()
+
+
+def _book(world: World) -> _NoiseBook:
+    """The world's bookkeeping; a reset world (another generation) starts a new one, as a new world does."""
+    book = _books.get(world)
+    if book is None or book.generation != world.generation:
+        book = _books[world] = _NoiseBook(world.generation)
+    return book
 
 
 def capture_frame(
@@ -90,9 +108,9 @@ def capture_frame(
     """Settle, render and add sensor noise; for a wrist camera first go to the capture/calibration pose.
 
     `settle_s`: None takes `camera.settle_s`. `rng`: None draws the noise from `noise_rng(world.seed, n)`
-    for the world's n-th capture (n = 0, 1, ...). `prefetch_noise`: the noise's random numbers are drawn
-    on a second thread while the scene settles (`PrefetchedDraws`: the same numbers, only sooner), unless
-    `prefetch_next_capture` started them earlier.
+    for the world's n-th capture (n = 0, 1, ..., counted since the world was built or last reset).
+    `prefetch_noise`: the noise's random numbers are drawn on a second thread while the scene settles
+    (`PrefetchedDraws`: the same numbers, only sooner), unless `prefetch_next_capture` started them earlier.
     """
     from twin.kinematics import UR5e
 
@@ -104,12 +122,13 @@ def capture_frame(
     steps = int(round(settle * settings.world.physics_hz))
     late = min(steps, int(round(cam.latency_s * settings.world.physics_hz)))  # the frame is from this far back
     depth_filter = settings.perception.depth_filter
-    plan = _burst_plan(settings) if prefetch_noise and world not in _off_plan else []
+    book = _book(world)
+    plan = _burst_plan(settings) if prefetch_noise and not book.off_plan else []
     draws: np.random.Generator | PrefetchedDraws
     if rng is None:
-        n = _captures_taken.get(world, 0)
-        _captures_taken[world] = n + 1
-        pending = _next_draws.pop(world, None)
+        n = book.taken
+        book.taken = n + 1
+        pending, book.next_draws = book.next_draws, None
         if pending is not None and pending[0] == n and pending[1].plan == plan:
             draws = pending[1]
         else:
@@ -144,7 +163,7 @@ def capture_frame(
         if isinstance(draws, PrefetchedDraws):
             draws.finish()
             if not draws.followed_plan:
-                _off_plan.add(world)
+                book.off_plan = True
     with stage("perception.depth_filter") as filtering:
         frame = filter_frames(frames, depth_filter)
     log.debug("captured a %dx%d frame at the %s pose (mount %s)", intr.width, intr.height, pose, cam.mount)
@@ -157,10 +176,10 @@ def prefetch_next_capture(world: World, settings: Settings) -> None:
     stream) on a second thread: a task calls this once it has perceived a capture, so the draws run while
     the arm works (not beside perception) and are ready when the next capture settles. Changes no number."""
     plan = _burst_plan(settings)
-    n = _captures_taken.get(world, 0)
-    pending = _next_draws.get(world)
-    if plan and world not in _off_plan and (pending is None or pending[0] != n or pending[1].plan != plan):
-        _next_draws[world] = (n, PrefetchedDraws(noise_rng(world.seed, n), plan))
+    book = _book(world)
+    n, pending = book.taken, book.next_draws
+    if plan and not book.off_plan and (pending is None or pending[0] != n or pending[1].plan != plan):
+        book.next_draws = (n, PrefetchedDraws(noise_rng(world.seed, n), plan))
 
 
 def _burst_plan(settings: Settings) -> list[tuple[str, int]]:
