@@ -312,6 +312,10 @@ class ObjectOutcome:
     cycle_time_s: float = 0.0  # simulated time spent on this object
     pose_error_m: float | None = None  # perceived vs true centroid, xy
     failure: str | None = None  # the failure's name (a twin.failures.FAILURES key) when the task knew it
+    # the stage that failed ("transfer", "descent", "perception", ...; None when placed) and the planner that
+    # planned it (the stage's planner block name; None when no motion failed, e.g. a grasp not sensed)
+    stage: str | None = None
+    planner: str | None = None
 
 
 @dataclass(frozen=True)
@@ -347,6 +351,8 @@ class RunSummary:
                     "placed": o.placed,
                     "error": o.error,
                     "failure": o.failure,
+                    "stage": o.stage,
+                    "planner": o.planner,
                     "cycle_time_s": o.cycle_time_s,
                     "pose_error_m": o.pose_error_m,
                 }

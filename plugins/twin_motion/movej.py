@@ -118,7 +118,9 @@ class MotionPlannerBase:
                 Status.INVALID_START, f"start joint {j + 1} = {q[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]"
             )
         if scene.in_collision(q):
-            return MotionResult(Status.INVALID_START, "the start configuration is in collision")
+            return MotionResult(
+                Status.INVALID_START, f"the start configuration is in collision ({colliding_pair(scene, q)})"
+            )
         return None
 
     def goal_configuration(

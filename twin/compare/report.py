@@ -149,6 +149,11 @@ class SummaryRow:
     straight_known: int = 0  # query runs that recorded it
     success_ci: tuple[float, float] | None = None  # 95 % Wilson interval of success_rate (0..1)
     failures: dict[str, int] = field(default_factory=dict)  # reason -> runs, in FAILURES order, nonzero only
+    # failed task runs by where they failed (the worker's `failure_in`): in a stage the compared planner
+    # planned, or elsewhere; and "stage (planner)" -> failed task runs, for the ones that failed elsewhere
+    task_failed_in_planner: int = 0
+    task_failed_elsewhere: int = 0
+    task_failed_stages: dict[str, int] = field(default_factory=dict)
 
     @property
     def success_rate(self) -> float | None:
@@ -259,6 +264,20 @@ def _failure_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
     return {k: counts[k] for k in known + sorted(set(counts) - set(FAILURES))}
 
 
+def _task_failure_places(rows: list[dict[str, Any]]) -> tuple[int, int, dict[str, int]]:
+    """(failed task runs in the compared planner's stages, failed elsewhere, "stage (planner)" -> runs)."""
+    failed = [r for r in rows if r.get("kind") == "task" and r.get("failure_in") is not None]
+    stages = Counter(
+        f"{r.get('failed_stage') or '?'}" + (f" ({r['failed_planner']})" if r.get("failed_planner") else "")
+        for r in failed
+    )
+    return (
+        sum(r["failure_in"] == "planner" for r in failed),
+        sum(r["failure_in"] != "planner" for r in failed),
+        dict(sorted(stages.items(), key=lambda kv: (-kv[1], kv[0]))),
+    )
+
+
 def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> SummaryRow:
     stats = {
         d.key: Stat.of(
@@ -276,6 +295,7 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
     common, n_common = counts.most_common(1)[0] if counts else (None, 0)
     known = [r["straight_free"] for r in rows if r.get("straight_free") is not None]
     ok = sum(1 for r in rows if r.get("success"))
+    in_planner, elsewhere, stages = _task_failure_places(rows)
     return SummaryRow(
         planner=planner,
         scenario=scenario,
@@ -291,6 +311,9 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
         straight_known=len(known),
         success_ci=wilson_ci(ok, len(rows)),
         failures=_failure_counts(rows),
+        task_failed_in_planner=in_planner,
+        task_failed_elsewhere=elsewhere,
+        task_failed_stages=stages,
     )
 
 
@@ -622,6 +645,22 @@ def _markdown(summary: Summary) -> str:
         for r in summary.overall:
             lines.append(f"| {r.planner} | " + " | ".join(str(r.failures.get(k, 0)) for k in reasons) + " |")
         lines += [""] + [f"- `{k}`: {FAILURES.get(k, 'a reason outside the fixed set')}" for k in reasons]
+    if any(r.task_failed_in_planner or r.task_failed_elsewhere for r in summary.overall):
+        lines += ["", "## Task runs that failed: where", ""]
+        lines += [
+            "In a stage the planner under test planned (its transfer, physics during it included: an object "
+            "dropped in its transfer is its failure) or elsewhere (the fixed stages, perception, grasping), by "
+            "the first object not placed; the stages name the planner that planned them.",
+            "",
+            "| planner | task runs failed | in its stages | elsewhere | failed stages |",
+            "|---|---:|---:|---:|---|",
+        ]
+        for r in summary.overall:
+            n = r.task_failed_in_planner + r.task_failed_elsewhere
+            if n:
+                where = ", ".join(f"{k} x{v}" for k, v in r.task_failed_stages.items())
+                counts = f"{n} | {r.task_failed_in_planner} | {r.task_failed_elsewhere}"
+                lines.append(f"| {r.planner} | {counts} | {where} |")
     lines += ["", "## Metrics: median (n = runs with a value) [95% CI] / p95", ""]
     lines += ["| metric | unit | " + " | ".join(planners) + " |", "|---|---|" + "---:|" * len(planners)]
     for k in keys:

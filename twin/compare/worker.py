@@ -398,11 +398,33 @@ def _run_task(task: RunTask, row: dict[str, Any]) -> None:
     row["reason"] = "; ".join(f"{o.id}: {o.error}" for o in failed)
     # the first object not placed, by the name its failed stage gave (the reason's words for older outcomes)
     row["failure"] = (failed[0].failure or failure_of_task([failed[0].error or ""])) if failed else None
+    row.update(task_attribution(failed))
     # the judge's limit ratios over the compared (transfer) planner's motions
     transfer = summary.metrics.get(block.name, {}) if isinstance(summary.metrics, dict) else {}
     row["metrics"].update({k: transfer.get(k) for k in limit_metrics({})})
     row["timing"]["wall_time_s"] = float(summary.wall_time_s)
     row["task"] = summary.to_json()  # per-object outcomes and the run's planner metrics
+
+
+def task_attribution(failed: list[Any]) -> dict[str, Any]:
+    """Where a task row failed (its first object not placed, `ObjectOutcome`s): the stage and the planner
+    that planned it, and whether that stage was one the compared planner plans (`failure_in`: "planner";
+    its stages are those of the `transfer` group, physics during its motion included: an object dropped in
+    its transfer is its failure) or one it does not ("elsewhere": the fixed stages, perception, grasping).
+    Also the count of objects lost each way."""
+    from twin.tasks.cell import STAGE_GROUPS
+
+    def mine(o: Any) -> bool:
+        return STAGE_GROUPS.get(o.stage or "") == "transfer"
+
+    first = failed[0] if failed else None
+    return {
+        "failed_stage": first.stage if first else None,
+        "failed_planner": first.planner if first else None,
+        "failure_in": None if first is None else ("planner" if mine(first) else "elsewhere"),
+        "objects_failed_in_planner": sum(mine(o) for o in failed),
+        "objects_failed_elsewhere": sum(not mine(o) for o in failed),
+    }
 
 
 def json_safe(x: Any) -> Any:

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -32,6 +32,8 @@ __all__ = [
     "GripStatus",
     "GripperReading",
     "StageFailed",
+    "clear_failure",
+    "note_failure",
     "stage_block",
     "stage_planners",
     "top_down",
@@ -56,19 +58,67 @@ STAGE_GROUPS = {stage: group for stage, (group, _) in STAGES.items()}
 DEFAULT_PLANNERS = {"movej": "ruckig.movej", "movel": "toppra.movel", "transfer": "ruckig.movej"}
 # stages in which the fingers work at an object: a finger touching a loose object is not a fault there
 _GRASPING_STAGES = frozenset({"descent", "ascent", "place"})
+# a fixed stage's choice (a grasp yaw) is clear when the gripper keeps this far from the planning scene:
+# the stage planners' own margin is below it, so a clear choice is not refused for a hair
+CHOOSE_CLEARANCE_M = 0.01
+# over the top: the tcp's path across passes this far above the highest thing in the planning scene
+OVER_MARGIN_M = 0.05
+# refusals that say the direct way runs into something (another way may not)
+_PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
+
+
+def _half_extents(kind: str, size: tuple[float, ...]) -> np.ndarray:
+    """(3,) half extents along its own axes of a primitive (twin.urdf_model.Shape kinds and sizes)."""
+    if kind == "box":
+        return np.asarray(size, dtype=float) / 2.0
+    if kind in ("cylinder", "capsule"):
+        r, length = size[0], size[1] + (2 * size[0] if kind == "capsule" else 0.0)
+        return np.array([r, r, length / 2.0])
+    return np.full(3, float(size[0]))  # a sphere
 
 
 class StageFailed(Exception):
     """A stage could not be done; the task logs the reason and moves on to the next object.
 
     `failure`: the failure's name (a `twin.failures.FAILURES` key) when the stage knows it, as a motion
-    that failed does from its planner's result and the judge's verdict; None leaves it to the reason."""
+    that failed does from its planner's result and the judge's verdict; None leaves it to the reason.
+    `planner`: the planner block that planned the failed motion (None when no motion failed: a grasp not
+    sensed, an object dropped). `moved`: whether the arm moved before the stage failed; a stage refused
+    in planning did not, so the task may still choose another way there."""
 
-    def __init__(self, stage: str, reason: str, *, failure: str | None = None):
+    def __init__(
+        self, stage: str, reason: str, *, failure: str | None = None, planner: str | None = None, moved: bool = True
+    ):
         super().__init__(f"{stage}: {reason}")
         self.stage = stage
         self.reason = reason
         self.failure = failure
+        self.planner = planner
+        self.moved = moved
+
+
+class FailureRecord(Protocol):
+    """What a task keeps about an object's failed attempts (its `_Attempt` or `_Target`)."""
+
+    error: str | None
+    failure: str | None
+    stage: str | None
+    planner: str | None
+
+
+def note_failure(rec: FailureRecord, e: StageFailed, attempt: int) -> None:
+    """Keep a failed attempt's reason on `rec`. The first failure is the object's: a cube dropped in the
+    transfer and then lying where no grasp reaches failed in the transfer; later attempts' reasons are
+    added to the text ("...; attempt 2: descent: ...")."""
+    if rec.stage is None:
+        rec.error, rec.failure, rec.stage, rec.planner = str(e), e.failure, e.stage, e.planner
+    else:
+        rec.error = f"{rec.error}; attempt {attempt}: {e}"
+
+
+def clear_failure(rec: FailureRecord) -> None:
+    """The object was placed after all: no failure is its."""
+    rec.error = rec.failure = rec.stage = rec.planner = None
 
 
 def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
@@ -182,34 +232,64 @@ class Cell:
         checked loop; StageFailed (with the planner's or the safety stop's reason) if it does not get there.
 
         `retreat`: a move away after a protective stop; the safety monitor does not stop it for touching
-        the loose objects the robot touches as it starts (it is moving off them), only for anything new."""
+        the loose objects the robot touches as it starts (it is moving off them), only for anything new.
+
+        A start the planner refuses because it is in collision in the planning scene (after a contact, the
+        gripper inside an obstacle or object perceived a little off) is backed off from
+        (`twin.tasks.recovery.back_off`: a few cm along the way that separates the pair, checked) and the
+        stage is planned once more; when that fails, the reason names the pair and why backing off failed."""
+        from twin.tasks.recovery import back_off
+
         if self.on_stage:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
         name = self.block(group).name
-        request = MotionRequest(
-            self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
-        )
-        ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
-        if retreat:
-            ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
-        result, record = plan_and_execute(
-            self.world,
-            self.planner(group),
-            request,
-            self.scene,
-            self.context,
-            stage=stage,
-            planner_name=name,
-            ignore_bodies=ignore,
-            fingers_may_touch_objects=stage in _GRASPING_STAGES,
-        )
-        self.records.append(record)
+        backed_off = False
+        while True:
+            request = MotionRequest(
+                self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
+            )
+            ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
+            if retreat:
+                ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
+            result, record = plan_and_execute(
+                self.world,
+                self.planner(group),
+                request,
+                self.scene,
+                self.context,
+                stage=stage,
+                planner_name=name,
+                ignore_bodies=ignore,
+                fingers_may_touch_objects=stage in _GRASPING_STAGES,
+            )
+            self.records.append(record)
+            if (
+                backed_off
+                or result.status is not Status.INVALID_START
+                or not self.kin.within_limits(request.start)
+                or not self.scene.in_collision(request.start)
+            ):
+                break
+            backed = back_off(self)
+            if not backed.clear:
+                log.info("%s: the start is in collision (%s); %s", stage, backed.pair, backed.reason)
+                raise StageFailed(
+                    stage,
+                    f"{name}: {result.status.value}: the start is in collision ({backed.pair}); {backed.reason}",
+                    failure=failure_of_plan(result.status.value, result.reason, result.info),
+                    planner=name,
+                    moved=backed.travel_m > 0.0,
+                )
+            log.info("%s: the start was in collision (%s); %s, planning again", stage, backed.pair, backed.reason)
+            backed_off = True
         if result.status is not Status.SUCCESS:
             raise StageFailed(
                 stage,
                 f"{name}: {result.status.value}: {result.reason}",
                 failure=failure_of_plan(result.status.value, result.reason, result.info),
+                planner=name,
+                moved=backed_off or record.duration_s > 0.0,
             )
         return result
 
@@ -227,6 +307,150 @@ class Cell:
 
     def move_joints(self, stage: str, q: np.ndarray, **kw: Any) -> MotionResult:
         return self.move(stage, JointGoal(np.asarray(q, dtype=float)), **kw)
+
+    # ---- choosing before moving -----------------------------------------------------------------
+    # A stage the compared planner does not plan must not fail where an equivalent choice would not: each
+    # picks, in the planning scene, a grasp yaw that is clear, and goes over the top of the scene when its
+    # planner refuses the direct way. Only planning is tried; nothing moves until a choice is made.
+    def clearance_at(self, T_tcp: np.ndarray, q_ref: np.ndarray) -> float:
+        """Signed distance (m) from the planning scene of the arm with its tcp at `T_tcp` (4, 4), in the IK
+        solution nearest `q_ref` (6,) (the one a planner would take from there); -inf when out of reach."""
+        sols = self.kin.ik(T_tcp)
+        if len(sols) == 0:
+            return -math.inf
+        q = sols[int(np.argmin(np.abs(sols - np.asarray(q_ref, dtype=float)).sum(axis=1)))]
+        return float(self.scene.min_distance(q, include_self=False).distance)
+
+    def choose_top_down_yaw(
+        self,
+        points: Sequence[np.ndarray | tuple[float, float, float]],
+        yaws: list[float],
+        *,
+        q_ref: np.ndarray | None = None,
+        min_clearance_m: float = CHOOSE_CLEARANCE_M,
+    ) -> tuple[float, float]:
+        """(yaw, clearance m): the first of `yaws` (in order of preference) at which the tcp pointing down
+        stays `min_clearance_m` clear of the planning scene at every one of `points` (e.g. a grasp, the
+        hover above it and the way between), else the one with the most clearance. `q_ref`: the joints a
+        planner starts from (default: the measured ones)."""
+        if not yaws:
+            raise ValueError("choose_top_down_yaw needs at least one yaw")
+        q0 = self.world.joint_positions() if q_ref is None else np.asarray(q_ref, dtype=float)
+        best, best_c = yaws[0], -math.inf
+        for yaw in yaws:
+            c = min(self.clearance_at(top_down(p, yaw), q0) for p in points)
+            if c >= min_clearance_m:
+                return yaw, c
+            if c > best_c + 1e-4:
+                best, best_c = yaw, c
+        log.info(
+            "no yaw keeps the gripper %.0f mm clear of the planning scene; the clearest, %.0f deg, keeps %.1f mm",
+            1e3 * min_clearance_m,
+            math.degrees(best),
+            1e3 * best_c,
+        )
+        return best, best_c
+
+    def safe_height(self) -> float:
+        """A tcp height from which the gripper, and what it holds, passes over everything in the planning
+        scene: the top of its highest object, plus what hangs below the tcp, plus `OVER_MARGIN_M`."""
+        top = 0.0
+        for shapes in self.scene.environment_shapes().values():
+            for kind, size, T in shapes:
+                top = max(top, float(T[2, 3] + np.abs(T[2, :3]) @ _half_extents(kind, size)))
+        hang = 0.0
+        held = self.scene.attached_box()
+        if held is not None:
+            _, held_size, T_held = held
+            hang = float(T_held[2, 3] + np.abs(T_held[2, :3]) @ (held_size / 2.0))  # the tcp's z points down
+        return top + max(hang, 0.0) + OVER_MARGIN_M
+
+    def move_pose_over(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
+        """`move_pose`, and when the stage's planner refuses the direct way because it runs into something
+        (planned, not moved), go over the top instead: straight up to `safe_height`, across at that height
+        with the stage's planner, and straight down to `T_tcp`; refused again (the arm's own links in the
+        way: another planner's motion left it in an awkward configuration), by way of home."""
+        try:
+            return self.move_pose(stage, T_tcp)
+        except StageFailed as e:
+            if e.moved or e.failure not in _PATH_COLLIDES:
+                raise
+            log.info("%s: the direct way runs into something (%s); going over the top", stage, e.reason)
+        above = np.array(T_tcp, dtype=float)
+        above[2, 3] = max(above[2, 3], self.safe_height())
+        try:
+            self._rise_to_safe_height()
+            result = self.move_pose(stage, above)
+        except StageFailed as e:
+            if e.moved or e.failure not in _PATH_COLLIDES:
+                raise
+            log.info("%s: over the top runs into something too (%s); by way of home", stage, e.reason)
+            self.move_joints_over("home", np.asarray(self.settings.robot.home, dtype=float))
+            result = self.move_pose(stage, above)
+        if above[2, 3] > T_tcp[2, 3]:
+            result = self.move_pose("descent", T_tcp)
+        return result
+
+    def move_joints_over(self, stage: str, q: np.ndarray) -> MotionResult:
+        """`move_joints`, and when the stage's planner refuses the direct way because it runs into
+        something (planned, not moved), by the first of a few other ways whose straight joint legs are
+        clear in the planning scene (checked before anything moves): the wrist joints first, the arm
+        joints first, straight up to `safe_height` first, up and then the wrist, or through the upright
+        posture. A way that is not clear is never started; none clear: the refusal stands."""
+        q = np.asarray(q, dtype=float)
+        try:
+            return self.move_joints(stage, q)
+        except StageFailed as e:
+            if e.moved or e.failure not in _PATH_COLLIDES:
+                raise
+            refused = e
+        q0 = self.world.joint_positions()
+        raised = self._raised(q0)
+        ways: list[tuple[str, list[np.ndarray]]] = [
+            ("wrist first", [np.concatenate([q0[:3], q[3:]])]),
+            ("arm first", [np.concatenate([q[:3], q0[3:]])]),
+        ]
+        if raised is not None:
+            ways += [
+                ("up first", [raised]),
+                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])]),
+            ]
+        # the arm straight up (the "candle" posture): from it the elbow and wrist unfold either way, which a
+        # straight joint motion between two elbow branches cannot do without folding through itself
+        ways.append(("through the upright posture", [np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])]))
+        for name, via in ways:
+            if not self.scene.check_path(np.array([q0, *via, q])).free:
+                continue
+            log.info("%s: the direct way runs into something (%s); going %s", stage, refused.reason, name)
+            for k, qv in enumerate(via):
+                if k == 0 and raised is not None and qv is raised:
+                    self._rise_to_safe_height()
+                else:
+                    self.move_joints(stage, qv)
+            return self.move_joints(stage, q)
+        raise refused
+
+    def _raised(self, q: np.ndarray) -> np.ndarray | None:
+        """The joints (6,) with the tcp straight above where it is at `q`, at `safe_height` (the IK solution
+        nearest `q`); None when it is there already or that is out of reach."""
+        T = self.kin.fk(q)
+        z = self.safe_height()
+        if T[2, 3] >= z:
+            return None
+        T[2, 3] = z
+        sols = self.kin.ik(T)
+        if len(sols) == 0:
+            return None
+        return np.asarray(sols[int(np.argmin(np.abs(sols - q).sum(axis=1)))], dtype=float)
+
+    def _rise_to_safe_height(self) -> float:
+        """Move the tcp straight up to `safe_height` (no move when it is there already); that height."""
+        z = self.safe_height()
+        T = self.kin.fk(self.world.joint_positions())
+        if T[2, 3] < z:
+            T[2, 3] = z
+            self.move_pose("ascent", T)
+        return z
 
     # ---- gripper --------------------------------------------------------------------------------
     def settle(self, seconds: float) -> None:
@@ -343,14 +567,30 @@ class Cell:
 
     def recover(self) -> None:
         """After a failed stage: let go, forget the held model, rise straight up to 0.3 m if a planner can
-        (a retreat: off whatever the gripper was stopped against)."""
+        (a retreat: off whatever the gripper was stopped against). Then make sure nothing stayed between
+        the opened fingers (`twin.tasks.jam`): fingers that did not open fully, the wrist camera seeing
+        something there, or (without a wrist camera) the stop that led here naming a finger on a loose
+        object while the gripper should have been empty. What is stuck is set down on what lies below and
+        let go again, a bounded number of tries; the run goes on either way."""
+        from twin.tasks.jam import free_jam, sense_jam
+
+        last = self.records[-1] if self.records else None
+        empty = self.grasp is None and self.scene.attached is None  # nothing should have been in the fingers
+        stop = last.reason if last is not None and last.status == Status.EXECUTION_STOPPED.value and empty else None
+        held = self.scene.attached_box()
+        hang = None if held is None else float(held[2][2, 3] + np.abs(held[2][2, :3]) @ (held[1] / 2.0))
         self.release()
         T = self.kin.fk(self.world.joint_positions())
         T[2, 3] = max(T[2, 3], 0.30)
+        risen = True
         try:
             self.move_pose("ascent", T, retreat=True)
         except StageFailed:
             log.info("recovery: could not rise from %s", np.round(T[:3, 3], 3).tolist())
+            risen = False  # still low: what the wrist camera sees below may be what it let go
+        reading = sense_jam(self, stop_reason=stop, camera=risen)
+        if reading.jammed:
+            free_jam(self, self.kin.fk(self.world.joint_positions()), hang_m=hang, reading=reading)
 
     # ---- bookkeeping ----------------------------------------------------------------------------
     def metrics(self) -> dict[str, Any]:

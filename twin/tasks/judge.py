@@ -180,6 +180,8 @@ class RobocupTarget(Protocol):
 
     error: str | None
     failure: str | None
+    stage: str | None
+    planner: str | None
     done: bool
     cycle_time_s: float
     first_estimate: np.ndarray | None
@@ -219,13 +221,13 @@ class RobocupReferee:
                 if bin_ is not None
                 else Verdict(False, f"there is no fixture {bin_name!r}")
             )
-            failure = None
+            failure = stage = planner = None
             if verdict.placed:
                 err = None
             elif not mine:
                 err = "perception: never seen on the table" + (f" (the run stopped: {stopped})" if stopped else "")
             elif mine[-1].error:
-                err, failure = mine[-1].error, mine[-1].failure
+                err, failure, stage, planner = mine[-1].error, mine[-1].failure, mine[-1].stage, mine[-1].planner
             elif mine[-1].done:
                 err = f"place: released, but {verdict.reason}{self._elsewhere(oid, bin_name)}"
             else:
@@ -242,6 +244,8 @@ class RobocupReferee:
                     placed=verdict.placed,
                     error=err,
                     failure=failure,
+                    stage=stage or _stage_of(err),
+                    planner=planner,
                     cycle_time_s=sum(t.cycle_time_s for t in mine),
                     pose_error_m=float(np.linalg.norm(first[:2] - o0.position[:2])) if first is not None else None,
                 )
@@ -263,6 +267,8 @@ class WarehouseAttempt(Protocol):
     true_id: int | None
     error: str | None
     failure: str | None
+    stage: str | None
+    planner: str | None
     cycle_time_s: float
 
 
@@ -293,13 +299,13 @@ class WarehouseReferee:
                 else Verdict(False, "no drop zone")
             )
             att = by_true.get(oid)
-            failure = None
+            failure = stage = planner = None
             if verdict.placed:
                 err = None
             elif att is None:
                 err = global_error or "perception: never seen on the table"
             elif att.error:
-                err, failure = att.error, att.failure
+                err, failure, stage, planner = att.error, att.failure, att.stage, att.planner
             else:
                 err = f"place: released, but {verdict.reason}"
             out.append(
@@ -311,11 +317,21 @@ class WarehouseReferee:
                     placed=verdict.placed,
                     error=err,
                     failure=failure,
+                    stage=stage or _stage_of(err),
+                    planner=planner,
                     cycle_time_s=att.cycle_time_s if att else 0.0,
                     pose_error_m=float(np.linalg.norm(att.cube.centroid[:2] - o0.position[:2])) if att else None,
                 )
             )
         return out
+
+
+def _stage_of(error: str | None) -> str | None:
+    """The stage an outcome's error names ("<stage>: <why>"), for an error no failed stage gave."""
+    if not error:
+        return None
+    head, sep, _ = error.partition(":")
+    return head if sep and head and " " not in head else None
 
 
 # ---- simulator plumbing (never a task's decision) -----------------------------------------------

@@ -26,7 +26,8 @@ from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame, prefetch_next_capture
 from twin.perception.pipeline import camera_extrinsics, make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
-from twin.tasks.cell import Cell, StageFailed, top_down
+from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
+from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
@@ -58,7 +59,6 @@ _WALL_MARGIN_M = 0.005  # a placed object's footprint keeps this from the inner 
 _SPOT_STEP_M = 0.005  # the grid of candidate release points in a bin
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
 _UNKNOWN_PAD_M = 0.01  # an unnamed thing on the table is planned around this much wider than it was seen
-_GRASP_CLEARANCE_M = 0.01  # a grasp yaw is turned away from neighbours only when the gripper comes closer
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,6 +151,8 @@ class _Target:
     done: bool = False
     error: str | None = None
     failure: str | None = None  # the failure's name, when the failed stage knew it (StageFailed.failure)
+    stage: str | None = None  # the stage that failed and the planner that planned it (StageFailed's)
+    planner: str | None = None
     cycle_time_s: float = 0.0
     first_estimate: np.ndarray | None = None
     true_ids: set[int] = field(default_factory=set)  # metrics only (the referee's), never decided on
@@ -193,10 +195,10 @@ def grasp_yaw_symmetry(est: ObjectEstimate) -> float | None:
 def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, float], yaw: float) -> float:
     """The grasp yaw to use. An object that can be gripped at other yaws too (`grasp_yaw_symmetry`) is
     gripped at the one of them the wrist reaches with the least turn after the base-first alignment (a
-    standing cylinder's perceived yaw says nothing: any yaw grips it), unless the gripper there comes
-    closer than `_GRASP_CLEARANCE_M` to something in the planning scene; then at the next one that does not,
-    or the one with the most clearance (a standing can beside a standing marker is gripped with the
-    fingers turned away from it). Clearance from FCL at the configuration IK gives nearest the joints."""
+    standing cylinder's perceived yaw says nothing: any yaw grips it), unless the gripper there or on its
+    way down from the hover comes closer than `CHOOSE_CLEARANCE_M` to something in the planning scene;
+    then at the next one that does not, or the one with the most clearance (a standing can beside a
+    standing marker is gripped with the fingers turned away from it; `Cell.choose_top_down_yaw`)."""
     turn = grasp_yaw_symmetry(est)
     if turn is None:
         return yaw
@@ -213,22 +215,10 @@ def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, f
         (yaw_ref + wrap_half_turn(base + k * step - yaw_ref) for k in range(n)),
         key=lambda a: abs(a - yaw_ref),
     )
-
-    def clearance(a: float) -> float:
-        sols = cell.kin.ik(top_down(xyz, a))
-        if len(sols) == 0:
-            return -math.inf
-        q = sols[int(np.argmin(np.abs(sols - q_ref).sum(axis=1)))]
-        return float(cell.scene.min_distance(q, include_self=False).distance)
-
-    best, best_c = candidates[0], -math.inf
-    for a in candidates:
-        c = clearance(a)
-        if c >= _GRASP_CLEARANCE_M:
-            best, best_c = a, c
-            break
-        if c > best_c + 1e-4:
-            best, best_c = a, c
+    x, y, z = xyz
+    hover_m = cell.settings.task.robocup.hover_m
+    way_down = [(x, y, z), (x, y, z + hover_m / 2), (x, y, z + hover_m)]  # the descent from the hover
+    best, best_c = cell.choose_top_down_yaw(way_down, candidates, q_ref=q_ref)
     if best != candidates[0]:
         log.info(
             "robocup: %s gripped at yaw %.0f deg, %.0f mm clear of the planning scene",
@@ -362,7 +352,7 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     # (2) pre-grasp hover, gripper opened to the lookup width
     cell.open_gripper(min(w_grip, max_opening))
     hover = top_down((x, y, z_grasp + task.hover_m), yaw)
-    cell.move_pose("hover", hover)
+    cell.move_pose_over("hover", hover)
     # (3) descent
     cell.move_pose("descent", top_down((x, y, z_grasp), yaw))
     # (4) close and settle: the finger position says whether the object is between the fingers
@@ -407,17 +397,24 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     if not _at_pose(cell, above):
         cell.move_pose("place", above)
     # (7) place: lower it into the bin (a tall object dropped from above the walls topples out), release
-    cell.move_pose("place", top_down((xy[0], xy[1], tcp_z), yaw))
+    release_pose = top_down((xy[0], xy[1], tcp_z), yaw)
+    cell.move_pose("place", release_pose)
     cell.release(release_w)
-    opened = cell.read_gripper().opening_m
-    if opened < release_w - _WALL_MARGIN_M:
-        raise StageFailed(
-            "place",
-            f"the fingers opened only to {1000 * opened:.0f} of {1000 * release_w:.0f} mm: "
-            "the object is stuck between them",
-        )
     placed.append(footprint)
-    cell.move_pose("ascent", top_down((xy[0], xy[1], rim_z + task.place_clearance_m + z_grasp), yaw))
+    # rise above the rims and make sure the object stayed in the bin: fingers that did not open, or an object
+    # the wrist camera sees still between them, is set down on the bin floor again and let go (twin.tasks.jam)
+    jam = clear_after_release(
+        cell,
+        release_pose,
+        top_down((xy[0], xy[1], rim_z + task.place_clearance_m + z_grasp), yaw),
+        commanded_m=release_w,
+        surface_z=floor_z,
+        hang_m=z_grasp,
+    )
+    if jam.jammed:
+        raise StageFailed(
+            "place", f"the object is stuck between the opened fingers: {jam.reason}", failure="grasp_lost"
+        )
 
 
 def run_robocup(cell: Cell) -> list[ObjectOutcome]:
@@ -480,15 +477,16 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             continue
         try:
             _pick_and_place(cell, est, bins[bin_name], placed_in.setdefault(bin_name, []))
-            tgt.done, tgt.error, tgt.failure = True, None, None
+            tgt.done = True
+            clear_failure(tgt)
         except StageFailed as e:
-            tgt.error, tgt.failure = str(e), e.failure
+            note_failure(tgt, e, tgt.attempts)
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
             _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
             cell.recover()
         tgt.cycle_time_s += world.sim_time - t0
         try:
-            cell.move_joints("home", home)
+            cell.move_joints_over("home", home)
         except StageFailed as e:
             log.info("robocup: could not return home: %s", e)
     cell.settle(1.0)
@@ -524,12 +522,12 @@ def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:
     """Move to the capture pose; when the move is stopped on the way (an object still stuck to a finger
     touches something), let go, rise and try once more before the run gives up."""
     try:
-        cell.move_joints("capture", q)
+        cell.move_joints_over("capture", q)
     except StageFailed as e:
         log.info("robocup: capture move failed (%s); recovering and trying again", e)
         _clear_seen(cell)
         cell.recover()
-        cell.move_joints("capture", q)
+        cell.move_joints_over("capture", q)
 
 
 def _fixture_boxes(cell: Cell) -> list[tuple[np.ndarray, np.ndarray]]:

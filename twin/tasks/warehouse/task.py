@@ -17,7 +17,8 @@ import numpy as np
 
 from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame, prefetch_next_capture
-from twin.tasks.cell import Cell, GraspCheck, StageFailed, top_down
+from twin.tasks.cell import Cell, GraspCheck, StageFailed, clear_failure, note_failure, top_down
+from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import WarehouseReferee
 from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
 from twin.types import ObjectOutcome
@@ -38,6 +39,7 @@ _GRIP_WIDTH_M = (_CUBE_M, _CUBE_M * np.sqrt(2.0))
 # A grip within this of the face width is square (under 6 deg off). Wider, the fingers hold the cube by two
 # edges, which turns and slips out under the transfer's accelerations: open, turn and grasp again.
 _SQUARE_TOL_M = 0.005
+_YAW_STEP = np.pi / 12  # the grasp and drop yaws tried, 15 deg apart
 
 
 @dataclass
@@ -46,41 +48,69 @@ class _Attempt:
     true_id: int | None  # metrics only (the referee's), never decided on
     error: str | None = None
     failure: str | None = None  # the failure's name, when the failed stage knew it (StageFailed.failure)
+    stage: str | None = None  # the stage that failed and the planner that planned it (StageFailed's)
+    planner: str | None = None
     cycle_time_s: float = 0.0
+
+
+def _yaws_from(yaw: float, step: float = _YAW_STEP) -> list[float]:
+    """Every top-down yaw of a half turn (a parallel gripper repeats after it) in `step`s from `yaw`,
+    nearest first: the yaws at which the fingers grip a cube whose yaw is unknown, or set one down."""
+    n = round(np.pi / step)
+    turns = sorted(range(n), key=lambda k: min(k, n - k) + 0.5 * (k > n / 2))  # 0, +1, -1, +2, -2, ...
+    return [yaw + (k if k <= n / 2 else k - n) * step for k in turns]
 
 
 def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, float]) -> None:
     task = cell.settings.task.warehouse
     c = cube.centroid
     cell.open_gripper()
-    cell.move_pose("hover", top_down((c[0], c[1], c[2] + task.hover_m), _GRASP_YAW))
-    cell.move_pose("descent", top_down(c, _GRASP_YAW))
-    grasp, yaw = _square_grasp(cell, c)
+    hover = (float(c[0]), float(c[1]), float(c[2] + task.hover_m))
+    # the seed grips at one yaw; beside the obstacle that yaw can put a finger into it: the opened gripper
+    # descends at the yaw nearest the seed's that keeps it clear of the planning scene on the way down
+    mid = (float(c[0]), float(c[1]), float(c[2] + task.hover_m / 2))
+    yaw, _ = cell.choose_top_down_yaw([c, mid, hover], _yaws_from(_GRASP_YAW))
+    cell.move_pose_over("hover", top_down(hover, yaw))
+    cell.move_pose("descent", top_down(c, yaw))
+    grasp, yaw = _square_grasp(cell, c, yaw)
     if not grasp.holding:
         raise StageFailed("grasp", grasp.reason)
-    cell.move_pose("ascent", top_down((c[0], c[1], c[2] + task.hover_m), yaw))
+    cell.move_pose("ascent", top_down(hover, yaw))
     held = cell.check_holding()
     if not held.holding:
         raise StageFailed("ascent", f"the cube slipped out of the gripper: {held.reason}")
     cell.attach("cube", np.full(3, _CUBE_M))
     drop = (zone[0], zone[1], zone[2] + task.release_height_m + _CUBE_M / 2)
     above = (drop[0], drop[1], drop[2] + _APPROACH_M)
-    cell.move_pose("transfer", top_down(above, _GRASP_YAW))
+    # the cube is set down at any yaw: the one nearest the grasp's at which the drop is clear
+    place_yaw, _ = cell.choose_top_down_yaw([drop, above], _yaws_from(yaw))
+    cell.move_pose("transfer", top_down(above, place_yaw))
     held = cell.check_holding()
     if not held.holding:
         raise StageFailed("transfer", f"the cube was dropped while carrying it: {held.reason}")
     # NMPC stops within 3 cm of its goal: finish with a short straight move to the exact drop point
-    cell.move_pose("place", top_down(drop, _GRASP_YAW))
+    release_pose = top_down(drop, place_yaw)
+    cell.move_pose("place", release_pose)
     cell.release()
-    cell.move_pose("ascent", top_down((drop[0], drop[1], drop[2] + task.hover_m / 2), _GRASP_YAW))
+    # rise and make sure the cube stayed: fingers that did not open fully hold it apart; then it is set down
+    # on the table in its zone again and let go (twin.tasks.jam)
+    jam = clear_after_release(
+        cell,
+        release_pose,
+        top_down((drop[0], drop[1], drop[2] + task.hover_m / 2), place_yaw),
+        surface_z=zone[2],
+        hang_m=_CUBE_M / 2,
+    )
+    if jam.jammed:
+        raise StageFailed("place", f"the cube is stuck between the opened fingers: {jam.reason}", failure="grasp_lost")
 
 
-def _square_grasp(cell: Cell, c: np.ndarray) -> tuple[GraspCheck, float]:
-    """Close on the cube at `c` (the tcp there at _GRASP_YAW); if the opening says the fingers hold it by
+def _square_grasp(cell: Cell, c: np.ndarray, yaw0: float) -> tuple[GraspCheck, float]:
+    """Close on the cube at `c` (the tcp there at `yaw0`); if the opening says the fingers hold it by
     two edges (the seed perceives no cube yaw), turn the open gripper by the angle that opening implies and
     close again, the other way round if that was no better. Decided from the finger opening alone; returns
     the grasp and the yaw it was made at."""
-    grasp, yaw = cell.close_gripper(_GRIP_WIDTH_M), _GRASP_YAW
+    grasp, yaw = cell.close_gripper(_GRIP_WIDTH_M), yaw0
     if not grasp.holding or grasp.opening_m <= _CUBE_M + _SQUARE_TOL_M:
         return grasp, yaw
     # across two edges, d off the faces: opening = side * (cos d + sin d) = side * sqrt(2) * sin(d + 45 deg)
@@ -93,8 +123,8 @@ def _square_grasp(cell: Cell, c: np.ndarray) -> tuple[GraspCheck, float]:
         )
         cell.open_gripper()
         try:
-            cell.move_pose("descent", top_down(c, _GRASP_YAW + turn))
-            yaw = _GRASP_YAW + turn
+            cell.move_pose("descent", top_down(c, yaw0 + turn))
+            yaw = yaw0 + turn
         except StageFailed as e:  # planned, not moved: e.g. the turned gripper would touch the obstacle
             log.info("warehouse: cannot turn there (%s)", e)
         grasp = cell.close_gripper(_GRIP_WIDTH_M)
@@ -117,7 +147,7 @@ def _perceive_again(cell: Cell, cube: LabeledCube) -> LabeledCube | None:
     """After a failed attempt: go home (out of the camera's view), look again and return the cube of the
     same colour nearest to where it was (a slipped or dropped cube has moved); None when none is seen."""
     try:
-        cell.move_joints("home", np.array(cell.settings.robot.home))
+        cell.move_joints_over("home", np.array(cell.settings.robot.home))
         seen = _perceive(cell)
     except (StageFailed, MarkerNotFound) as e:
         log.info("warehouse: could not look again: %s", e)
@@ -168,10 +198,10 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
         for k in range(task.retries + 1):
             try:
                 _pick_and_place(cell, att.cube, zone)
-                att.error = att.failure = None
+                clear_failure(att)
                 break
             except StageFailed as e:
-                att.error, att.failure = str(e), e.failure
+                note_failure(att, e, k + 1)
                 log.info("warehouse: %s cube, attempt %d failed: %s", att.cube.color_label, k + 1, e)
                 cell.recover()
                 if k < task.retries:
@@ -182,7 +212,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
                     att.cube = again
         att.cycle_time_s = world.sim_time - t0
     try:
-        cell.move_joints("home", np.array(settings.robot.home))
+        cell.move_joints_over("home", np.array(settings.robot.home))
     except StageFailed as e:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
