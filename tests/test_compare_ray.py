@@ -17,7 +17,7 @@ from twin.errors import ConfigError
 from twin.resources import packaged_config
 
 
-@pytest.mark.parametrize("config", ["compare-smoke", "compare", "compare-robustness"])
+@pytest.mark.parametrize("config", ["compare-smoke", "compare", "compare-robustness", "compare-tasks"])
 def test_every_shipped_config_a_sweep_runs_is_sent_by_name(config):
     """The tasks carry the driver's absolute paths; each one of a shipped config must be recognised, or a
     node whose venv lives at another path fails every run with 'config file not found' (as it did)."""

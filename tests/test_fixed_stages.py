@@ -46,9 +46,8 @@ def test_the_grasp_yaw_turns_the_fingers_away_from_the_obstacle():
         cell.open_gripper()
         c = np.array([-0.535, 0.24, 0.025])  # a cube 3 cm from the wall's face
         way_down = [c, c + [0, 0, 0.05], c + [0, 0, 0.10]]
-        q = world.joint_positions()
         # the seed's yaw puts a finger into the wall
-        assert cell.clearance_at(top_down(c, 0.0), q) < 0.0
+        assert cell.clearance_at(top_down(c, 0.0)) < 0.0
         yaw, clearance = cell.choose_top_down_yaw(way_down, [0.0, math.pi / 4, math.pi / 2])
         assert clearance >= 0.01
         assert yaw == math.pi / 2
@@ -99,3 +98,87 @@ def test_an_objects_failure_is_its_first_attempts_later_ones_are_added_to_the_re
     note_failure(rec, StageFailed("descent", "toppra.movel: collision", failure="collision", planner="toppra.movel"), 2)
     assert (rec.stage, rec.planner, rec.failure) == ("transfer", None, "grasp_lost")
     assert rec.error == "transfer: dropped; attempt 2: descent: toppra.movel: collision"
+
+
+def _task_row(planner: str, seed: int, where: str | None, stage: str | None, by: str | None) -> dict:
+    return {
+        "run_id": f"{planner}|t|seed={seed}",
+        "planner": planner,
+        "scenario": "t",
+        "case": "t",
+        "kind": "task",
+        "seed": seed,
+        "status": "success" if where is None else "incomplete",
+        "success": where is None,
+        "failure": None if where is None else "collision",
+        "failure_in": where,
+        "failed_stage": stage,
+        "failed_planner": by,
+        "metrics": {},
+        "timing": {},
+    }
+
+
+def test_the_summary_counts_task_failures_in_the_planners_stages_apart_from_elsewhere(tmp_path):
+    from twin.compare.report import summarize, write_summary
+
+    rows = [
+        _task_row("p", 0, "planner", "transfer", "p"),
+        _task_row("p", 1, "elsewhere", "descent", "toppra.movel"),
+        _task_row("p", 2, "elsewhere", "descent", "toppra.movel"),
+        _task_row("p", 3, None, None, None),
+        _task_row("q", 0, None, None, None),
+    ]
+    summary = summarize(rows, planners=["p", "q"])
+    p = summary.row("p")
+    assert p is not None and (p.task_failed_in_planner, p.task_failed_elsewhere) == (1, 2)
+    assert p.task_failed_stages == {"descent (toppra.movel)": 2, "transfer (p)": 1}
+    write_summary(summary, tmp_path)
+    md = (tmp_path / "summary.md").read_text()
+    assert "## Task runs that failed: where" in md
+    assert "| p | 3 | 1 | 2 | descent (toppra.movel) x2, transfer (p) x1 |" in md
+    assert "| q |" not in md.split("## Task runs that failed: where")[1].split("##")[0]
+
+
+def test_the_task_comparison_runs_every_planner_on_the_task_seeds_it_says():
+    from twin.compare.spec import expand_runs, load_compare_config
+
+    spec = load_compare_config(ROOT / "configs/compare-tasks.yaml")
+    runs = expand_runs(spec)
+    assert {r.kind for r in runs} == {"task"}
+    assert len(spec.planners) == len(load_compare_config(ROOT / "configs/compare.yaml").planners)
+    assert {s.name: spec.seeds_for(s) for s in spec.scenarios} == {
+        "warehouse-task": [0, 1, 2, 3, 4],
+        "robocup-task": [2, 3, 4],
+    }
+    assert f"= {len(runs)} runs" in (ROOT / "configs/compare-tasks.yaml").read_text()
+
+
+def test_a_placed_cube_knocked_out_by_a_later_motion_is_lost_to_that_motion():
+    from types import SimpleNamespace
+
+    from twin.tasks.judge import DisplacementWatch, WarehouseReferee
+
+    settings = load_config(ROOT / "configs/warehouse.yaml")
+    with World(settings, seed=0, renderer="tiny") as world:
+        watch = DisplacementWatch(world)
+        referee = WarehouseReferee(world, settings, watch)
+        cube = next(o for o in world.objects() if o.color == "black")
+        zone = settings.task.warehouse.drop_zones["black"]
+        # the place motion held it; then it stood in its zone
+        watch.before()
+        world.set_object_pose(cube.id, (zone[0], zone[1], 0.025), (0, 0, 0, 1))
+        watch.after("place", "toppra.movel", cube.id)
+        # a later transfer swings another cube into it: 20 cm away
+        watch.before()
+        world.set_object_pose(cube.id, (zone[0], zone[1] + 0.2, 0.025), (0, 0, 0, 1))
+        watch.after("transfer", "ompl.rrtstar", None)
+        att = SimpleNamespace(
+            cube=SimpleNamespace(centroid=cube.position), true_id=cube.id, error=None, failure=None, stage=None,
+            planner=None, cycle_time_s=1.0,
+        )  # fmt: skip
+        out = {o.id: o for o in referee.outcomes([att])}[cube.name]
+    assert not out.placed
+    assert (out.stage, out.planner, out.failure) == ("transfer", "ompl.rrtstar", "execution_contact")
+    assert out.error.startswith("transfer: ompl.rrtstar: the motion moved it 20 cm after it was let go")
+    assert task_attribution([out])["failure_in"] == "planner"

@@ -216,6 +216,9 @@ class Cell:
         )
         self.grasp: GraspCheck | None = None  # the current grasp as sensed when it closed (None: not holding)
         self.current = ""  # what the task works on, shown beside the stage in progress displays
+        from twin.tasks.judge import DisplacementWatch  # judging only: the referees read it, no task does
+
+        self.watch = DisplacementWatch(self.world)
 
     # ---- planners -------------------------------------------------------------------------------
     def block(self, group: str) -> PlannerBlock:
@@ -244,54 +247,58 @@ class Cell:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
         name = self.block(group).name
-        backed_off = False
-        while True:
-            request = MotionRequest(
-                self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
-            )
-            ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
-            if retreat:
-                ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
-            result, record = plan_and_execute(
-                self.world,
-                self.planner(group),
-                request,
-                self.scene,
-                self.context,
-                stage=stage,
-                planner_name=name,
-                ignore_bodies=ignore,
-                fingers_may_touch_objects=stage in _GRASPING_STAGES,
-            )
-            self.records.append(record)
-            if (
-                backed_off
-                or result.status is not Status.INVALID_START
-                or not self.kin.within_limits(request.start)
-                or not self.scene.in_collision(request.start)
-            ):
-                break
-            backed = back_off(self)
-            if not backed.clear:
-                log.info("%s: the start is in collision (%s); %s", stage, backed.pair, backed.reason)
+        self.watch.before()
+        try:
+            backed_off = False
+            while True:
+                request = MotionRequest(
+                    self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
+                )
+                ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
+                if retreat:
+                    ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
+                result, record = plan_and_execute(
+                    self.world,
+                    self.planner(group),
+                    request,
+                    self.scene,
+                    self.context,
+                    stage=stage,
+                    planner_name=name,
+                    ignore_bodies=ignore,
+                    fingers_may_touch_objects=stage in _GRASPING_STAGES,
+                )
+                self.records.append(record)
+                if (
+                    backed_off
+                    or result.status is not Status.INVALID_START
+                    or not self.kin.within_limits(request.start)
+                    or not self.scene.in_collision(request.start)
+                ):
+                    break
+                backed = back_off(self)
+                if not backed.clear:
+                    log.info("%s: the start is in collision (%s); %s", stage, backed.pair, backed.reason)
+                    raise StageFailed(
+                        stage,
+                        f"{name}: {result.status.value}: the start is in collision ({backed.pair}); {backed.reason}",
+                        failure=failure_of_plan(result.status.value, result.reason, result.info),
+                        planner=name,
+                        moved=backed.travel_m > 0.0,
+                    )
+                log.info("%s: the start was in collision (%s); %s, planning again", stage, backed.pair, backed.reason)
+                backed_off = True
+            if result.status is not Status.SUCCESS:
                 raise StageFailed(
                     stage,
-                    f"{name}: {result.status.value}: the start is in collision ({backed.pair}); {backed.reason}",
+                    f"{name}: {result.status.value}: {result.reason}",
                     failure=failure_of_plan(result.status.value, result.reason, result.info),
                     planner=name,
-                    moved=backed.travel_m > 0.0,
+                    moved=backed_off or record.duration_s > 0.0,
                 )
-            log.info("%s: the start was in collision (%s); %s, planning again", stage, backed.pair, backed.reason)
-            backed_off = True
-        if result.status is not Status.SUCCESS:
-            raise StageFailed(
-                stage,
-                f"{name}: {result.status.value}: {result.reason}",
-                failure=failure_of_plan(result.status.value, result.reason, result.info),
-                planner=name,
-                moved=backed_off or record.duration_s > 0.0,
-            )
-        return result
+            return result
+        finally:
+            self.watch.after(stage, name, self.held_body)
 
     def move_pose(self, stage: str, T_tcp: np.ndarray, **kw: Any) -> MotionResult:
         """Move the tcp to `T_tcp` (4, 4); a stage that asks for a position only (the transfer) gets the
@@ -312,33 +319,30 @@ class Cell:
     # A stage the compared planner does not plan must not fail where an equivalent choice would not: each
     # picks, in the planning scene, a grasp yaw that is clear, and goes over the top of the scene when its
     # planner refuses the direct way. Only planning is tried; nothing moves until a choice is made.
-    def clearance_at(self, T_tcp: np.ndarray, q_ref: np.ndarray) -> float:
-        """Signed distance (m) from the planning scene of the arm with its tcp at `T_tcp` (4, 4), in the IK
-        solution nearest `q_ref` (6,) (the one a planner would take from there); -inf when out of reach."""
-        sols = self.kin.ik(T_tcp)
+    def clearance_at(self, T_tcp: np.ndarray) -> float:
+        """Signed distance (m) from the planning scene of the arm with its tcp at `T_tcp` (4, 4), in the
+        clearest of its IK branches (which one a planner takes there is its choice; the gripper, and what
+        it holds, stand the same in every one); -inf when out of reach."""
+        sols = self.kin.ik(T_tcp, all_wraps=False)
         if len(sols) == 0:
             return -math.inf
-        q = sols[int(np.argmin(np.abs(sols - np.asarray(q_ref, dtype=float)).sum(axis=1)))]
-        return float(self.scene.min_distance(q, include_self=False).distance)
+        return max(float(self.scene.min_distance(q, include_self=False).distance) for q in sols)
 
     def choose_top_down_yaw(
         self,
         points: Sequence[np.ndarray | tuple[float, float, float]],
         yaws: list[float],
         *,
-        q_ref: np.ndarray | None = None,
         min_clearance_m: float = CHOOSE_CLEARANCE_M,
     ) -> tuple[float, float]:
         """(yaw, clearance m): the first of `yaws` (in order of preference) at which the tcp pointing down
         stays `min_clearance_m` clear of the planning scene at every one of `points` (e.g. a grasp, the
-        hover above it and the way between), else the one with the most clearance. `q_ref`: the joints a
-        planner starts from (default: the measured ones)."""
+        hover above it and the way between), else the one with the most clearance."""
         if not yaws:
             raise ValueError("choose_top_down_yaw needs at least one yaw")
-        q0 = self.world.joint_positions() if q_ref is None else np.asarray(q_ref, dtype=float)
         best, best_c = yaws[0], -math.inf
         for yaw in yaws:
-            c = min(self.clearance_at(top_down(p, yaw), q0) for p in points)
+            c = min(self.clearance_at(top_down(p, yaw)) for p in points)
             if c >= min_clearance_m:
                 return yaw, c
             if c > best_c + 1e-4:

@@ -188,16 +188,70 @@ class RobocupTarget(Protocol):
     true_ids: set[int]
 
 
+@dataclass(frozen=True)
+class Displacement:
+    """A loose object the gripper did not hold moved `distance_m` during one motion (`stage`, `planner`);
+    `after_release`: the gripper had held it before (it had been placed, or let go)."""
+
+    object_id: int
+    stage: str
+    planner: str
+    distance_m: float
+    after_release: bool
+
+
+class DisplacementWatch:
+    """Judging only (ground truth, never read by a task): which motion moved which loose object it did not
+    hold. An object placed and then knocked out of its bin or zone by a later motion (a held object swinging
+    into it, a path through where it stands) is lost to that motion, whichever stage carried it; the
+    referees say so (`Referee.outcomes`). `Cell.move` calls `before` and `after` around every motion."""
+
+    MIN_M = 0.01  # a move of less than this is settling, not a knock
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.events: list[Displacement] = []
+        self._before: dict[int, np.ndarray] = {}
+        self._held_once: set[int] = set()
+
+    def before(self) -> None:
+        self._before = {o.id: o.position.copy() for o in self.world.objects()}
+
+    def after(self, stage: str, planner: str, held: int | None) -> None:
+        if held is not None:
+            self._held_once.add(held)
+        for o in self.world.objects():
+            p0 = self._before.get(o.id)
+            if o.id == held or p0 is None:
+                continue
+            d = float(np.linalg.norm(o.position - p0))
+            if d > self.MIN_M:
+                self.events.append(Displacement(o.id, stage, planner, d, o.id in self._held_once))
+
+    def knocked(self, object_id: int) -> Displacement | None:
+        """The last motion that moved the object after the gripper had let go of it, if any."""
+        hits = [e for e in self.events if e.object_id == object_id and e.after_release]
+        return hits[-1] if hits else None
+
+
+def _knocked_error(knock: Displacement, verdict_reason: str) -> str:
+    return (
+        f"{knock.stage}: {knock.planner}: the motion moved it {100 * knock.distance_m:.0f} cm after it was "
+        f"let go; {verdict_reason}"
+    )
+
+
 class RobocupReferee:
     """Ground truth of one RoboCup run: the true objects at the start, which of them each estimate was
     (metrics), and the verdict on each at the end. The task hands it its records; it never answers a
     question the task could act on."""
 
-    def __init__(self, world: World, settings: Settings) -> None:
+    def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:
         from twin.tasks.robocup import bin_geometries  # the task's rules: which bin, what a bin looks like
 
         self.world = world
         self.settings = settings
+        self.watch = watch
         self.truth = {o.id: o for o in world.objects()}
         self.bins = bin_geometries(settings)
 
@@ -228,6 +282,9 @@ class RobocupReferee:
                 err = "perception: never seen on the table" + (f" (the run stopped: {stopped})" if stopped else "")
             elif mine[-1].error:
                 err, failure, stage, planner = mine[-1].error, mine[-1].failure, mine[-1].stage, mine[-1].planner
+            elif mine[-1].done and (knock := self.watch and self.watch.knocked(oid)):
+                err = _knocked_error(knock, f"{verdict.reason}{self._elsewhere(oid, bin_name)}")
+                failure, stage, planner = "execution_contact", knock.stage, knock.planner
             elif mine[-1].done:
                 err = f"place: released, but {verdict.reason}{self._elsewhere(oid, bin_name)}"
             else:
@@ -276,9 +333,10 @@ class WarehouseReferee:
     """Ground truth of one warehouse run: the true cubes at the start, which one each perceived cube was,
     and the verdict on each at the end."""
 
-    def __init__(self, world: World, settings: Settings) -> None:
+    def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:
         self.world = world
         self.settings = settings
+        self.watch = watch
         self.truth = {o.id: o for o in world.objects()}
 
     def match(self, centroid: np.ndarray) -> int | None:
@@ -306,6 +364,9 @@ class WarehouseReferee:
                 err = global_error or "perception: never seen on the table"
             elif att.error:
                 err, failure, stage, planner = att.error, att.failure, att.stage, att.planner
+            elif knock := self.watch and self.watch.knocked(oid):
+                err = _knocked_error(knock, verdict.reason)
+                failure, stage, planner = "execution_contact", knock.stage, knock.planner
             else:
                 err = f"place: released, but {verdict.reason}"
             out.append(

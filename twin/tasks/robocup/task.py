@@ -218,7 +218,7 @@ def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, f
     x, y, z = xyz
     hover_m = cell.settings.task.robocup.hover_m
     way_down = [(x, y, z), (x, y, z + hover_m / 2), (x, y, z + hover_m)]  # the descent from the hover
-    best, best_c = cell.choose_top_down_yaw(way_down, candidates, q_ref=q_ref)
+    best, best_c = cell.choose_top_down_yaw(way_down, candidates)
     if best != candidates[0]:
         log.info(
             "robocup: %s gripped at yaw %.0f deg, %.0f mm clear of the planning scene",
@@ -421,7 +421,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     """Sort every object on the table into its bin; one outcome per true object, judged at the end."""
     settings, world = cell.settings, cell.world
     task = settings.task.robocup
-    referee = RobocupReferee(world, settings)  # ground truth: metrics along the way, the verdicts at the end
+    referee = RobocupReferee(world, settings, cell.watch)  # ground truth: metrics, verdicts at the end
     bins = bin_geometries(settings)
     detector = make_detector(settings)
     targets: list[_Target] = []

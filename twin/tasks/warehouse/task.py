@@ -103,6 +103,11 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
     )
     if jam.jammed:
         raise StageFailed("place", f"the cube is stuck between the opened fingers: {jam.reason}", failure="grasp_lost")
+    # the cell knows where it put the cube: later motions plan around it (a transfer that swept through the
+    # zone would knock it out). Its yaw in the fingers is not known exactly: a square as wide as its diagonal
+    lo = np.array([drop[0], drop[1], zone[2]]) - [_CUBE_M / np.sqrt(2.0), _CUBE_M / np.sqrt(2.0), 0.0]
+    hi = lo + [_CUBE_M * np.sqrt(2.0), _CUBE_M * np.sqrt(2.0), _CUBE_M]
+    cell.scene.add_box_bounds(f"placed_{sum(n.startswith('placed_') for n in cell.scene.boxes())}", lo, hi)
 
 
 def _square_grasp(cell: Cell, c: np.ndarray, yaw0: float) -> tuple[GraspCheck, float]:
@@ -162,7 +167,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     """Sort every cube the camera sees; one outcome per true cube, judged by physics at the end."""
     settings, world = cell.settings, cell.world
     task = settings.task.warehouse
-    referee = WarehouseReferee(world, settings)  # ground truth: metrics along the way, the verdicts at the end
+    referee = WarehouseReferee(world, settings, cell.watch)  # ground truth: metrics, verdicts at the end
     cubes: tuple[LabeledCube, ...] = ()
     global_error: str | None = None
     try:
