@@ -109,3 +109,14 @@ def test_no_colour_and_bad_input(tmp_path):
         urdf_rgba(tmp_path / "missing.urdf")
     with pytest.raises(ConfigError, match="not valid XML"):
         urdf_rgba(_write(tmp_path, "<link"))
+
+
+def test_primitive_half_extents_are_those_of_each_kind_and_a_mesh_has_none():
+    from twin.urdf_model import primitive_half_extents
+
+    assert primitive_half_extents("box", (0.2, 0.4, 0.6)).tolist() == [0.1, 0.2, 0.3]
+    assert primitive_half_extents("cylinder", (0.05, 0.3)).tolist() == [0.05, 0.05, 0.15]
+    assert primitive_half_extents("capsule", (0.05, 0.3)).tolist() == [0.05, 0.05, 0.2]
+    assert primitive_half_extents("sphere", (0.07,)).tolist() == [0.07, 0.07, 0.07]
+    with pytest.raises(ValueError, match="mesh"):
+        primitive_half_extents("mesh", (1.0, 1.0, 1.0))

@@ -35,6 +35,7 @@ __all__ = [
     "RobotModel",
     "Shape",
     "pose_from_xyz_rpy",
+    "primitive_half_extents",
     "read_fixture_shapes",
     "rpy_to_matrix",
     "urdf_link_rgba",
@@ -65,6 +66,19 @@ class Shape:
     def name(self) -> str:
         """'link' for a link's only/first shape, 'link#i' for the others."""
         return self.link if self.index == 0 else f"{self.link}#{self.index}"
+
+
+def primitive_half_extents(kind: str, size: Sequence[float]) -> np.ndarray:
+    """(3,) half extents along its own axes of a primitive (`Shape` kinds and sizes; a cylinder's and a
+    capsule's axis is z). ValueError for a mesh or an unknown kind."""
+    if kind == "box":
+        return np.asarray(size, dtype=float) / 2.0
+    if kind in ("cylinder", "capsule"):
+        r, length = float(size[0]), float(size[1]) + (2.0 * float(size[0]) if kind == "capsule" else 0.0)
+        return np.array([r, r, length / 2.0])
+    if kind == "sphere":
+        return np.full(3, float(size[0]))
+    raise ValueError(f"no half extents for a {kind!r}: primitives only (box, cylinder, capsule, sphere)")
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,6 +23,7 @@ from twin.failures import failure_of_plan
 from twin.limit_check import RATIO_METRICS
 from twin.planning import CheckedPlanner, describe_goal_kinds, limits_from_settings, make_context, make_planner
 from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
+from twin.urdf_model import primitive_half_extents
 
 __all__ = [
     "STAGES",
@@ -65,16 +66,6 @@ CHOOSE_CLEARANCE_M = 0.01
 OVER_MARGIN_M = 0.05
 # refusals that say the direct way runs into something (another way may not)
 _PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
-
-
-def _half_extents(kind: str, size: tuple[float, ...]) -> np.ndarray:
-    """(3,) half extents along its own axes of a primitive (twin.urdf_model.Shape kinds and sizes)."""
-    if kind == "box":
-        return np.asarray(size, dtype=float) / 2.0
-    if kind in ("cylinder", "capsule"):
-        r, length = size[0], size[1] + (2 * size[0] if kind == "capsule" else 0.0)
-        return np.array([r, r, length / 2.0])
-    return np.full(3, float(size[0]))  # a sphere
 
 
 class StageFailed(Exception):
@@ -361,7 +352,7 @@ class Cell:
         top = 0.0
         for shapes in self.scene.environment_shapes().values():
             for kind, size, T in shapes:
-                top = max(top, float(T[2, 3] + np.abs(T[2, :3]) @ _half_extents(kind, size)))
+                top = max(top, float(T[2, 3] + np.abs(T[2, :3]) @ primitive_half_extents(kind, size)))
         hang = 0.0
         held = self.scene.attached_box()
         if held is not None:

@@ -32,7 +32,7 @@ from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
-from twin.urdf_model import RobotModel, read_fixture_shapes
+from twin.urdf_model import RobotModel, primitive_half_extents, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
@@ -259,15 +259,12 @@ def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray
         if up is None:  # not on the gripper
             continue
         for shape in model.links[name].shapes:
-            if shape.kind == "box":
-                half = np.asarray(shape.size, dtype=float) / 2.0
-            elif shape.kind in ("cylinder", "capsule"):
-                r, length = shape.size[0], shape.size[1] + (2 * shape.size[0] if shape.kind == "capsule" else 0.0)
-                half = np.array([r, r, length / 2.0])
-            elif shape.kind == "sphere":
-                half = np.full(3, shape.size[0])
-            else:
-                raise ConfigError(f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only")
+            try:
+                half = primitive_half_extents(shape.kind, shape.size)
+            except ValueError:
+                raise ConfigError(
+                    f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only"
+                ) from None
             T = T_inv @ poses[name][0] @ shape.origin
             h = np.abs(T[:3, :3]) @ half
             out.append((T[:3, 3] - h, T[:3, 3] + h))
