@@ -61,18 +61,35 @@ def test_the_way_home_avoids_a_straight_joint_motion_that_folds_the_arm_through_
     settings = load_config(ROOT / "configs/warehouse.yaml")
     with World(settings, seed=0, renderer="tiny") as world:
         cell = Cell(settings, world)
-        # the other elbow branch, as a sampling planner's transfer can leave the arm: the straight joint
-        # motion home folds the forearm through the gripper
-        q_flipped = np.array([-2.2, -1.6, -1.8, 1.83, -1.57, 3.66])
+        # an awkward configuration a sampling planner's transfer can leave the arm in: the straight joint
+        # motion home, the wrist first and the arm first all fold the arm through itself
+        q_flipped = np.array([1.55, -1.47, 2.4, -2.6, 2.05, -2.6])
         home = np.asarray(settings.robot.home, dtype=float)
-        assert not cell.scene.check_path(np.array([q_flipped, home])).free
         world.reset_joints(q_flipped)
         cell.settle(0.2)
+        goal = cell.nearest_turn(home)  # the home posture at the turns of the wrist nearest where they are
+        assert not cell.scene.check_path(np.array([q_flipped, goal])).free
         cell.move_joints_over("home", home)
-        assert np.abs(world.joint_positions() - home).max() < 0.01
+        assert np.abs(world.joint_positions() - goal).max() < 0.01
         stages = [(r.stage, r.status) for r in cell.records]
         assert stages[0][1] == "collision"  # the direct way was refused in planning, not moved
-        assert all(s == "success" for _, s in stages[1:])
+        assert all(s == "success" for _, s in stages[1:]) and len(stages) == 3  # through the upright posture
+
+
+def test_a_posture_is_reached_at_the_turn_of_each_joint_nearest_where_it_is():
+    settings = load_config(ROOT / "configs/warehouse.yaml")
+    with World(settings, seed=0, renderer="tiny") as world:
+        cell = Cell(settings, world)
+        # a planner's transfer left the wrist a turn away from home's angles (a bkpiece1 run did)
+        q_turned = np.array([-0.983, -2.014, 2.168, 4.558, 4.712, -1.547])
+        home = np.asarray(settings.robot.home, dtype=float)
+        assert not cell.scene.check_path(np.array([q_turned, home])).free  # the wrist swings through the arm
+        world.reset_joints(q_turned)
+        cell.settle(0.2)
+        goal = cell.nearest_turn(home)
+        assert np.allclose(goal, home + [0, 0, 0, 2 * math.pi, 2 * math.pi, 0])
+        cell.move_joints_over("home", home)
+        assert np.abs(world.joint_positions() - goal).max() < 0.01
 
 
 def _outcome(stage: str | None, planner: str | None = None) -> ObjectOutcome:

@@ -362,15 +362,29 @@ class Cell:
 
     def move_pose_over(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
         """`move_pose`, and when the stage's planner refuses the direct way because it runs into something
-        (planned, not moved), go over the top instead: straight up to `safe_height`, across at that height
-        with the stage's planner, and straight down to `T_tcp`; refused again (the arm's own links in the
-        way: another planner's motion left it in an awkward configuration), by way of home."""
+        (planned, not moved): to the arm configuration at `T_tcp` (an IK branch and turn of the joints)
+        whose straight joint motion from here is clear, nearest first; else over the top: straight up to
+        `safe_height`, across at that height with the stage's planner, and straight down to `T_tcp`;
+        refused again (the arm's own links in the way: another planner's motion left it in an awkward
+        configuration), by way of home."""
         try:
             return self.move_pose(stage, T_tcp)
         except StageFailed as e:
             if e.moved or e.failure not in _PATH_COLLIDES:
                 raise
-            log.info("%s: the direct way runs into something (%s); going over the top", stage, e.reason)
+            why = e.reason
+        q0 = self.world.joint_positions()
+        sols = self.kin.ik(T_tcp)
+        clear = [q for q in sorted(sols, key=lambda q: float(np.abs(q - q0).max())) if self._clear_way(q0, q)]
+        if clear:
+            log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
+            try:
+                return self.move_joints(stage, clear[0])
+            except StageFailed as e:
+                if e.moved or e.failure not in _PATH_COLLIDES:
+                    raise
+                why = e.reason
+        log.info("%s: the direct way runs into something (%s); going over the top", stage, why)
         above = np.array(T_tcp, dtype=float)
         above[2, 3] = max(above[2, 3], self.safe_height())
         try:
@@ -391,8 +405,12 @@ class Cell:
         something (planned, not moved), by the first of a few other ways whose straight joint legs are
         clear in the planning scene (checked before anything moves): the wrist joints first, the arm
         joints first, straight up to `safe_height` first, up and then the wrist, or through the upright
-        posture. A way that is not clear is never started; none clear: the refusal stands."""
-        q = np.asarray(q, dtype=float)
+        posture. A way that is not clear is never started; none clear: the refusal stands.
+
+        `q` is a posture: each joint goes to the turn of its angle (q + 2 pi k, within the joint's limits)
+        nearest where it is, the same posture without a needless full turn of a wrist (which swings the
+        gripper through the arm) after a planner left a joint a turn away."""
+        q = self.nearest_turn(np.asarray(q, dtype=float))
         try:
             return self.move_joints(stage, q)
         except StageFailed as e:
@@ -414,7 +432,7 @@ class Cell:
         # straight joint motion between two elbow branches cannot do without folding through itself
         ways.append(("through the upright posture", [np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])]))
         for name, via in ways:
-            if not self.scene.check_path(np.array([q0, *via, q])).free:
+            if not self._clear_way(q0, *via, q):
                 continue
             log.info("%s: the direct way runs into something (%s); going %s", stage, refused.reason, name)
             for k, qv in enumerate(via):
@@ -423,7 +441,30 @@ class Cell:
                 else:
                     self.move_joints(stage, qv)
             return self.move_joints(stage, q)
+        log.info(
+            "%s: the direct way runs into something and no other way is clear from %s",
+            stage,
+            np.round(q0, 3).tolist(),
+        )
         raise refused
+
+    def _clear_way(self, *qs: np.ndarray) -> bool:
+        """Whether the straight joint legs through `qs` are clear of the planning scene (checked as the stage
+        planners check: every 0.01 rad)."""
+        return bool(self.scene.check_path(np.array(qs)).free)
+
+    def nearest_turn(self, q: np.ndarray) -> np.ndarray:
+        """`q` (6,) with each joint turned by whole turns (within its limits) to the angle nearest the
+        measured one: the same posture, reached without a needless full turn."""
+        q0 = self.world.joint_positions()
+        lo, hi = self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1]
+        out = np.array(q, dtype=float)
+        for j in range(len(out)):
+            turns = out[j] + 2.0 * math.pi * np.arange(-2, 3)
+            turns = turns[(turns >= lo[j]) & (turns <= hi[j])]
+            if len(turns):
+                out[j] = float(turns[np.argmin(np.abs(turns - q0[j]))])
+        return out
 
     def _raised(self, q: np.ndarray) -> np.ndarray | None:
         """The joints (6,) with the tcp straight above where it is at `q`, at `safe_height` (the IK solution

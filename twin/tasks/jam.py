@@ -97,6 +97,7 @@ TRIES = 3
 PRESS_M = 0.015  # the object's bottom is set this far below the surface it is pressed onto (pushed up in the pads)
 TIP_GAP_M = 0.006  # the fingertips stay this far above the surface
 SHAKE_RAD = 0.35  # wrist turns of the shake, each way
+SET_DOWN_RAISES = 3  # a set-down refused in planning is tried this many more times, a centimetre higher each
 _STOP = re.compile(r"(\w+) with ([\w.\-]+)")
 
 
@@ -296,11 +297,20 @@ def _set_down(cell: Cell, look_pose: np.ndarray, surface_z: float, hang_m: float
     floor_tcp = surface_z + _tip_below_tcp(cell) + TIP_GAP_M
     z = floor_tcp if hang_m is None else max(floor_tcp, surface_z + hang_m - PRESS_M)
     T = np.array(look_pose, dtype=float)
-    if z >= T[2, 3]:
-        return
-    T[2, 3] = z
     try:
-        cell.move_pose("place", T)
+        # refused in planning (the fingers' model reaching into the surface at this opening): a little
+        # higher, up to SET_DOWN_RAISES steps of a centimetre; nothing moved until one is accepted
+        for k in range(SET_DOWN_RAISES + 1):
+            T[2, 3] = z + 0.01 * k
+            if T[2, 3] >= look_pose[2, 3]:
+                return
+            try:
+                cell.move_pose("place", T)
+                return
+            except StageFailed as e:
+                if e.moved or k == SET_DOWN_RAISES:
+                    raise
+                log.info("jam: setting it down at %.3f m was refused (%s); a centimetre higher", T[2, 3], e.reason)
     finally:
         cell.release()
         cell.close_gripper()
