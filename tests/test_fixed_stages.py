@@ -88,6 +88,11 @@ def test_a_posture_is_reached_at_the_turn_of_each_joint_nearest_where_it_is():
         cell.settle(0.2)
         goal = cell.nearest_turn(home)
         assert np.allclose(goal, home + [0, 0, 0, 2 * math.pi, 2 * math.pi, 0])
+        # never onto a limit: wrist 3 at 6.2 rad stays at 0 rather than 2 pi (a hair past the limit on arrival)
+        world.reset_joints(np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 6.2]))
+        assert cell.nearest_turn(home)[5] == 0.0
+        world.reset_joints(q_turned)
+        cell.settle(0.2)
         cell.move_joints_over("home", home)
         assert np.abs(world.joint_positions() - goal).max() < 0.01
 

@@ -64,6 +64,7 @@ _GRASPING_STAGES = frozenset({"descent", "ascent", "place"})
 CHOOSE_CLEARANCE_M = 0.01
 # over the top: the tcp's path across passes this far above the highest thing in the planning scene
 OVER_MARGIN_M = 0.05
+_TURN_MARGIN_RAD = 0.05  # a posture's joints are turned only to angles this far inside their limits
 # refusals that say the direct way runs into something (another way may not)
 _PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
 
@@ -454,14 +455,15 @@ class Cell:
         return bool(self.scene.check_path(np.array(qs)).free)
 
     def nearest_turn(self, q: np.ndarray) -> np.ndarray:
-        """`q` (6,) with each joint turned by whole turns (within its limits) to the angle nearest the
+        """`q` (6,) with each joint turned by whole turns (within its limits, `_TURN_MARGIN_RAD` inside them:
+        a joint that arrives a hair past a limit is a start every planner refuses) to the angle nearest the
         measured one: the same posture, reached without a needless full turn."""
         q0 = self.world.joint_positions()
         lo, hi = self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1]
         out = np.array(q, dtype=float)
         for j in range(len(out)):
             turns = out[j] + 2.0 * math.pi * np.arange(-2, 3)
-            turns = turns[(turns >= lo[j]) & (turns <= hi[j])]
+            turns = turns[(turns >= lo[j] + _TURN_MARGIN_RAD) & (turns <= hi[j] - _TURN_MARGIN_RAD)]
             if len(turns):
                 out[j] = float(turns[np.argmin(np.abs(turns - q0[j]))])
         return out
