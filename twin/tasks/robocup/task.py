@@ -387,7 +387,9 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     cell.move_pose("transfer", above)
     held = cell.check_holding()
     if not held.holding:
-        raise StageFailed("transfer", f"the object was dropped while carrying it: {held.reason}")
+        raise StageFailed(  # physics during the transfer's motion: its planner's
+            "transfer", f"the object was dropped while carrying it: {held.reason}", planner=cell.block("transfer").name
+        )
     # a transfer asks for a position within `transfer_tolerance_m`, orientation free: a planner that stops
     # there (nmpc) leaves the object up to 3 cm off and turned. Lowering it straight from there would cut
     # diagonally past the walls while turning it; the place move first finishes the pose above the rims

@@ -87,7 +87,9 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
     cell.move_pose("transfer", top_down(above, place_yaw))
     held = cell.check_holding()
     if not held.holding:
-        raise StageFailed("transfer", f"the cube was dropped while carrying it: {held.reason}")
+        raise StageFailed(  # physics during the transfer's motion: its planner's
+            "transfer", f"the cube was dropped while carrying it: {held.reason}", planner=cell.block("transfer").name
+        )
     # NMPC stops within 3 cm of its goal: finish with a short straight move to the exact drop point
     release_pose = top_down(drop, place_yaw)
     cell.move_pose("place", release_pose)
