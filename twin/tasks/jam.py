@@ -37,6 +37,7 @@ object the fingers touch are retreats (`retreat=True`), which the protective sto
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -44,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.tasks.cell import StageFailed
+from twin.tasks.cell import StageFailed, top_down
 from twin.timing import stage
 
 if TYPE_CHECKING:
@@ -293,10 +294,13 @@ def _set_down(cell: Cell, look_pose: np.ndarray, surface_z: float, hang_m: float
     """Lower straight down from `look_pose` until the object's bottom is PRESS_M into the surface (or, not
     knowing how far it hangs, the fingertips TIP_GAP_M above it), open fully, close and open there (the
     object resting on the surface is let go square). A stop on the way down (the object pushed up against
-    the gripper body) lets go where it stopped."""
+    the gripper body) lets go where it stopped. The gripper comes down pointing straight down at the yaw
+    it looks at (a transfer with its orientation free, stopped on the way, can leave it tilted, and a
+    tilted finger reaches below the tips' height)."""
     floor_tcp = surface_z + _tip_below_tcp(cell) + TIP_GAP_M
     z = floor_tcp if hang_m is None else max(floor_tcp, surface_z + hang_m - PRESS_M)
-    T = np.array(look_pose, dtype=float)
+    R = np.asarray(look_pose, dtype=float)[:3, :3]
+    T = top_down(look_pose[:3, 3], math.atan2(float(R[1, 0]), float(R[0, 0])))
     try:
         # refused in planning (the fingers' model reaching into the surface at this opening): a little
         # higher, up to SET_DOWN_RAISES steps of a centimetre; nothing moved until one is accepted
