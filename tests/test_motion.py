@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from typing import Any
 
 import numpy as np
@@ -524,3 +525,18 @@ def check_planner_contract(name: str, ctx: Any, scene: Any, limits: Limits) -> N
 @pytest.mark.parametrize("name", sorted(default_registry().names([Kind.PLANNER])))
 def test_planner_contract(name: str, ctx: Any, scene: Any, limits: Limits) -> None:
     check_planner_contract(name, ctx, scene, limits)
+
+
+@pytest.mark.parametrize("name", ["ruckig.movej", "seed.quintic_movej"])
+def test_a_start_or_joint_goal_in_collision_is_refused_naming_the_pair(
+    ctx: Any, limits: Limits, scene: Any, name: str
+) -> None:
+    if isinstance(scene, FreeScene):
+        pytest.skip("needs the FCL planning scene")
+    q_low = HOME.copy()
+    q_low[1] = 0.4  # the upper arm swung down through the table
+    assert scene.in_collision(q_low)
+    goal = planner(ctx, name).plan(MotionRequest(HOME, JointGoal(q_low), limits), scene)
+    assert goal.status is Status.INVALID_GOAL and re.search(r"in collision \(\w+ with \w+\)", goal.reason), goal.reason
+    start = planner(ctx, name).plan(MotionRequest(q_low, JointGoal(HOME), limits), scene)
+    assert start.status is Status.INVALID_START and re.search(r"in collision \(\w+ with \w+\)", start.reason)

@@ -136,7 +136,11 @@ class MotionPlannerBase:
             if not self.kin.within_limits(q):
                 return None, MotionResult(Status.INVALID_GOAL, "the joint goal is outside the joint limits"), None
             if scene.in_collision(q):
-                return None, MotionResult(Status.INVALID_GOAL, "the joint goal is in collision"), None
+                return (
+                    None,
+                    MotionResult(Status.INVALID_GOAL, f"the joint goal is in collision ({colliding_pair(scene, q)})"),
+                    None,
+                )
             return q, None, None
         assert isinstance(goal, PoseGoal)
         if goal.frame not in _FRAMES:
