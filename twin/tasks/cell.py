@@ -420,27 +420,28 @@ class Cell:
             refused = e
         q0 = self.world.joint_positions()
         raised = self._raised(q0)
-        ways: list[tuple[str, list[np.ndarray]]] = [
-            ("wrist first", [np.concatenate([q0[:3], q[3:]])]),
-            ("arm first", [np.concatenate([q[:3], q0[3:]])]),
+        # (name, the joints it passes through, whether its first leg is the rise straight up to `raised`)
+        ways: list[tuple[str, list[np.ndarray], bool]] = [
+            ("wrist first", [np.concatenate([q0[:3], q[3:]])], False),
+            ("arm first", [np.concatenate([q[:3], q0[3:]])], False),
         ]
         if raised is not None:
             ways += [
-                ("up first", [raised]),
-                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])]),
+                ("up first", [raised], True),
+                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])], True),
             ]
         # the arm straight up (the "candle" posture): from it the elbow and wrist unfold either way, which a
         # straight joint motion between two elbow branches cannot do without folding through itself
-        ways.append(("through the upright posture", [np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])]))
-        for name, via in ways:
+        upright = np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])
+        ways.append(("through the upright posture", [upright], False))
+        for name, via, rises in ways:
             if not self._clear_way(q0, *via, q):
                 continue
             log.info("%s: the direct way runs into something (%s); going %s", stage, refused.reason, name)
-            for k, qv in enumerate(via):
-                if k == 0 and raised is not None and qv is raised:
-                    self._rise_to_safe_height()
-                else:
-                    self.move_joints(stage, qv)
+            if rises:
+                self._rise_to_safe_height()
+            for qv in via[1:] if rises else via:
+                self.move_joints(stage, qv)
             return self.move_joints(stage, q)
         log.info(
             "%s: the direct way runs into something and no other way is clear from %s",

@@ -47,6 +47,7 @@ import numpy as np
 
 from twin.tasks.cell import StageFailed, top_down
 from twin.timing import stage
+from twin.urdf_model import primitive_half_extents
 
 if TYPE_CHECKING:
     from twin.camera import Intrinsics
@@ -183,12 +184,12 @@ def surface_below(cell: Cell, xy: np.ndarray | tuple[float, float]) -> float:
     `xy`: what an object let go there comes to rest on. 0 when nothing is modelled below (the floor)."""
     x, y = float(xy[0]), float(xy[1])
     top = 0.0
+    # the scene's environment shapes hold the fixtures and the boxes added at run time alike
     shapes = [s for group in cell.scene.environment_shapes().values() for s in group]
-    shapes += [("box", tuple(sz), T) for sz, T in cell.scene.boxes().values()]
     for kind, dims, T in shapes:
         if kind != "box":
             continue
-        half = np.abs(T[:3, :3]) @ (np.asarray(dims, dtype=float) / 2.0)
+        half = np.abs(T[:3, :3]) @ primitive_half_extents(kind, dims)
         lo, hi = T[:3, 3] - half, T[:3, 3] + half
         if lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1]:
             top = max(top, float(hi[2]))
