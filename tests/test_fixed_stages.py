@@ -97,6 +97,32 @@ def test_a_posture_is_reached_at_the_turn_of_each_joint_nearest_where_it_is():
         assert np.abs(world.joint_positions() - goal).max() < 0.01
 
 
+def test_a_way_that_keeps_a_centimetre_clear_is_taken_before_a_nearer_one_that_grazes():
+    # a way 0.1 mm clear in planning met the real obstacle (the box perceived a little small, the arm a
+    # little off its plan while tracking): the upper arm touched it and every later move was stopped
+    settings = load_config(ROOT / "configs/warehouse.yaml")
+    with World(settings, seed=0, renderer="tiny") as world:
+        cell = Cell(settings, world)
+        home = np.asarray(settings.robot.home, dtype=float)
+        turned = home + [1.0, 0, 0, 0, 0, 0]  # the tcp 1 rad round the base: far from the box
+        tcp = cell.kin.fk(home)[:3, 3]
+
+        def box_below(gap_m: float) -> float:
+            h = 0.20
+            for _ in range(3):  # the box's top `gap_m` below the gripper's lowest point
+                pose = np.eye(4)
+                pose[:3, 3] = tcp - [0.0, 0.0, h]
+                cell.scene.add_box("probe", [0.1, 0.1, 0.1], pose)
+                h -= float(cell.scene.min_distance(home, include_self=False).distance) - gap_m
+            return float(cell.scene.min_distance(home, include_self=False).distance)
+
+        assert abs(box_below(0.003) - 0.003) < 5e-4
+        assert cell._first_clear([[home], [turned]]) == 1  # 3 mm clear: the other way, 1 cm clear, first
+        assert cell._first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
+        assert box_below(-0.003) < 0.0
+        assert cell._first_clear([[home]]) is None
+
+
 def _outcome(stage: str | None, planner: str | None = None) -> ObjectOutcome:
     return ObjectOutcome("o", "cube", None, "bin", False, error=f"{stage}: x", stage=stage, planner=planner)
 
