@@ -223,16 +223,24 @@ def free_jam(
         ("press it down with the fingertips at the surface", lambda: _set_down(cell, look_pose, surface_z, None)),
         ("shake the wrist", lambda: _shake(cell)),
     ]
+    from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
+
     done = 0
     for name, act in actions[: max(0, tries)]:
         if not reading.jammed:
             break
         done += 1
         log.info("jam: %s; try %d of %d: %s", reading.reason, done, tries, name)
+        # what is stuck moves with the gripper: the contact monitor treats it as carried, as after a grasp
+        # (a real cell's protective stop is a force threshold, which an object wedged in the gripper, moving
+        # with it, does not trip); else a set-down is stopped by the object pressed against the gripper body
+        carried, cell.held_body = cell.held_body, body_between_fingers(cell.world)
         try:
             act()
         except StageFailed as e:
             log.info("jam: %s: %s", name, e)
+        finally:
+            cell.held_body = carried
         try:
             if not _at(cell, look_pose):
                 cell.move_pose("ascent", look_pose, retreat=True)
