@@ -25,7 +25,7 @@ RENDERER = "tiny"
 
 def test_the_robocup_task_measures_a_knocked_wrist_camera_from_the_base_marker():
     """The camera sits 1 cm / 1 deg off its configured hand-eye transform; trusting the config puts the
-    camera ~1.5 cm off at the capture pose, the task's marker view at the start of the run within 3 mm."""
+    camera 1 cm off at the capture pose, the task's marker view at the start of the run within 3 mm."""
     s = load_config(
         "robocup", overrides=["camera.extrinsic_error.translation_m=0.01", "camera.extrinsic_error.rotation_deg=1"]
     )
@@ -39,7 +39,7 @@ def test_the_robocup_task_measures_a_knocked_wrist_camera_from_the_base_marker()
         T_true = true_camera_pose(s.camera, world.seed, world.link_matrix("tool0"))
         dt_used, dr_used = transform_error(camera_extrinsics(s, cap, *hand_eye), T_true)
         dt_config, _ = transform_error(cap.T_base_camera_nominal, T_true)
-    assert dt_config > 0.01
+    assert dt_config > 0.0099  # its 1 cm (to round-off: 10.000008 mm at 240 Hz, 9.999989 at 480)
     assert dt_used < 0.003 and dr_used < 0.2, (dt_used, dr_used)
     with World(
         load_config("robocup", overrides=["perception.extrinsics=kinematics"]), seed=3, renderer=RENDERER

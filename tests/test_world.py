@@ -170,11 +170,11 @@ def test_closing_on_nothing_closes_fully_and_opening_is_symmetric() -> None:
     with World(one_object_settings("cube"), seed=0, renderer="tiny") as world:
         assert world.gripper_opening() == pytest.approx(world.settings.gripper.max_opening_m, abs=1e-6)
         world.close_gripper()
-        world.step(240)
+        world.step(round(1.0 / world.dt))
         assert world.gripper_opening() < 1e-3
         assert world.gripper_settled()
         world.set_gripper_opening(0.05)
-        world.step(240)
+        world.step(round(1.0 / world.dt))
         left, right = (
             pb.getJointState(world.robot_id, world.link_indices()[n], physicsClientId=world.client_id)[0]
             for n in ("left_finger", "right_finger")
@@ -223,7 +223,7 @@ def test_same_seed_gives_identical_object_poses_after_2s_and_other_seeds_differ(
     runs = []
     for seed in (7, 7, 8):
         with World(settings, seed=seed, renderer="tiny") as world:
-            world.step(480)
+            world.step(round(2.0 / world.dt))
             assert world.sim_time == pytest.approx(2.0)
             runs.append(poses(world))
     np.testing.assert_array_equal(runs[0], runs[1])
