@@ -375,7 +375,12 @@ class Cell:
                 raise
             why = e.reason
         q0 = self.world.joint_positions()
-        sols = sorted(self.kin.ik(T_tcp), key=lambda q: float(np.abs(q - q0).max()))
+        # each IK branch once, at the turn of each joint nearest where it is: a way that swings a wrist a
+        # full turn to keep clear leaves the arm a turn from where the next planner expects it
+        sols = sorted(
+            (self.nearest_turn(q) for q in self.kin.ik(T_tcp, all_wraps=False)),
+            key=lambda q: float(np.abs(q - q0).max()),
+        )
         i = self._first_clear([[q0, q] for q in sols])
         if i is not None:
             log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
