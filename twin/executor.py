@@ -25,11 +25,12 @@ if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.world import World
 
-__all__ = ["CONTACT_CHECK_EVERY", "ExecutionReport", "MotionRecord", "WorldPlant", "execute", "plan_and_execute"]
+__all__ = ["CONTACT_CHECK_S", "ExecutionReport", "MotionRecord", "WorldPlant", "execute", "plan_and_execute"]
 
 log = logging.getLogger("twin")
 
-CONTACT_CHECK_EVERY = 4  # physics steps between two looks at the contacts (1/60 s at 240 Hz)
+# simulated seconds between two looks at the contacts (the protective stop's reaction), whatever the physics rate
+CONTACT_CHECK_S = 1.0 / 60.0
 
 
 @dataclass(frozen=True)
@@ -72,12 +73,13 @@ def execute(
 ) -> ExecutionReport:
     """Play `traj` on the arm at the physics rate, then hold its last point for `hold_s`.
 
-    Every `CONTACT_CHECK_EVERY` steps the contacts are read: an unexpected one (anything but
+    Every `CONTACT_CHECK_S` the contacts are read: an unexpected one (anything but
     `ignore_bodies`; see `World.unexpected_contacts`) stops the arm at its measured position when
     `stop_on_contact`, and is reported. `on_step` is called after every physics step.
     """
     dt = world.dt
     n = int(np.ceil(traj.duration / dt - 1e-9))
+    check_every = max(1, round(CONTACT_CHECK_S / dt))
     worst = 0.0
     stopped: str | None = None
     steps = 0
@@ -90,7 +92,7 @@ def execute(
         if on_step is not None:
             on_step()
         worst = max(worst, float(np.abs(world.joint_positions() - qs[k]).max()))
-        if stop_on_contact and (k + 1) % CONTACT_CHECK_EVERY == 0:
+        if stop_on_contact and (k + 1) % check_every == 0:
             hits = world.unexpected_contacts(ignore=ignore_bodies, fingers_may_touch_objects=fingers_may_touch_objects)
             if hits:
                 stopped = "unexpected contact: " + ", ".join(f"{a} with {b}" for a, b in hits)
