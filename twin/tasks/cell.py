@@ -363,8 +363,9 @@ class Cell:
 
     def move_pose_over(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
         """`move_pose`, and when the stage's planner refuses the direct way because it runs into something
-        (planned, not moved): to the arm configuration at `T_tcp` (an IK branch and turn of the joints)
-        whose straight joint motion from here is clear, nearest first; else over the top: straight up to
+        (planned, not moved): to the arm configuration at `T_tcp` (an IK branch, at the turn of each joint
+        nearest where it is) whose straight joint motion from here is clear, nearest first, 1 cm clear
+        before merely clear (`_first_clear`); else over the top: straight up to
         `safe_height`, across at that height with the stage's planner, and straight down to `T_tcp`;
         refused again (the arm's own links in the way: another planner's motion left it in an awkward
         configuration), by way of home."""
