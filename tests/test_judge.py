@@ -177,6 +177,36 @@ def test_the_robocup_referee_names_the_stage_of_every_failure():
     assert others and all(o.error == "perception: never seen on the table" for o in others)
 
 
+def test_an_object_seen_again_elsewhere_after_a_failure_keeps_its_first_failure():
+    # nmpc braked a transfer, the recovery let the marker go, it fell beside the base plate where no grasp
+    # reaches: to the task a new target, whose descent is refused. The object's failure is nmpc's
+    with World(ROBOCUP, seed=0, renderer="tiny") as world:
+        referee = RobocupReferee(world, ROBOCUP)
+        obj = world.objects()[0]
+
+        def target(error, stage, planner):
+            return SimpleNamespace(
+                error=error,
+                failure="collision",
+                stage=stage,
+                planner=planner,
+                done=False,
+                cycle_time_s=1.0,
+                first_estimate=obj.position.copy(),
+                true_ids={obj.id},
+            )
+
+        dropped = target("transfer: nmpc: collision: braked to a stop", "transfer", "nmpc")
+        out = {
+            o.id: o
+            for o in referee.outcomes([dropped, target("descent: toppra.movel: collision", "descent", "toppra.movel")])
+        }
+    o = out[obj.name]
+    assert (o.stage, o.planner) == ("transfer", "nmpc")
+    assert o.error == "transfer: nmpc: collision: braked to a stop; then: descent: toppra.movel: collision"
+    assert o.cycle_time_s == 2.0
+
+
 # ---- warehouse --------------------------------------------------------------------------------------
 def test_warehouse_cube_in_its_zone_beside_it_and_on_another_cube():
     with World(WAREHOUSE, seed=0, renderer="tiny") as world:

@@ -280,8 +280,13 @@ class RobocupReferee:
                 err = None
             elif not mine:
                 err = "perception: never seen on the table" + (f" (the run stopped: {stopped})" if stopped else "")
-            elif mine[-1].error:
-                err, failure, stage, planner = mine[-1].error, mine[-1].failure, mine[-1].stage, mine[-1].planner
+            elif mine[-1].error or (not mine[-1].done and any(t.error for t in mine)):
+                # seen again elsewhere after a failure (dropped, knocked), the object is a new target to the
+                # task; its first failure is still the object's, the later targets' are added to the text
+                failed = [t for t in mine if t.error]
+                first = failed[0]
+                err, failure, stage, planner = first.error, first.failure, first.stage, first.planner
+                err = "; then: ".join([str(err), *(str(t.error) for t in failed[1:])])
             elif mine[-1].done and (knock := self.watch and self.watch.knocked(oid)):
                 err = _knocked_error(knock, f"{verdict.reason}{self._elsewhere(oid, bin_name)}")
                 failure, stage, planner = "execution_contact", knock.stage, knock.planner
