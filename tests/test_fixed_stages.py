@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from twin.compare.worker import task_attribution
 from twin.config import load_config
@@ -121,6 +122,27 @@ def test_a_way_that_keeps_a_centimetre_clear_is_taken_before_a_nearer_one_that_g
         assert cell._first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
         assert box_below(-0.003) < 0.0
         assert cell._first_clear([[home]]) is None
+
+
+def test_a_place_move_refused_in_the_branch_a_transfer_left_turns_the_arm_where_it_is_first():
+    # ompl.lbkpiece1's transfer (RoboCup seed 4) ended above bin_green elbow-down: lowering the bottle from
+    # there takes the upper arm into the bin wall; the place was refused and the run lost every object
+    settings = load_config("robocup")
+    with World(settings, seed=4, renderer="tiny") as world:
+        cell = Cell(settings, world)
+        world.reset_joints(np.array([0.99, -0.12, -1.32, -0.13, -1.57, 0.99]))
+        cell.settle(0.2)
+        q0 = world.joint_positions()
+        down = cell.kin.fk(q0)
+        down[2, 3] -= 0.10
+        with pytest.raises(StageFailed, match="upper_arm_link with bin_green"):
+            cell.move_pose("place", down)
+        assert np.abs(world.joint_positions() - q0).max() < 1e-3  # refused in planning: nothing moved
+        cell.move_pose_turned("place", down)
+        q = world.joint_positions()
+        assert np.linalg.norm(cell.kin.fk(q)[:3, 3] - down[:3, 3]) < 2e-3
+        assert np.sign(q[2]) != np.sign(q0[2])  # the elbow turned over first
+        assert [(r.stage, r.status) for r in cell.records[-2:]] == [("align", "success"), ("place", "success")]
 
 
 def _outcome(stage: str | None, planner: str | None = None) -> ObjectOutcome:

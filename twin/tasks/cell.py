@@ -295,14 +295,15 @@ class Cell:
     def move_pose(self, stage: str, T_tcp: np.ndarray, **kw: Any) -> MotionResult:
         """Move the tcp to `T_tcp` (4, 4); a stage that asks for a position only (the transfer) gets the
         orientation free and `task.transfer_tolerance_m` on the position."""
+        return self.move(stage, self._pose_goal(stage, T_tcp), **kw)
+
+    def _pose_goal(self, stage: str, T_tcp: np.ndarray) -> PoseGoal:
         pose = Pose.from_matrix(T_tcp)
         if STAGES[stage][1] == "position":
-            goal = PoseGoal(
+            return PoseGoal(
                 pose, position_tolerance_m=self.settings.task.transfer_tolerance_m, orientation_tolerance_rad=None
             )
-        else:
-            goal = PoseGoal(pose)
-        return self.move(stage, goal, **kw)
+        return PoseGoal(pose)
 
     def move_joints(self, stage: str, q: np.ndarray, **kw: Any) -> MotionResult:
         return self.move(stage, JointGoal(np.asarray(q, dtype=float)), **kw)
@@ -376,12 +377,7 @@ class Cell:
                 raise
             why = e.reason
         q0 = self.world.joint_positions()
-        # each IK branch once, at the turn of each joint nearest where it is: a way that swings a wrist a
-        # full turn to keep clear leaves the arm a turn from where the next planner expects it
-        sols = sorted(
-            (self.nearest_turn(q) for q in self.kin.ik(T_tcp, all_wraps=False)),
-            key=lambda q: float(np.abs(q - q0).max()),
-        )
+        sols = self._branches(T_tcp)
         i = self._first_clear([[q0, q] for q in sols])
         if i is not None:
             log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
@@ -406,6 +402,46 @@ class Cell:
         if above[2, 3] > T_tcp[2, 3]:
             result = self.move_pose("descent", T_tcp)
         return result
+
+    def move_pose_turned(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
+        """`move_pose` (a short straight move, e.g. lowering into a bin), and when the stage's planner refuses
+        it because the arm runs into something on the way (planned, not moved; e.g. the upper arm into a
+        bin wall, in the IK branch another planner's motion left it in): the arm turned first, where it is,
+        to another configuration of the same tcp pose (an IK branch at the joints' nearest turns) from which
+        the stage's planner plans the move, and then the move. The turn (1 cm clear before merely clear,
+        `_first_clear`) and the move from there are planned before anything moves; none clear: the refusal
+        stands."""
+        try:
+            return self.move_pose(stage, T_tcp)
+        except StageFailed as e:
+            if e.moved or e.failure not in _PATH_COLLIDES:
+                raise
+            refused = e
+        q0 = self.world.joint_positions()
+        turns = [q for q in self._branches(self.kin.fk(q0)) if float(np.abs(q - q0).max()) > 1e-3]
+        planner, goal = self.planner(STAGE_GROUPS[stage]), self._pose_goal(stage, T_tcp)
+        turns = [
+            q
+            for q in turns
+            if planner.plan(MotionRequest(q, goal, self.limits, seed=self.world.seed), self.scene).status
+            is Status.SUCCESS
+        ]
+        i = self._first_clear([[q0, q] for q in turns])
+        if i is None:
+            raise refused
+        log.info("%s: the way runs into something (%s); turning the arm where it is first", stage, refused.reason)
+        self.move_joints("align", turns[i])
+        return self.move_pose(stage, T_tcp)
+
+    def _branches(self, T_tcp: np.ndarray) -> list[np.ndarray]:
+        """The arm configurations (6,) at `T_tcp` (4, 4): each IK branch once, at the turn of each joint
+        nearest where it is (a way that swings a wrist a full turn to keep clear leaves the arm a turn from
+        where the next planner expects it), nearest first."""
+        q0 = self.world.joint_positions()
+        return sorted(
+            (self.nearest_turn(q) for q in self.kin.ik(T_tcp, all_wraps=False)),
+            key=lambda q: float(np.abs(q - q0).max()),
+        )
 
     def move_joints_over(self, stage: str, q: np.ndarray) -> MotionResult:
         """`move_joints`, and when the stage's planner refuses the direct way because it runs into

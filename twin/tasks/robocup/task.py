@@ -397,7 +397,7 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
         cell.move_pose("place", above)
     # (7) place: lower it into the bin (a tall object dropped from above the walls topples out), release
     release_pose = top_down((xy[0], xy[1], tcp_z), yaw)
-    cell.move_pose("place", release_pose)
+    cell.move_pose_turned("place", release_pose)
     cell.release(release_w)
     placed.append(footprint)
     # rise above the rims and make sure the object stayed in the bin: fingers that did not open, or an object

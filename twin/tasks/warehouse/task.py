@@ -92,7 +92,7 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
         )
     # NMPC stops within 3 cm of its goal: finish with a short straight move to the exact drop point
     release_pose = top_down(drop, place_yaw)
-    cell.move_pose("place", release_pose)
+    cell.move_pose_turned("place", release_pose)
     cell.release()
     # rise and make sure the cube stayed: fingers that did not open fully hold it apart; then it is set down
     # on the table in its zone again and let go (twin.tasks.jam)
