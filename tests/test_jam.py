@@ -180,6 +180,25 @@ def test_a_warehouse_cube_wedged_on_its_diagonal_stops_the_next_move_and_recover
         cell.move_joints("home", home)
 
 
+def test_the_way_home_stopped_by_a_cube_stuck_to_a_finger_frees_it_and_gets_home():
+    # after the warehouse's last release a cube stayed on a finger; the return home was stopped by it and
+    # the run ended with the cube hanging there (rrtconnect+try_direct, seed 0)
+    s = load_config("warehouse")
+    with World(s, seed=0, renderer="tiny") as world:
+        cell = Cell(s, world)
+        cube = _ids(world)["warehouse_cube_black_0"]
+        world.reset_joints(_q_at(cell, (-0.28, 0.18, 0.17)))
+        cell.open_gripper()
+        _wedge_cube_on_its_diagonal(world, cube)
+        world.step(round(1.0 / world.dt))
+        assert _in_fingers(world, cube)
+        home = np.asarray(s.robot.home)
+        cell.reach_posture("home", home)
+        assert np.abs(world.joint_positions() - cell.nearest_turn(home)).max() < 0.01
+        assert not _in_fingers(world, cube) and world.object_pose(cube)[0][2] < 0.03  # set down on the table
+        assert cell.records[0].status == "execution_stopped"
+
+
 def test_a_robocup_run_with_a_jam_after_its_first_release_frees_it_and_places_every_object(monkeypatch, caplog):
     """Right after the first release, the released object is wedged between the opened fingers at the look
     pose above the bin (ground truth sets it up). The task senses it, sets it down in the bin, and the run

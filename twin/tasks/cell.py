@@ -492,6 +492,19 @@ class Cell:
         )
         raise refused
 
+    def reach_posture(self, stage: str, q: np.ndarray) -> MotionResult:
+        """`move_joints_over` (home, the capture pose), and when a contact stops it on the way (an object
+        still stuck to a finger after a release touches something): let go, rise, free what is stuck
+        (`recover`: the stop that led there names the finger) and try once more."""
+        try:
+            return self.move_joints_over(stage, q)
+        except StageFailed as e:
+            if e.failure != "execution_contact":
+                raise
+            log.info("%s: stopped on the way (%s); recovering and trying again", stage, e.reason)
+        self.recover()
+        return self.move_joints_over(stage, q)
+
     def _first_clear(self, ways: Sequence[Sequence[np.ndarray]]) -> int | None:
         """The index of the first of `ways` (each the joints its straight legs pass through, in order of
         preference) that keeps `CHOOSE_CLEARANCE_M` from the planning scene all along (checked every 0.01

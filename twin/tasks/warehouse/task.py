@@ -154,7 +154,7 @@ def _perceive_again(cell: Cell, cube: LabeledCube) -> LabeledCube | None:
     """After a failed attempt: go home (out of the camera's view), look again and return the cube of the
     same colour nearest to where it was (a slipped or dropped cube has moved); None when none is seen."""
     try:
-        cell.move_joints_over("home", np.array(cell.settings.robot.home))
+        cell.reach_posture("home", np.array(cell.settings.robot.home))
         seen = _perceive(cell)
     except (StageFailed, MarkerNotFound) as e:
         log.info("warehouse: could not look again: %s", e)
@@ -219,7 +219,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
                     att.cube = again
         att.cycle_time_s = world.sim_time - t0
     try:
-        cell.move_joints_over("home", np.array(settings.robot.home))
+        cell.reach_posture("home", np.array(settings.robot.home))
     except StageFailed as e:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
