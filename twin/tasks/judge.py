@@ -284,8 +284,8 @@ class RobocupReferee:
                 # seen again elsewhere after a failure (dropped, knocked), the object is a new target to the
                 # task; its first failure is still the object's, the later targets' are added to the text
                 failed = [t for t in mine if t.error]
-                first = failed[0]
-                err, failure, stage, planner = first.error, first.failure, first.stage, first.planner
+                origin = failed[0]
+                err, failure, stage, planner = origin.error, origin.failure, origin.stage, origin.planner
                 err = "; then: ".join([str(err), *(str(t.error) for t in failed[1:])])
             elif mine[-1].done and (knock := self.watch and self.watch.knocked(oid)):
                 err = _knocked_error(knock, f"{verdict.reason}{self._elsewhere(oid, bin_name)}")
