@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import SimpleNamespace
 
 import numpy as np
@@ -157,10 +159,9 @@ def test_a_spam_wedged_between_the_opened_fingers_is_seen_by_the_wrist_camera_an
         cell.move_joints("capture", np.asarray(s.camera.capture_pose))  # no finger stops it any more
 
 
-def test_a_warehouse_cube_wedged_on_its_diagonal_stops_the_next_move_and_recovery_frees_it():
-    """No wrist camera in the warehouse and the fingers read open: the protective stop of the next move
-    (a finger touching a loose object while the gripper should be empty) is what tells. `Cell.recover`
-    sets the cube down on the table below and lets go; the move then goes through."""
+@contextmanager
+def _warehouse_cube_wedged() -> Iterator[tuple[World, Cell, int]]:
+    """A warehouse world, the black cube wedged on its diagonal between the opened fingers above a drop zone."""
     s = load_config("warehouse")
     with World(s, seed=0, renderer="tiny") as world:
         cell = Cell(s, world)
@@ -168,10 +169,18 @@ def test_a_warehouse_cube_wedged_on_its_diagonal_stops_the_next_move_and_recover
         world.reset_joints(_q_at(cell, (-0.28, 0.18, 0.17)))
         cell.open_gripper()
         _wedge_cube_on_its_diagonal(world, cube)
-        world.step(240)
+        world.step(round(1.0 / world.dt))
         assert _in_fingers(world, cube)
+        yield world, cell, cube
+
+
+def test_a_warehouse_cube_wedged_on_its_diagonal_stops_the_next_move_and_recovery_frees_it():
+    """No wrist camera in the warehouse and the fingers read open: the protective stop of the next move
+    (a finger touching a loose object while the gripper should be empty) is what tells. `Cell.recover`
+    sets the cube down on the table below and lets go; the move then goes through."""
+    with _warehouse_cube_wedged() as (world, cell, cube):
         assert not sense_jam(cell).jammed  # encoders alone: open
-        home = np.asarray(s.robot.home)
+        home = np.asarray(cell.settings.robot.home)
         with pytest.raises(StageFailed, match=r"unexpected contact: .*finger with warehouse_cube_black_0"):
             cell.move_joints("home", home)
         cell.recover()
@@ -183,16 +192,8 @@ def test_a_warehouse_cube_wedged_on_its_diagonal_stops_the_next_move_and_recover
 def test_the_way_home_stopped_by_a_cube_stuck_to_a_finger_frees_it_and_gets_home():
     # after the warehouse's last release a cube stayed on a finger; the return home was stopped by it and
     # the run ended with the cube hanging there (rrtconnect+try_direct, seed 0)
-    s = load_config("warehouse")
-    with World(s, seed=0, renderer="tiny") as world:
-        cell = Cell(s, world)
-        cube = _ids(world)["warehouse_cube_black_0"]
-        world.reset_joints(_q_at(cell, (-0.28, 0.18, 0.17)))
-        cell.open_gripper()
-        _wedge_cube_on_its_diagonal(world, cube)
-        world.step(round(1.0 / world.dt))
-        assert _in_fingers(world, cube)
-        home = np.asarray(s.robot.home)
+    with _warehouse_cube_wedged() as (world, cell, cube):
+        home = np.asarray(cell.settings.robot.home)
         cell.reach_posture("home", home)
         assert np.abs(world.joint_positions() - cell.nearest_turn(home)).max() < 0.01
         assert not _in_fingers(world, cube) and world.object_pose(cube)[0][2] < 0.03  # set down on the table

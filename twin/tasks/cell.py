@@ -113,6 +113,17 @@ def clear_failure(rec: FailureRecord) -> None:
     rec.error = rec.failure = rec.stage = rec.planner = None
 
 
+def _or_refusal(move: Callable[[], MotionResult]) -> MotionResult | StageFailed:
+    """`move()`'s result, or its StageFailed when the stage's planner refused the way because it runs into
+    something (planned, not moved: another way may not); any other failure is raised."""
+    try:
+        return move()
+    except StageFailed as e:
+        if e.moved or e.failure not in _PATH_COLLIDES:
+            raise
+        return e
+
+
 def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
     """(4, 4) tcp pose at `xyz` pointing straight down, fingers closing along (cos yaw, sin yaw, 0)."""
     return Pose.from_xyz_rpy(tuple(float(v) for v in xyz), (math.pi, 0.0, float(yaw))).matrix()
@@ -370,23 +381,19 @@ class Cell:
         `safe_height`, across at that height with the stage's planner, and straight down to `T_tcp`;
         refused again (the arm's own links in the way: another planner's motion left it in an awkward
         configuration), by way of home."""
-        try:
-            return self.move_pose(stage, T_tcp)
-        except StageFailed as e:
-            if e.moved or e.failure not in _PATH_COLLIDES:
-                raise
-            why = e.reason
+        done = _or_refusal(lambda: self.move_pose(stage, T_tcp))
+        if isinstance(done, MotionResult):
+            return done
+        why = done.reason
         q0 = self.world.joint_positions()
         sols = self._branches(T_tcp)
         i = self._first_clear([[q0, q] for q in sols])
         if i is not None:
             log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
-            try:
-                return self.move_joints(stage, sols[i])
-            except StageFailed as e:
-                if e.moved or e.failure not in _PATH_COLLIDES:
-                    raise
-                why = e.reason
+            done = _or_refusal(lambda: self.move_joints(stage, sols[i]))
+            if isinstance(done, MotionResult):
+                return done
+            why = done.reason
         log.info("%s: the direct way runs into something (%s); going over the top", stage, why)
         above = np.array(T_tcp, dtype=float)
         above[2, 3] = max(above[2, 3], self.safe_height())
@@ -411,12 +418,9 @@ class Cell:
         the stage's planner plans the move, and then the move. The turn (1 cm clear before merely clear,
         `_first_clear`) and the move from there are planned before anything moves; none clear: the refusal
         stands."""
-        try:
-            return self.move_pose(stage, T_tcp)
-        except StageFailed as e:
-            if e.moved or e.failure not in _PATH_COLLIDES:
-                raise
-            refused = e
+        refused = _or_refusal(lambda: self.move_pose(stage, T_tcp))
+        if isinstance(refused, MotionResult):
+            return refused
         q0 = self.world.joint_positions()
         turns = [q for q in self._branches(self.kin.fk(q0)) if float(np.abs(q - q0).max()) > 1e-3]
         planner, goal = self.planner(STAGE_GROUPS[stage]), self._pose_goal(stage, T_tcp)
@@ -454,12 +458,9 @@ class Cell:
         nearest where it is, the same posture without a needless full turn of a wrist (which swings the
         gripper through the arm) after a planner left a joint a turn away."""
         q = self.nearest_turn(np.asarray(q, dtype=float))
-        try:
-            return self.move_joints(stage, q)
-        except StageFailed as e:
-            if e.moved or e.failure not in _PATH_COLLIDES:
-                raise
-            refused = e
+        refused = _or_refusal(lambda: self.move_joints(stage, q))
+        if isinstance(refused, MotionResult):
+            return refused
         q0 = self.world.joint_positions()
         raised = self._raised(q0)
         # (name, the joints it passes through, whether its first leg is the rise straight up to `raised`)
