@@ -81,7 +81,6 @@ class SeedProblem:
         self.ahead_id = self.model.addFrame(
             pin.Frame("ahead", self.model.frames[tcp].parentJoint, ahead, pin.FrameType.OP_FRAME)
         )
-        self.tcp_id = tcp
         self.data = self.model.createData()
         self.horizon, self.n_boxes, self.margin = horizon, n_boxes, box_margin_m
         self.max_iterations = max_iterations
