@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin_nmpc.model import TCP_FRAME
-from twin_nmpc.params import NMPCParams
+from twin_nmpc.params import RecedingParams
 from twin_nmpc.spheres import Box, sphere_positions
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ def resample(
     return out
 
 
-def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: NMPCParams) -> np.ndarray:
+def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: RecedingParams) -> np.ndarray:
     """(N,) table-clearance slack per knot (N, 6) that makes the guess feasible for the soft table rows."""
     z = sphere_positions(kin, knots, sph)[:, :, 2]
     need = params.table_z_m + params.table_clearance_m - (z - sph[None, :, 4])
@@ -106,7 +106,7 @@ def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: NMPCParam
 
 def initial_guess(
     kin: UR5e,
-    params: NMPCParams,
+    params: RecedingParams,
     q0: np.ndarray,
     target: np.ndarray,
     track: np.ndarray,

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["DEFAULT_TOOL_SPHERES", "DEFAULT_WRIST_SPHERES", "NMPCParams"]
+__all__ = ["DEFAULT_TOOL_SPHERES", "DEFAULT_WRIST_SPHERES", "NMPCParams", "RecedingParams"]
 
 # (x, y, z, radius) in the TCP frame (z along the tool, pointing out of the gripper; the flange is at
 # z = -0.135): fingertips/held object, fingers, the two halves of the 0.14 x 0.06 x 0.07 m gripper body,
@@ -36,8 +36,9 @@ DEFAULT_WRIST_SPHERES: tuple[tuple[int, float, float, float, float], ...] = (
 )
 
 
-class NMPCParams(BaseModel):
-    """Parameters of `nmpc` (defaults: SPEC, seed 000; seed 001 is dt=0.1, execute_steps=3)."""
+class RecedingParams(BaseModel):
+    """The parameters every MPC of `twin_nmpc.receding` shares: the seed formulation's (defaults: SPEC, seed
+    000; seed 001 is dt=0.1, execute_steps=3) and the loop's."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -72,12 +73,6 @@ class NMPCParams(BaseModel):
     object_sphere_max_radius_m: float = Field(0.05, gt=0)
     max_object_spheres: int = Field(4, ge=1, le=16)
     box_margin_m: float = Field(0.01, ge=0, le=0.1, description="boxes are grown by this on every side")
-    prebuild_boxes: list[int] | None = Field(
-        None,
-        description="obstacle-box counts whose NLPs are built when the planner is constructed; None: as many boxes as"
-        " the config has fixtures that perception reports (`known: false`; warehouse: the wall). Another count is"
-        " built on first use, inside that (slower) step",
-    )
     box_screen_m: float | None = Field(
         0.1,
         gt=0,
@@ -102,6 +97,32 @@ class NMPCParams(BaseModel):
     )
     lift_clearance_m: float = Field(0.05, ge=0, description="extra height of the over-the-box initial guess")
     guess_step_fraction: float = Field(0.9, gt=0, le=1.0, description="initial guess steps, fraction of max")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RecedingParams:
+        if self.execute_steps > self.horizon:
+            raise ValueError(f"execute_steps ({self.execute_steps}) must not exceed horizon ({self.horizon})")
+        if self.object_sphere_min_radius_m > self.object_sphere_max_radius_m:
+            raise ValueError("object_sphere_min_radius_m must not exceed object_sphere_max_radius_m")
+        for s in self.tool_spheres:
+            if s[3] <= 0:
+                raise ValueError(f"tool sphere radii must be positive, got {s}")
+        for w in self.wrist_spheres:
+            if w[0] not in (4, 5, 6) or w[4] <= 0:
+                raise ValueError(f"wrist spheres need a DH frame 4, 5 or 6 and a positive radius, got {w}")
+        return self
+
+
+class NMPCParams(RecedingParams):
+    """Parameters of `nmpc` (defaults: SPEC, seed 000; seed 001 is dt=0.1, execute_steps=3): the shared ones
+    and IPOPT's."""
+
+    prebuild_boxes: list[int] | None = Field(
+        None,
+        description="obstacle-box counts whose NLPs are built when the planner is constructed; None: as many boxes as"
+        " the config has fixtures that perception reports (`known: false`; warehouse: the wall). Another count is"
+        " built on first use, inside that (slower) step",
+    )
     ipopt_tol: float = Field(
         1e-3, gt=0, description="IPOPT tol of warm-started solves (the shifted plan is usually 1-5 iterations away)"
     )
@@ -118,17 +139,7 @@ class NMPCParams(BaseModel):
     )
 
     @model_validator(mode="after")
-    def _consistent(self) -> NMPCParams:
-        if self.execute_steps > self.horizon:
-            raise ValueError(f"execute_steps ({self.execute_steps}) must not exceed horizon ({self.horizon})")
+    def _prebuild(self) -> NMPCParams:
         if self.prebuild_boxes is not None and any(n < 0 for n in self.prebuild_boxes):
             raise ValueError(f"prebuild_boxes must be box counts >= 0, got {self.prebuild_boxes}")
-        if self.object_sphere_min_radius_m > self.object_sphere_max_radius_m:
-            raise ValueError("object_sphere_min_radius_m must not exceed object_sphere_max_radius_m")
-        for s in self.tool_spheres:
-            if s[3] <= 0:
-                raise ValueError(f"tool sphere radii must be positive, got {s}")
-        for w in self.wrist_spheres:
-            if w[0] not in (4, 5, 6) or w[4] <= 0:
-                raise ValueError(f"wrist spheres need a DH frame 4, 5 or 6 and a positive radius, got {w}")
         return self

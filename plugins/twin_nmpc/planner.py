@@ -62,8 +62,8 @@ Why these choices:
 
 The pieces: `twin_nmpc.params` (the parameter model, the default spheres), `twin_nmpc.model` (the NLP and
 its cache), `twin_nmpc.spheres` (the proxy spheres and the numpy check of a plan), `twin_nmpc.guess` (the
-cold solve's initial guess), `twin_nmpc.braking` (stops within the bounds); this module holds the
-receding-horizon loop.
+cold solve's initial guess), `twin_nmpc.braking` (stops within the bounds), `twin_nmpc.receding` (the
+receding-horizon loop around a solve, shared with `croc`); this module holds the IPOPT solve.
 """
 
 from __future__ import annotations
@@ -74,39 +74,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.plugin import (
-    JointGoal,
-    MotionRequest,
-    MotionResult,
-    PlanningError,
-    PoseGoal,
-    Segment,
-    Status,
-    Trajectory,
-    as_q,
-    colliding_pair,
-    densify,
-    densify_path,
-    first_collision,
-)
-from twin_nmpc.braking import can_stop_now, stopping_steps
-from twin_nmpc.guess import guess_slack, initial_guess
-from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, Weights, cached_problem
+from twin_nmpc.guess import guess_slack
+from twin_nmpc.model import NMPCProblem, ProblemShape, Weights, cached_problem
 from twin_nmpc.params import NMPCParams
-from twin_nmpc.spheres import (
-    Box,
-    box_gaps,
-    clearance,
-    drop_covered,
-    object_spheres,
-    robot_spheres,
-    sphere_positions,
-    violation,
-    with_object,
-)
+from twin_nmpc.receding import RecedingHorizonMPC, Solved
+from twin_nmpc.spheres import Box, box_gaps
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, PluginContext, UR5e
+    from twin.plugin import PluginContext
 
 __all__ = ["NMPCPlanner"]
 
@@ -115,41 +90,31 @@ log = logging.getLogger("twin")
 # what fills an NLP's unused box slots: a 2 cm box 100 m below the base, whose rows are never near active
 _FAR_BOX: Box = ("", np.array([0.0, 0.0, -100.0]), np.array([0.0, 0.0, -100.0]))
 
-# the last plan beyond a segment is checked joint-linearly at this resolution (rad): a coarse early warning
-# (the segment itself is checked at the configured resolution), for the knots the arm needs to stop
-_LOOKAHEAD_RESOLUTION_RAD = 0.03
 
-
-class NMPCPlanner:
+class NMPCPlanner(RecedingHorizonMPC):
     """Receding-horizon NMPC over CasADi/IPOPT: `reset(request, scene)`, then `step(q)` until a MotionResult."""
 
     Params = NMPCParams
-    goal_kinds = frozenset({"position"})  # see the module docstring
+    name = "nmpc"
+    params: NMPCParams
 
     def __init__(self, params: NMPCParams | None, context: PluginContext):
-        self.params = params if params is not None else NMPCParams()
-        self.context = context
-        self.kin: UR5e = context.kinematics
-        col = context.settings.collision
-        self._resolution = {"max_step_rad": col.check_resolution_rad, "max_step_m": col.check_resolution_m}
-        self._robot_sph = robot_spheres(self.params.tool_spheres, self.params.wrist_spheres)
-        self._problems: dict[ProblemShape, NMPCProblem] = {}
-        self._request: MotionRequest | None = None
-        self._scene: PlanningScene | None = None
-        P = self.params
+        P = params if params is not None else NMPCParams()
         expected = P.prebuild_boxes
         if expected is None:  # perception reports one box per fixture the planners do not know
             expected = [sum(not f.known for f in context.settings.world.fixtures)]
         self._expected_slots = max(expected, default=0)
-        self._start_goal()
+        self._problems: dict[ProblemShape, NMPCProblem] = {}
+        super().__init__(P, context)
         for nb in sorted(set(expected)):  # built here, not in the first (timed) step
             self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps), expand=True)
 
-    @property
-    def jerk_limited(self) -> bool:
-        """Declared (`twin.planning.jerk_limited`): the NLP bounds the change of the step's change by the
-        request's jerk limit x dt^3 unless `limit_jerk` is off."""
-        return bool(self.params.limit_jerk)
+    def _start_goal(self) -> None:
+        super()._start_goal()
+        # the box in each NLP box slot ("" = free), kept from solve to solve of a goal; a goal starts with the
+        # slots of the shape the planner expects (`prebuild_boxes`), so its plans do not depend on earlier goals
+        self._slots: list[str] = []
+        self._box_slots = self._expected_slots
 
     # ---- the NLPs ---------------------------------------------------------------------------------
     def problem(self, shape: ProblemShape, *, expand: bool = False) -> NMPCProblem:
@@ -218,195 +183,17 @@ class NMPCPlanner:
         opts.update({f"ipopt.{k}": v for k, v in P.ipopt_options.items()})
         return opts
 
-    # ---- geometry helpers -------------------------------------------------------------------------
-    def spheres(self) -> np.ndarray:
-        """(n, 5) all proxy spheres (frame, x, y, z, r): tool, wrist, then held object (TCP frame)."""
-        return with_object(self._robot_sph, self._object_spheres())
-
-    def proxy_spheres(self, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Centres (m, n, 3) and radii (n,) of the proxy spheres at configurations qs (m, 6), base frame."""
-        sph = self.spheres()
-        return sphere_positions(self.kin, qs, sph), sph[:, 4].copy()
-
-    def _object_spheres(self) -> np.ndarray:
-        att = self._scene.attached_box() if self._scene is not None else None
-        if att is None:
-            return np.zeros((0, 4))
-        _, size, T = att
+    # ---- one solve ------------------------------------------------------------------------------------
+    def _solve(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray, sph: np.ndarray) -> Solved:
+        """One IPOPT solve, warm-started (primal and dual, shifted) from the last accepted one of the same shape."""
         P = self.params
-        obj = object_spheres(
-            size, T, r_min=P.object_sphere_min_radius_m, r_max=P.object_sphere_max_radius_m, max_n=P.max_object_spheres
-        )
-        return drop_covered(obj, self._robot_sph)
-
-    def _boxes(self) -> list[Box]:
-        """The scene's run-time (perceived) boxes, read fresh for every solve: (name, lo, hi)."""
-        if self._scene is None:
-            return []
-        return [(n, b.lo, b.hi) for n, b in sorted(self._scene.box_bounds().items())]
-
-    def _tracked(self, q: np.ndarray) -> np.ndarray:
-        T = self.kin.fk(q, "tcp")
-        return T[:3, 3] + T[:3, :3] @ self._track
-
-    # ---- receding horizon -------------------------------------------------------------------------
-    def _start_goal(self) -> None:
-        """The state of one goal, as before its first solve (the NLPs are kept)."""
-        self._solves = 0
-        self._fallbacks = 0
-        self._braking_steps = 0
-        self._solve_log: list[dict[str, Any]] = []
-        self._plan: np.ndarray | None = None  # (N+1, 6) knots of the last feasible plan
-        self._plan_idx = 0  # index of the knot the robot should be at now
-        self._ws: tuple[ProblemShape, SolveOutput] | None = None  # last converged solve, for warm start
-        self._ws_offset = 0
-        # the box in each NLP box slot ("" = free), kept from solve to solve of a goal; a goal starts with the
-        # slots of the shape the planner expects (`prebuild_boxes`), so its plans do not depend on earlier goals
-        self._slots: list[str] = []
-        self._box_slots = self._expected_slots
-        self._dq_prev = np.zeros(6)  # the last executed step (knot to knot): the start is at rest
-        self._dq_prev2 = np.zeros(6)  # the step before it
-        self._started = False  # whether step() has seen the measured start
-        self._guess_kind = ""  # what the last cold solve started from (twin_nmpc.guess)
-        self._done: MotionResult | None = None
-        self._pending: MotionResult | None = None
-        self._goal_candidates = np.zeros((0, 6))  # goal configurations, for a joint-space initial guess
-        self._track = np.zeros(3)  # the point that goes to the goal, TCP frame
-        self._target = np.zeros(3)  # the goal position, base frame
-        self._tolerance = self.params.goal_tolerance_m  # or the goal's tighter position tolerance
-
-    def reset(self, request: MotionRequest, scene: PlanningScene) -> None:
-        """Start a new goal: resolve the goal's TCP target and forget the previous plan (keep the NLPs)."""
-        self._request = request
-        self._scene = scene
-        self._start_goal()
-        goal = request.goal
-        if isinstance(goal, PoseGoal):
-            self._tolerance = min(self._tolerance, goal.position_tolerance_m)
-        if isinstance(goal, JointGoal):
-            self._target = self.kin.fk(goal.q, "tcp")[:3, 3]
-            self._goal_candidates = goal.q[None].copy()
-            if not self.kin.within_limits(goal.q):
-                self._pending = self._final(
-                    Status.INVALID_GOAL, f"joint goal {np.round(goal.q, 3).tolist()} is outside the joint limits"
-                )
-        elif isinstance(goal, PoseGoal):
-            if goal.frame not in ("tcp", "flange"):
-                self._pending = self._final(
-                    Status.INVALID_GOAL, f"unknown goal frame {goal.frame!r}; allowed: tcp, flange"
-                )
-                self._target = np.asarray(goal.pose.position, dtype=float)
-                return
-            self._track = np.zeros(3) if goal.frame == "tcp" else np.array([0.0, 0.0, -self.kin.tcp_offset_m])
-            self._target = np.asarray(goal.pose.position, dtype=float)
-            self._goal_candidates = self._goal_ik(goal)
-            if self._goal_candidates.shape[0] == 0:
-                self._pending = self._final(
-                    Status.INVALID_GOAL, f"goal position {np.round(self._target, 3).tolist()} is out of reach (no IK)"
-                )
-        else:  # pragma: no cover - MotionRequest already rejects other goal types
-            raise PlanningError(f"unsupported goal {goal!r}")
-        if self._pending is None and self._target[2] < self.params.table_z_m:
-            self._pending = self._final(
-                Status.INVALID_GOAL,
-                f"goal z {self._target[2]:.3f} m is below the table top ({self.params.table_z_m} m)",
-            )
-
-    def _goal_ik(self, goal: PoseGoal) -> np.ndarray:
-        """Joint solutions for the goal pose; when the orientation is out of reach, for the goal position
-        with the tool facing down at a few yaws (NMPC tracks the position; orientation is a soft term)."""
-        T = goal.pose.matrix()
-        sols = self.kin.ik(T, goal.frame)
-        if sols.shape[0]:
-            return sols
-        out = []
-        for yaw in np.linspace(0, 2 * math.pi, 8, endpoint=False):
-            Td = np.eye(4)
-            c, s = math.cos(yaw), math.sin(yaw)
-            Td[:3, :3] = np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
-            Td[:3, 3] = T[:3, 3]
-            sol = self.kin.ik(Td, goal.frame)
-            if sol.shape[0]:
-                out.append(sol)
-        return np.vstack(out) if out else np.zeros((0, 6))
-
-    def _final(self, status: Status, reason: str, q: np.ndarray | None = None) -> MotionResult:
-        info: dict[str, Any] = {
-            "nmpc_solves": self._solves,
-            "nmpc_fallbacks": self._fallbacks,
-            "nmpc_braking_steps": self._braking_steps,
-            "nmpc_solve_log": list(self._solve_log),
-            "initial_guess": self._guess_kind,
-        }
-        traj = None
-        if q is not None:
-            info["position_error_m"] = float(np.linalg.norm(self._tracked(q) - self._target))
-            if self._request is not None and isinstance(self._request.goal, PoseGoal):
-                R = self.kin.fk(q, self._request.goal.frame)[:3, :3]
-                G = self._request.goal.pose.matrix()[:3, :3]
-                info["orientation_error_rad"] = float(np.arccos(np.clip((np.trace(R.T @ G) - 1) / 2, -1, 1)))
-            if status is Status.SUCCESS:
-                traj = Trajectory(np.zeros(1), q[None], np.zeros((1, 6)), np.zeros((1, 6)))
-        return MotionResult(status, reason, traj, info=info, goal_tolerance_m=self._tolerance)
-
-    def step(self, q: np.ndarray) -> Segment | MotionResult:
-        """The next k steps from measured joint state `q` (6,) rad, or the final MotionResult."""
-        if self._request is None or self._scene is None:
-            raise PlanningError("NMPCPlanner.step() called before reset()")
-        if self._done is not None:
-            return self._done
-        q = as_q(q, "q")
-        P = self.params
-        if self._pending is not None:
-            self._done = self._pending
-            return self._done
-        if not self._started:
-            self._started = True
-            if self._scene.in_collision(q):
-                pair = colliding_pair(self._scene, q)
-                self._done = self._final(Status.INVALID_START, f"the start is in collision ({pair})", q)
-                return self._done
-        err = float(np.linalg.norm(self._tracked(q) - self._target))
-        boxes = self._boxes()
-        obj = self._object_spheres()
-        sph = with_object(self._robot_sph, obj)
         step, dstep, jstep = self._step_bounds()
-        if err <= self._tolerance:
-            # within the tolerance the NMPC stops solving; a moving arm first comes to rest within its limits
-            # (`_stop_at_goal`), and the status follows once it stands
-            if self._moving():
-                knots = self._stop_at_goal(q, sph, boxes)
-                if knots is not None:
-                    return self._execute(knots, {"solve": self._solves, "braking": True, "fallback": False}, 0.0, err)
-                log.warning(
-                    "nmpc: at the goal but no way to come to rest within the limits; stopping from %.3f rad/step",
-                    float(np.abs(self._dq_prev).max()),
-                )
-            self._done = self._final(
-                Status.SUCCESS, f"TCP within {err:.4f} m of the goal after {self._solves} solves", q
-            )
-            return self._done
-        if self._solves >= P.max_solves:
-            why = f"goal not reached after {self._solves} solves: TCP {err:.3f} m away (tolerance {self._tolerance} m)"
-            return self._end(Status.NO_SOLUTION, why, q)
-
-        for name, lo, hi in boxes:
-            if np.any(np.all((self._target >= lo) & (self._target <= hi))):
-                return self._end(Status.INVALID_GOAL, f"the goal lies inside obstacle box {name!r}", q)
-        clear = clearance(self.kin, q[None], sph, boxes, margin=0.0)
-        if clear.size and clear.min() < 0.0:
-            when = "at the start" if self._solves == 0 else f"at the state measured for solve {self._solves + 1}"
-            why = f"a proxy sphere is {-clear.min():.3f} m inside an obstacle box {when}"
-            return self._end(Status.INVALID_START, why, q)
 
         # the NLP holds the boxes near the plan the solve starts from (`box_screen_m`), in a fixed number of slots
         # (unused ones hold a far-away box) so that the shape, and with it the warm start, survives a change of
         # which boxes are near; a solution that comes close to a box left out is solved again with it
         def cold_guess() -> np.ndarray:
-            guess, self._guess_kind = initial_guess(
-                self.kin, P, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
-            )
-            return guess
+            return self._cold_guess(q, boxes, sph)
 
         guess: np.ndarray | None = None
         if self._ws is not None:
@@ -448,147 +235,18 @@ class NMPCPlanner:
                 break
             names = {b[0] for b in near + missed}
             near = [b for b in boxes if b[0] in names]
-        self._solves += 1
-        entry = {
-            "solve": self._solves,
-            "warm": sol.warm,
-            "time_s": spent,
-            "status": sol.status,
-            "iterations": iterations,
-            "boxes": len(near),
-            "rounds": rounds,
-        }
-        self._solve_log.append(entry)
-
-        k = P.execute_steps
+        entry = {"status": sol.status, "iterations": iterations, "boxes": len(near), "rounds": rounds}
         problem = None if sol.converged else f"IPOPT: {sol.status}"
-        if problem is None:
-            problem = self._violation(sol.q, sph, boxes)
-        if problem is None:
-            self._plan, self._plan_idx = sol.q, 0
-            self._ws, self._ws_offset = (shape, sol), 0
-            knots = sol.q[: k + 1].copy()
-            fallback = False
-        else:
-            entry["rejected"] = problem
-            log.info("nmpc: solve %d rejected (%s)", self._solves, problem)
-            if self._plan is None and not sol.warm and guess is not None:
-                # the first solve of a goal failed: its initial guess is itself a plan over the box, at
-                # reduced speed; it is followed (as the "last feasible plan") only if it passes the same check
-                path = np.vstack([q[None], guess])
-                if self._violation(path, sph, boxes) is None:
-                    self._plan, self._plan_idx = path, 0
-                    entry["following"] = "initial guess"
-            self._ws = None  # the next solve starts cold, from a fresh guess at the state reached
-            knots, fallback = self._fallback_knots(q, sph, boxes, k), True
-            if knots is None:
-                why = f"solve {self._solves} failed ({problem}) and no feasible plan is left to follow"
-                return self._end(Status.NO_SOLUTION, why, q)
-            self._fallbacks += 1
-        knots[0] = q
-        entry["fallback"] = fallback
-        return self._execute(knots, dict(entry, cost=sol.cost), spent, err)
-
-    # ---- executing, checked -------------------------------------------------------------------------
-    def _execute(
-        self, knots: np.ndarray, info: dict[str, Any], solve_time_s: float, err: float
-    ) -> Segment | MotionResult:
-        """Command `knots` (m+1, 6), knots[0] = the measured state, if they are free in the FCL scene and the
-        last plan is free for as far beyond them as the arm needs to stop; else brake (`_end`)."""
-        traj = self._segment(knots)
-        hit = self._collision(traj)
-        braking = bool(info.get("braking"))
-        if hit is None and not braking:
-            ahead = self._collision_ahead(knots)
-            if ahead is not None:
-                pair, n = ahead
-                why = f"the plan runs into a collision ({pair}) within {n} step{'' if n == 1 else 's'}"
-                return self._end(Status.COLLISION, why, knots[0], hit=True)
-        elif hit is not None:
-            kind = "braking segment" if braking else ("fallback segment" if info.get("fallback") else "segment")
-            return self._end(Status.COLLISION, f"the next {kind} would collide ({hit})", knots[0], hit=True)
-        self._commit(knots)
-        if braking:
-            self._braking_steps += knots.shape[0] - 1
-        return Segment(traj, solve_time_s, dict(info, position_error_m=err), fallback=bool(info.get("fallback", False)))
-
-    def _commit(self, knots: np.ndarray) -> None:
-        """The arm is commanded along `knots`: advance the plan and the step history."""
-        m = knots.shape[0] - 1
-        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
-        self._dq_prev2, self._dq_prev = hist[-2].copy(), hist[-1].copy()
-        self._plan_idx += m
-        self._ws_offset += m
-
-    def _end(self, status: Status, reason: str, q: np.ndarray, *, hit: bool = False) -> Segment | MotionResult:
-        """End the goal with `status`: a moving arm first brakes to rest (a braking segment, if its stop is
-        free; the status follows at the next step), else the status now. `hit`: the reason is a collision
-        ahead (the braking segment is what avoids it)."""
-        if self._moving():
-            knots = self._brake_knots(q)
-            if knots is not None:
-                traj = self._segment(knots)
-                pair = self._collision(traj)
-                if pair is None:
-                    self._commit(knots)
-                    self._braking_steps += knots.shape[0] - 1
-                    what = "braked to a stop" if hit else "braked to a stop first"
-                    self._pending = self._final(status, f"{reason}; {what}", knots[-1])
-                    info = {"solve": self._solves, "braking": True, "fallback": False, "stopping": status.value}
-                    err = float(np.linalg.norm(self._tracked(q) - self._target))
-                    return Segment(traj, 0.0, dict(info, position_error_m=err))
-                reason += f"; no free way to brake ({pair}): stopped at once"
-            else:
-                reason += "; no stop within the limits: stopped at once"
-            log.warning("nmpc: %s", reason)
-        self._done = self._final(status, reason, q)
-        return self._done
-
-    def _collision(self, traj: Trajectory) -> str | None:
-        """The colliding pair of the first colliding sample of `traj` (FCL, whole scene, configured resolution)."""
-        assert self._scene is not None
-        hit = first_collision(traj, self._scene, self.kin, **self._resolution)
-        if hit is None:
-            return None
-        return colliding_pair(self._scene, densify(traj, self.kin, **self._resolution)[hit])
-
-    def _collision_ahead(self, knots: np.ndarray) -> tuple[str, int] | None:
-        """(pair, steps) when the last plan, after the segment `knots` that follows it, collides within the
-        steps the arm needs to stop from the segment's end (+2), checked joint-linearly and coarsely."""
-        if self._plan is None or knots.shape[0] < 2:
-            return None
-        start = self._plan_idx + knots.shape[0] - 1
-        _, dstep, _ = self._step_bounds()
-        a = float(np.min(dstep)) if dstep is not None else self.params.max_step_rad
-        n = math.ceil(float(np.abs(knots[-1] - knots[-2]).max()) / a) + 2
-        rest = self._plan[start + 1 : start + 1 + n]
-        if rest.shape[0] == 0:
-            return None
-        path = np.vstack([knots[-1:], rest])
-        qs = densify_path(path, _LOOKAHEAD_RESOLUTION_RAD)[1:]
-        assert self._scene is not None
-        i = self._scene.first_collision(qs)
-        if i is None:
-            return None
-        # densify_path puts ceil(|step| / resolution) points on each step: which step the hit is on
-        lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        per_step = np.maximum(1, np.ceil(lengths / _LOOKAHEAD_RESOLUTION_RAD - 1e-9))
-        return colliding_pair(self._scene, qs[i]), int(np.searchsorted(np.cumsum(per_step), i + 1)) + 1
-
-    # ---- pieces of step() ---------------------------------------------------------------------------
-    def _step_bounds(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """Per-joint bounds (6,) of a step (velocity x dt), of its change (acceleration x dt^2) and of the
-        change of that (jerk x dt^3); None where the parameters switch a bound off."""
-        assert self._request is not None
-        P, lim = self.params, self._request.limits
-        step = np.minimum(P.max_step_rad, lim.max_joint_vel * P.dt)
-        dstep = lim.max_joint_acc * P.dt**2 if P.limit_acceleration else None
-        jstep = lim.max_joint_jerk * P.dt**3 if P.limit_jerk else None
-        return step, dstep, jstep
-
-    def _moving(self) -> bool:
-        """Whether the last commanded step moved (a stop ends with a zero step: the arm is declared at rest)."""
-        return bool(np.any(self._dq_prev != 0.0))
+        return Solved(
+            sol.q if sol.converged else None,
+            problem,
+            spent,
+            sol.cost,
+            entry,
+            guess=guess,
+            warm_start=(shape, sol),
+            warm=sol.warm,
+        )
 
     def _parameters(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray) -> np.ndarray:
         m = self.params.box_margin_m
@@ -628,98 +286,3 @@ class NMPCPlanner:
         P = self.params
         gaps = box_gaps(self.kin, knots, sph, boxes, box_margin_m=P.box_margin_m, substeps=P.constraint_substeps)
         return [b for b, g in zip(boxes, gaps, strict=True) if g < within]
-
-    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
-        """Why the knot path (m+1, 6) (knots[0] = the current state) breaks a hard constraint, or None."""
-        P = self.params
-        step, dstep, jstep = self._step_bounds()
-        return violation(
-            self.kin,
-            knots,
-            sph,
-            boxes,
-            step,
-            dstep,
-            jstep,
-            dq_prev=self._dq_prev,
-            dq_prev2=self._dq_prev2,
-            box_margin_m=P.box_margin_m,
-            substeps=P.constraint_substeps,
-        )
-
-    def _fallback_knots(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], k: int) -> np.ndarray | None:
-        """Up to k remaining steps of the last feasible plan, from the measured state, if they still pass."""
-        if self._plan is None:
-            return None
-        rest = self._plan[self._plan_idx + 1 : self._plan_idx + 1 + k]
-        if rest.shape[0] == 0:
-            return None
-        knots = np.vstack([q[None], rest])
-        why = self._violation(knots, sph, boxes)
-        if why is not None:
-            log.info("nmpc: the last feasible plan no longer passes (%s)", why)
-            return None
-        return knots
-
-    def _stop_along_plan(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
-        """The last plan's next knots up to the first one the arm may stop at (`braking.can_stop_now`), then a
-        zero step, from the measured state, if they pass the constraint check; None without such a plan."""
-        _, dstep, jstep = self._step_bounds()
-        d2, d1 = self._dq_prev2, self._dq_prev
-        if can_stop_now(d2, d1, dstep, jstep):
-            return np.vstack([q[None], q[None]])
-        if self._plan is None:
-            return None
-        path = [q]
-        for nxt in self._plan[self._plan_idx + 1 :]:
-            d2, d1 = d1, nxt - path[-1]
-            path.append(nxt)
-            if can_stop_now(d2, d1, dstep, jstep):
-                knots = np.vstack([*path, path[-1]])
-                return knots if self._violation(knots, sph, boxes) is None else None
-        return None
-
-    def _stop_at_goal(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
-        """How a moving arm within the goal tolerance comes to rest: the shorter of the stop along the last plan
-        (`_stop_along_plan`) and the shortest stop (`_brake_knots`) among those that end within the tolerance
-        and pass the constraint check, as the seed stops as soon as it is within the tolerance; when neither
-        ends there, the shortest stop anyway (the loop then solves again from rest); None without any."""
-        along, brake = self._stop_along_plan(q, sph, boxes), self._brake_knots(q)
-        ok = [
-            k
-            for k in (along, brake)
-            if k is not None
-            and np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance
-            and self._violation(k, sph, boxes) is None
-        ]
-        if ok:
-            return min(ok, key=len)
-        if brake is not None and self._violation(brake, sph, boxes) is None:
-            return brake
-        return along
-
-    def _brake_knots(self, q: np.ndarray) -> np.ndarray | None:
-        """The shortest stop from the measured state `q` and the last two steps (`braking.stopping_steps`),
-        ending in a zero step, within the joint limits; None when there is none."""
-        step, dstep, jstep = self._step_bounds()
-        steps = stopping_steps(self._dq_prev2, self._dq_prev, step, dstep, jstep)
-        if steps is None:
-            return None
-        knots = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
-        knots[-1] = knots[-2]  # the zero step, exactly
-        lim = self.kin.joint_limits
-        if np.any(knots < lim[:, 0]) or np.any(knots > lim[:, 1]):
-            return None
-        return knots
-
-    def _segment(self, knots: np.ndarray) -> Trajectory:
-        """The knots (m+1, 6) as a trajectory at dt, with the knots' backward differences as its derivatives:
-        qd_i = (q_i - q_{i-1}) / dt and qdd_i = (qd_i - qd_{i-1}) / dt, for the first sample from the last two
-        executed steps (the state the arm was brought to; zero at rest). Declared and measured agree exactly,
-        and a segment starts with the velocity and acceleration the previous one ended with."""
-        dt = self.params.dt
-        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
-        qd = hist[1:] / dt
-        qdd = np.diff(hist, axis=0) / dt**2
-        t = dt * np.arange(knots.shape[0])
-        return Trajectory(t, knots.copy(), qd, qdd)
