@@ -1,7 +1,8 @@
-"""twin_croc's seed formulation, one CSQP solve (issue 28, in progress): over the warehouse wall from an
+"""twin_croc's horizon problem, one CSQP solve of the seed formulation: over the warehouse wall from an
 over-the-box guess, the plan keeps every proxy sphere out of the margin-grown wall at the knots and clear of
-the wall itself between them, holds the step bound and the joint limits, and ends at the goal; the same
-problem, re-targeted, solves another query."""
+the wall itself between them, holds the step and acceleration bounds and the joint limits, and ends at the
+goal; the same problem, re-targeted, solves another query, and warm-started from its own solution shifted by
+a step it is done in a few iterations."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ pytest.importorskip("crocoddyl")
 pytest.importorskip("mim_solvers")
 
 from twin.plugin import UR5e
-from twin_croc.ocp import SeedProblem
+from twin_croc.ocp import HorizonProblem
+from twin_croc.rows import close_pairs, sphere_bounds
 from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.spheres import robot_spheres
@@ -38,36 +40,83 @@ def _over_the_box(kin: UR5e, q0: np.ndarray, goal: np.ndarray, height: float, n:
     return np.array([np.interp(t, knots, Q[:, j]) for j in range(6)]).T
 
 
-def _clearance(prob: SeedProblem, qs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+def _clearance(prob: HorizonProblem, qs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     c = prob.centres(qs)
     outside = np.linalg.norm(np.maximum(np.maximum(lo - c, c - hi), 0.0), axis=-1)
     return float((outside - prob.radii).min())
 
 
+def _rows(prob: HorizonProblem, qs: np.ndarray, margin: float = 0.01) -> np.ndarray:
+    c = prob.centres(qs)
+    boxes = [("wall", *WALL)]
+    pairs = close_pairs(c, prob.radii, boxes, margin, None)
+    return sphere_bounds(c, prob.radii, boxes, pairs, margin=margin, tighten=0.002)
+
+
 def test_a_solve_over_the_wall_keeps_every_sphere_out_and_reaches_the_goal():
     kin = UR5e()
     p = NMPCParams()
-    prob = SeedProblem(kin, robot_spheres(p.tool_spheres, p.wrist_spheres), n_boxes=1, tcp_index=TCP_FRAME)
+    sph = robot_spheres(p.tool_spheres, p.wrist_spheres)
+    prob = HorizonProblem(kin, sph, tcp_index=TCP_FRAME)
     home = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    step, accel = np.full(6, 0.15), np.full(6, 0.05)
     for start, goal in (([-0.57, 0.15, 0.275], [-0.28, 0.32, 0.105]), ([-0.62, 0.30, 0.275], [-0.28, 0.18, 0.105])):
         sols = kin.ik(_down(np.array(start)))
         q0 = sols[int(np.argmin(np.abs(sols - home).sum(axis=1)))]
         goal_p = np.array(goal)
-        r = prob.solve(q0, np.zeros(6), goal_p, [WALL], _over_the_box(kin, q0, goal_p, 0.33, prob.horizon + 1))
+        guess = _over_the_box(kin, q0, goal_p, 0.33, prob.horizon + 1)
+        r = prob.solve(
+            q0,
+            np.zeros(6),
+            goal_p,
+            _rows(prob, guess),
+            step_bound=step,
+            accel_bound=accel,
+            guess=guess,
+            max_iterations=2,
+        )
+        for _ in range(20):  # rounds, the faces chosen again on each iterate (as twin_croc.planner does)
+            if r.converged and np.array_equal(_rows(prob, r.qs), prob._bounds):
+                break
+            r = prob.solve(
+                q0, np.zeros(6), goal_p, _rows(prob, r.qs), step_bound=step, accel_bound=accel, max_iterations=2
+            )
         lo, hi = WALL
-        assert _clearance(prob, r.qs, lo - prob.margin, hi + prob.margin) > -1e-4  # the hard rows, to CSQP's tolerance
+        assert _clearance(prob, r.qs, lo - 0.01, hi + 0.01) > -1e-4  # the hard rows, to CSQP's tolerance
         t = np.linspace(0.0, 1.0, 11)[:, None]
         dense = np.concatenate([a + t * (b - a) for a, b in zip(r.qs[:-1], r.qs[1:], strict=True)])
         assert _clearance(prob, dense, lo, hi) > 0.0  # between the knots too: clear of the wall itself
         assert np.abs(np.diff(r.qs, axis=0)).max() <= 0.15 + 1e-5
+        assert np.abs(np.diff(np.vstack([np.zeros(6), np.diff(r.qs, axis=0)]), axis=0)).max() <= 0.05 + 1e-5
         assert np.all(r.qs >= kin.joint_limits[:, 0] - 1e-6) and np.all(r.qs <= kin.joint_limits[:, 1] + 1e-6)
         assert np.linalg.norm(kin.fk(r.qs[-1])[:3, 3] - goal_p) < 0.03, r.iterations
-        assert r.converged and r.iterations < 50, r.iterations  # to CSQP's tolerance, not the iteration cap
+        shifted = np.vstack([r.qs[1:], r.qs[-1:]])
+        w = prob.solve(
+            r.qs[1],
+            r.steps[1],
+            goal_p,
+            _rows(prob, shifted),
+            step_bound=step,
+            accel_bound=accel,
+            shift=1,
+            max_iterations=6,
+        )
+        assert w.iterations <= 6
+        assert np.linalg.norm(kin.fk(w.qs[-1])[:3, 3] - goal_p) < 0.03
+        assert _clearance(prob, w.qs, lo - 0.01, hi + 0.01) > -1e-4
 
 
-def test_more_boxes_than_the_problem_has_rows_for_is_an_error():
-    kin = UR5e()
-    prob = SeedProblem(kin, robot_spheres([(0.0, 0.0, 0.0, 0.05)]), n_boxes=1, tcp_index=TCP_FRAME, horizon=5)
-    q0 = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
-    with pytest.raises(ValueError, match="2 boxes, the problem has rows for 1"):
-        prob.solve(q0, np.zeros(6), np.zeros(3), [WALL, WALL], np.tile(q0, (6, 1)))
+def test_sphere_bounds_keep_each_sphere_beyond_a_face_of_every_near_box_over_both_knots_of_a_step():
+    """Two boxes side by side, a sphere moving over both: each knot bounds z from below by the higher need
+    (one row for both boxes), and a knot holds the bounds of the steps on both sides."""
+    boxes = [
+        ("a", np.array([0.0, 0.0, 0.0]), np.array([0.1, 0.1, 0.1])),
+        ("b", np.array([0.1, 0.0, 0.0]), np.array([0.2, 0.1, 0.3])),
+    ]
+    xs = np.array([0.05, 0.15, 0.25])
+    c = np.stack([xs, np.full(3, 0.05), np.full(3, 0.4)], axis=1)[:, None, :]  # (3 knots, 1 sphere, 3)
+    b = sphere_bounds(c, np.array([0.05]), boxes, {(0, 0), (0, 1)}, margin=0.01, tighten=0.0)
+    assert np.all(b[0, 0, 0] == -1e9) and np.all(b[0, 0, 1] == 1e9)  # the measured state: free
+    assert b[1, 0, 0, 2] == pytest.approx(0.3 + 0.01 + 0.05)  # box b's top, from both steps
+    assert b[2, 0, 0, 2] == pytest.approx(0.3 + 0.01 + 0.05)  # step 1 (over b and past it) still over b
+    assert np.all(b[:, 0, 1] == 1e9) and np.all(b[:, 0, 0, :2] == -1e9)  # nothing else bounded

@@ -1,23 +1,25 @@
-"""One solve of the seed formulation (`nmpc`'s, seeds 000/001) as a Crocoddyl problem for mim-solvers' CSQP.
+"""The MPC's horizon as a Crocoddyl problem for mim-solvers' CSQP: the seed formulation (`nmpc`'s, seeds
+000/001) with any set of proxy spheres, re-targeted and warm-started from solve to solve.
 
 Time is counted in MPC steps: a free inverse-dynamics action model integrated by Euler with a unit time step
 makes the velocity state the joint step of one MPC step (q' = q + v', v' = v + a), so the seed's step bound
-is a bound on the state. The seed's rows (`nmpc`'s without the acceleration and jerk rows it adds):
+is a bound on the state and the control (a) is the change of the step, which the request's acceleration
+limit bounds (`nmpc`'s `limit_acceleration`). The rows:
 - cost: the tcp's distance from the goal at every knot, `terminal_weight_factor` times at the last; the
   joint step (`step_weight`); soft table clearance of every sphere; at the last knot soft facing down (a
   point 0.1 m along the tool axis straight below the goal: the yaw stays free);
-- hard: joint limits and |step| <= `max_step_rad`; each proxy sphere outside each (margin-grown) box. A
-  sphere-box pair is one frame-translation row per knot whose bounds say "beyond this face": the face the
-  warm start's sphere is farthest out of, chosen per step and applied at both knots of the step (bounding the
-  knots alone lets the path between them cut into the box). The rows are built once per problem shape and
-  re-targeted (`updateBounds`) at each solve (rows for boxes beyond those given are left unbounded).
+- hard: joint limits and |step| <= the step bound at every knot after the first, |step change| <= the
+  acceleration bound; and one row per sphere and knot: its centre (a frame translation) within bounds, the
+  axis-aligned region that keeps it beyond a face of every box near it (`twin_croc.rows`), re-set at each
+  solve. Only rows whose bounds changed are touched: a warm start shifts the plan, and the bounds with it,
+  so most stay as they were.
 
-Not a planner yet (issue 28, in progress): `solve` is what the receding-horizon loop will call each step.
+The held object's spheres are frames on the tcp whose placements change per goal (`set_object`), so the
+problem is built once per sphere model and horizon.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -31,158 +33,219 @@ from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
 if TYPE_CHECKING:
     from twin.plugin import UR5e
 
-__all__ = ["SeedProblem", "Solve"]
+__all__ = ["HorizonProblem", "Solve", "Weights"]
 
-_FREE = 1e9  # bounds of a row that is switched off
+_FREE = 1e9  # bounds of a slot that is switched off
 _AHEAD_M = 0.1  # the facing-down point: this far along the tool axis
 
 
 @dataclass(frozen=True)
+class Weights:
+    """The seed's cost weights."""
+
+    position: float = 1.0
+    terminal_factor: float = 10.0
+    step: float = 0.02
+    table: float = 1e4
+    facing_down: float = 1e3
+
+
+@dataclass(frozen=True)
 class Solve:
-    """A solve's plan: joints (H+1, 6) and steps (H+1, 6) at the knots, whether CSQP converged, its
-    iterations."""
+    """A solve's plan: joints (H+1, 6) and steps (H+1, 6) at the knots; whether CSQP met its tolerance, its
+    iterations, the cost."""
 
     qs: np.ndarray
     steps: np.ndarray
     converged: bool
     iterations: int
+    cost: float
 
 
-class SeedProblem:
-    """The seed formulation for a fixed horizon, sphere set and number of boxes; `solve` re-targets the goal,
-    the boxes and the faces and warm-starts from a plan."""
+class HorizonProblem:
+    """The formulation for a fixed horizon, sphere model (`spheres` (n, 5) = frame, x, y, z, r; frame a DH
+    frame 1..6 or `tcp_index`) and number of held-object spheres."""
 
     def __init__(
         self,
         kin: UR5e,
         spheres: np.ndarray,
         *,
-        n_boxes: int,
         tcp_index: int,
+        n_object: int = 0,
         horizon: int = 30,
-        max_step_rad: float = 0.15,
-        position_weight: float = 1.0,
-        terminal_weight_factor: float = 10.0,
-        step_weight: float = 0.02,
+        acceleration_rows: bool = True,
+        weights: Weights = Weights(),
         table_z_m: float = 0.0,
         table_clearance_m: float = 0.0,
-        table_weight: float = 1e4,
-        facing_down_weight: float = 1e3,
-        box_margin_m: float = 0.01,
-        max_iterations: int = 50,
-        termination_tolerance: float = 1e-4,
+        termination_tolerance: float = 1e-3,
+        qp_tolerance: float = 1e-3,
     ):
         self.model = arm_model(kin)
-        self.spheres = np.asarray(spheres, dtype=float)
-        self.radii = self.spheres[:, 4]
-        self.sphere_ids = sphere_frames(self.model, self.spheres, tcp_index=tcp_index)
+        robot = np.asarray(spheres, dtype=float).reshape(-1, 5)
+        obj = np.column_stack([np.full(n_object, tcp_index), np.zeros((n_object, 3)), np.full(n_object, 0.01)])
+        self.n_robot, self.n_object = robot.shape[0], n_object
+        self.radii = np.concatenate([robot[:, 4], obj[:, 4]])
+        self.sphere_ids = sphere_frames(self.model, np.vstack([robot, obj]), tcp_index=tcp_index)
         tcp = self.model.getFrameId(TCP_FRAME_NAME)
-        ahead = self.model.frames[tcp].placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, _AHEAD_M]))
-        self.ahead_id = self.model.addFrame(
-            pin.Frame("ahead", self.model.frames[tcp].parentJoint, ahead, pin.FrameType.OP_FRAME)
-        )
+        self._tcp_placement = self.model.frames[tcp].placement.copy()
+        joint = self.model.frames[tcp].parentJoint
+        # the point that goes to the goal (`set_track`: the tcp, or the flange for a flange goal), and the
+        # facing-down point 0.1 m further along the tool axis
+        track = self.model.addFrame(pin.Frame("track", joint, self._tcp_placement, pin.FrameType.OP_FRAME))
+        ahead_id = self.model.addFrame(pin.Frame("ahead", joint, self._tcp_placement, pin.FrameType.OP_FRAME))
+        self._track_ids = (track, ahead_id)
         self.data = self.model.createData()
-        self.horizon, self.n_boxes, self.margin = horizon, n_boxes, box_margin_m
-        self.max_iterations = max_iterations
+        self.horizon, self.acceleration_rows = horizon, acceleration_rows
+        self._table_floor = table_z_m + table_clearance_m
         state = crocoddyl.StateMultibody(self.model)
+        self._pin_model = state.pinocchio  # the model the residuals read (the object frames are set on it)
         actuation = crocoddyl.ActuationModelFull(state)
         nu = actuation.nu
         self._goal_rows: list[crocoddyl.ResidualModelFrameTranslation] = []
-        self._face_rows: list[list[crocoddyl.ConstraintModelResidual]] = []  # per knot: (2 steps x boxes x spheres)
-        lb = np.concatenate([self.model.lowerPositionLimit, np.full(6, -max_step_rad)])
-        ub = np.concatenate([self.model.upperPositionLimit, np.full(6, max_step_rad)])
+        self._table_rows: list[list[crocoddyl.ActivationModelQuadraticBarrier]] = []
+        self._spheres: list[list[crocoddyl.ConstraintModelResidual]] = []  # per knot: one row per sphere
+        self._limits: list[crocoddyl.ConstraintModelResidual | None] = []
+        self._accel: list[crocoddyl.ConstraintModelResidual | None] = []
         models = []
         for k in range(horizon + 1):
             terminal = k == horizon
             costs = crocoddyl.CostModelSum(state, nu)
-            goal = crocoddyl.ResidualModelFrameTranslation(state, tcp, np.zeros(3), nu)
+            goal = crocoddyl.ResidualModelFrameTranslation(state, track, np.zeros(3), nu)
             self._goal_rows.append(goal)
-            weight = position_weight * (terminal_weight_factor if terminal else 1.0)
+            weight = weights.position * (weights.terminal_factor if terminal else 1.0)
             costs.addCost("position", crocoddyl.CostModelResidual(state, goal), weight)
-            steps = np.concatenate([np.zeros(6), np.ones(6)])
             costs.addCost(
                 "step",
                 crocoddyl.CostModelResidual(
                     state,
-                    crocoddyl.ActivationModelWeightedQuad(steps),
+                    crocoddyl.ActivationModelWeightedQuad(np.concatenate([np.zeros(6), np.ones(6)])),
                     crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
                 ),
-                step_weight,
+                weights.step,
             )
             if not terminal:
                 costs.addCost(
                     "control", crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state, nu)), 1e-4
                 )
+            barriers = []
             for s, fid in enumerate(self.sphere_ids):
-                floor = np.array([-_FREE, -_FREE, table_z_m + table_clearance_m + self.radii[s]])
+                floor = np.array([-_FREE, -_FREE, self._table_floor + self.radii[s]])
                 barrier = crocoddyl.ActivationModelQuadraticBarrier(
                     crocoddyl.ActivationBounds(floor, np.full(3, _FREE))
                 )
                 row = crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu)
-                costs.addCost(f"table{s}", crocoddyl.CostModelResidual(state, barrier, row), table_weight)
+                costs.addCost(f"table{s:03d}", crocoddyl.CostModelResidual(state, barrier, row), weights.table)
+                barriers.append(barrier)
+            self._table_rows.append(barriers)
             if terminal:
-                self._ahead_row = crocoddyl.ResidualModelFrameTranslation(state, self.ahead_id, np.zeros(3), nu)
-                costs.addCost("facing_down", crocoddyl.CostModelResidual(state, self._ahead_row), facing_down_weight)
+                self._ahead_row = crocoddyl.ResidualModelFrameTranslation(state, ahead_id, np.zeros(3), nu)
+                costs.addCost("facing_down", crocoddyl.CostModelResidual(state, self._ahead_row), weights.facing_down)
+            # the manager orders its rows by name: a_accel (6), b_limits (12), c_sphere000 .. (3 each)
             constraints = crocoddyl.ConstraintModelManager(state, nu)
-            if k > 0:
-                constraints.addConstraint(
-                    "limits",
-                    crocoddyl.ConstraintModelResidual(
-                        state, crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu), lb, ub
-                    ),
+            accel = limits = None
+            if acceleration_rows and not terminal:
+                accel = crocoddyl.ConstraintModelResidual(
+                    state, crocoddyl.ResidualModelControl(state, nu), np.full(6, -_FREE), np.full(6, _FREE)
                 )
+                constraints.addConstraint("a_accel", accel)
+            if k > 0:  # the first knot is the measured state
+                limits = crocoddyl.ConstraintModelResidual(
+                    state,
+                    crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
+                    np.full(state.nx, -_FREE),
+                    np.full(state.nx, _FREE),
+                )
+                constraints.addConstraint("b_limits", limits)
             rows = []
-            for j in range(2 * n_boxes * len(self.sphere_ids)):
-                fid = self.sphere_ids[j % len(self.sphere_ids)]
+            for j, fid in enumerate(self.sphere_ids if k > 0 else []):
                 row = crocoddyl.ConstraintModelResidual(
                     state,
                     crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu),
                     np.full(3, -_FREE),
                     np.full(3, _FREE),
                 )
-                constraints.addConstraint(f"face{j}", row)
+                constraints.addConstraint(f"c_sphere{j:03d}", row)
                 rows.append(row)
-            self._face_rows.append(rows)
+            self._accel.append(accel)
+            self._limits.append(limits)
+            self._spheres.append(rows)
             dam = crocoddyl.DifferentialActionModelFreeInvDynamics(state, actuation, costs, constraints)
             models.append(crocoddyl.IntegratedActionModelEuler(dam, 0.0 if terminal else 1.0))
+        # where a knot's sphere rows start in its duals (after a_accel and b_limits)
+        self._sphere_offset = [(6 if a is not None else 0) + (12 if k > 0 else 0) for k, a in enumerate(self._accel)]
+        self._bounds = np.empty((horizon + 1, len(self.sphere_ids), 2, 3))  # what the sphere rows hold now
+        self._bounds[:, :, 0], self._bounds[:, :, 1] = -_FREE, _FREE
+        self._bounds_now: dict[str, tuple[bytes, bytes]] = {}
         self.problem = crocoddyl.ShootingProblem(np.zeros(state.nx), models[:-1], models[-1])
+        # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
+        # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
+        self.problem.nthreads = 1
         self.solver = mim_solvers.SolverCSQP(self.problem)
         self.solver.reg_min = 1e-2  # the default cycles on these problems (issue 28's spike)
         self.solver.max_qp_iters = 1000
-        # CSQP's default (1e-6 on the KKT residual) is never met with reg_min at 1e-2: the residual stalls near
-        # 7e-5 after ~10 iterations while the plan no longer moves (measured over the warehouse wall: the same
-        # tcp error to 0.1 mm at 10 and at 200 iterations), so every solve ran to its iteration cap
+        # CSQP's defaults (1e-6 on the KKT residual, 1e-4 on the ADMM QP's) are never met here once the
+        # acceleration rows are active: over the warehouse wall every SQP iteration ran its QP to 1000 ADMM
+        # iterations (~30 ms) and the KKT residual stalled near 1e-4 for 100 iterations while the plan no longer
+        # moved. At 1e-3 both, a cold solve over the wall converges in 4-5 iterations (15 ms), the tcp within
+        # 0.2 mm of the 100-iteration plan; the sphere rows are tightened by more than the bounds' slack
         self.solver.termination_tolerance = termination_tolerance
+        self.solver.eps_abs = qp_tolerance
+        self.solver.eps_rel = qp_tolerance
+        self._bound_slack = 2 * qp_tolerance
+        self.solver.reset_y = False  # the duals are warm-started (shifted) by `solve`
+        self.solver.reset_rho = True  # the ADMM penalty starts from rho_sparse at every solve (deterministic)
+        self._last: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None  # xs, us, duals
+        self.set_track(np.zeros(3))
 
+    # ---- re-targeting -----------------------------------------------------------------------------------
+    def set_object(self, obj: np.ndarray) -> None:
+        """The held object's spheres (m, 4) = (x, y, z, r) in the tcp frame, m <= n_object (the others are
+        parked at the tcp; give them no rows)."""
+        obj = np.asarray(obj, dtype=float).reshape(-1, 4)
+        if obj.shape[0] > self.n_object:
+            raise ValueError(f"{obj.shape[0]} held-object spheres, the problem has frames for {self.n_object}")
+        for i in range(self.n_object):
+            fid = self.sphere_ids[self.n_robot + i]
+            x = obj[i, :3] if i < obj.shape[0] else np.zeros(3)
+            self._pin_model.frames[fid].placement = self._tcp_placement * pin.SE3(np.eye(3), x)
+            r = obj[i, 3] if i < obj.shape[0] else 0.01
+            self.radii[self.n_robot + i] = r
+            floor = np.array([-_FREE, -_FREE, self._table_floor + r])
+            for barriers in self._table_rows:
+                barriers[self.n_robot + i].bounds = crocoddyl.ActivationBounds(floor, np.full(3, _FREE))
+
+    def set_track(self, offset: np.ndarray) -> None:
+        """The point that goes to the goal: `offset` (3,) in the tcp frame (on the tool axis)."""
+        offset = np.asarray(offset, dtype=float)
+        track, ahead = self._track_ids
+        self._pin_model.frames[track].placement = self._tcp_placement * pin.SE3(np.eye(3), offset)
+        ahead_at = offset + np.array([0.0, 0.0, _AHEAD_M])
+        self._pin_model.frames[ahead].placement = self._tcp_placement * pin.SE3(np.eye(3), ahead_at)
+
+    def _set(self, key: str, row: crocoddyl.ConstraintModelResidual, lo: np.ndarray, hi: np.ndarray) -> None:
+        """updateBounds only when the bounds change (most stay the same from solve to solve)."""
+        now = (lo.tobytes(), hi.tobytes())
+        if self._bounds_now.get(key) != now:
+            row.updateBounds(lo, hi)
+            self._bounds_now[key] = now
+
+    def _set_spheres(self, bounds: np.ndarray) -> np.ndarray:
+        """Set the sphere rows to `bounds` (H+1, n, 2, 3) where they changed; (H+1, n) which changed."""
+        changed = np.any(bounds != self._bounds, axis=(2, 3))
+        changed[0] = False  # the first knot has no sphere rows (the measured state)
+        for k, j in zip(*np.nonzero(changed), strict=True):
+            self._spheres[k][j].updateBounds(bounds[k, j, 0], bounds[k, j, 1])
+        self._bounds = bounds.copy()
+        return changed
+
+    # ---- solving ----------------------------------------------------------------------------------------
     def centres(self, qs: np.ndarray) -> np.ndarray:
-        """(m, n, 3) sphere centres for joints (m, 6)."""
+        """(m, n, 3) sphere centres for joints (m, 6) (pinocchio's; twin's own are `sphere_positions`)."""
         out = np.empty((len(qs), len(self.sphere_ids), 3))
         for i, q in enumerate(qs):
-            pin.framesForwardKinematics(self.model, self.data, q)
+            pin.framesForwardKinematics(self._pin_model, self.data, q)
             out[i] = [self.data.oMf[f].translation for f in self.sphere_ids]
-        return out
-
-    def _faces(self, centres: np.ndarray, boxes: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
-        """Per step (H,) and box: (spheres, 3, 2) lower/upper bounds on the centres that keep each sphere
-        beyond the box face its centre is farthest out of over the step's two knots."""
-        out = []
-        for k in range(self.horizon):
-            per_box = []
-            for lo, hi in boxes:
-                lo_m, hi_m = np.asarray(lo) - self.margin, np.asarray(hi) + self.margin
-                bounds = np.empty((len(self.sphere_ids), 3, 2))
-                bounds[:, :, 0], bounds[:, :, 1] = -_FREE, _FREE
-                for s in range(len(self.sphere_ids)):
-                    c = 0.5 * (centres[k, s] + centres[k + 1, s])
-                    outside = np.concatenate([c - hi_m, lo_m - c])  # +x +y +z -x -y -z
-                    f = int(np.argmax(outside))
-                    axis, upper = f % 3, f < 3
-                    if upper:
-                        bounds[s, axis, 0] = hi_m[axis] + self.radii[s]
-                    else:
-                        bounds[s, axis, 1] = lo_m[axis] - self.radii[s]
-                per_box.append(bounds)
-            out.append(np.array(per_box))
         return out
 
     def solve(
@@ -190,36 +253,70 @@ class SeedProblem:
         q0: np.ndarray,
         step0: np.ndarray,
         goal: np.ndarray,
-        boxes: Sequence[tuple[np.ndarray, np.ndarray]],
-        guess: np.ndarray,
+        bounds: np.ndarray,
+        *,
+        step_bound: np.ndarray,
+        accel_bound: np.ndarray | None = None,
+        guess: np.ndarray | None = None,
+        shift: int = 0,
+        max_iterations: int = 50,
     ) -> Solve:
-        """Solve from joints `q0` and last step `step0` towards the tcp position `goal` (3,), the spheres kept
-        out of `boxes` ((lo, hi) each, without the margin; at most `n_boxes`), warm-started from the joint
-        plan `guess` (H+1, 6) (the last plan shifted, or an initial guess)."""
-        if len(boxes) > self.n_boxes:
-            raise ValueError(f"{len(boxes)} boxes, the problem has rows for {self.n_boxes}")
+        """Solve from joints `q0` and last step `step0` towards the goal position `goal` (3,) of the tracked point
+        with each sphere's centre within `bounds` (H+1, n, 2, 3) (`twin_croc.rows`; knot 0's are not used; n: the
+        robot's spheres, then the object's, parked ones free), steps within `step_bound` (6,) and step changes within
+        `accel_bound` (6,). Cold from the joint plan `guess` (H+1, 6), or warm (guess None): the last solution
+        shifted by `shift` executed steps, primal and dual (a sphere row's duals kept only where its bounds are
+        those of the knot `shift` later)."""
         goal = np.asarray(goal, dtype=float)
         for row in self._goal_rows:
             row.reference = goal
         self._ahead_row.reference = goal - np.array([0.0, 0.0, _AHEAD_M])
-        faces = self._faces(self.centres(guess), boxes)
-        n = len(self.sphere_ids)
-        for k, rows in enumerate(self._face_rows):
-            for row in rows:
-                row.updateBounds(np.full(3, -_FREE), np.full(3, _FREE))
-            for half, step in ((0, k - 1), (1, k)):  # the step ending here and the one starting here
-                if not 0 <= step < self.horizon:
-                    continue
-                for b in range(len(boxes)):
-                    for s in range(n):
-                        lo, hi = faces[step][b, s, :, 0], faces[step][b, s, :, 1]
-                        rows[(half * self.n_boxes + b) * n + s].updateBounds(lo, hi)
+        # the QP holds bounds to about its tolerance: the joint, step and step-change bounds are tightened by it
+        eps = self._bound_slack
+        lo_x = np.concatenate([self.model.lowerPositionLimit + eps, -(step_bound - eps)])
+        hi_x = np.concatenate([self.model.upperPositionLimit - eps, step_bound - eps])
+        for k in range(self.horizon + 1):
+            lim, acc = self._limits[k], self._accel[k]
+            if lim is not None:
+                self._set(f"l{k}", lim, lo_x, hi_x)
+            if acc is not None:
+                a = np.full(6, _FREE) if accel_bound is None else np.asarray(accel_bound, dtype=float) - eps
+                self._set(f"a{k}", acc, -a, a)
+        before = self._bounds
+        self._set_spheres(np.asarray(bounds, dtype=float))
         x0 = np.concatenate([q0, step0])
         self.problem.x0 = x0
-        steps = np.vstack([step0, np.diff(guess, axis=0)])
-        xs = [np.concatenate([q, v]) for q, v in zip(guess, steps, strict=True)]
-        xs[0] = x0
-        us = [np.zeros(6)] * self.horizon
-        converged = bool(self.solver.solve(xs, us, self.max_iterations))
-        X = np.array(self.solver.xs)
-        return Solve(X[:, :6].copy(), X[:, 6:].copy(), converged, int(self.solver.iter))
+        H = self.horizon
+        if guess is None:
+            if self._last is None:
+                raise ValueError("a warm solve needs an earlier solve; give a guess")
+            xs_prev, us_prev, y_prev = self._last
+            idx = np.minimum(np.arange(H + 1) + shift, H)
+            X = xs_prev[idx].copy()
+            X[idx == H, 6:] = 0.0  # past the old horizon: resting at its last knot
+            U = np.vstack([us_prev[shift:], np.zeros((min(shift, H), 6))])[:H]
+            duals = []
+            for k in range(H + 1):
+                # a knot's duals come from the knot `shift` later when that one has the same rows (a running knot's
+                # from a running knot; the terminal knot has no acceleration row): giving CSQP a dual vector of
+                # another length corrupts its memory (NaN steps some solves later)
+                src = k + shift
+                if k > 0 and src <= H and (src < H) == (k < H):
+                    y = y_prev[src].copy()
+                    off = self._sphere_offset[k]
+                    for j in np.nonzero(np.any(self._bounds[k] != before[src], axis=(1, 2)))[0]:
+                        y[off + 3 * j : off + 3 * j + 3] = 0.0
+                else:
+                    y = np.zeros_like(y_prev[k])
+                duals.append(y)
+        else:
+            steps = np.vstack([step0, np.diff(guess, axis=0)])
+            X = np.hstack([guess, steps])
+            U = np.diff(steps, axis=0)
+            duals = [np.zeros_like(y) for y in self.solver.y]
+        X[0] = x0
+        self.solver.y = duals
+        converged = bool(self.solver.solve(list(X), list(U), max_iterations))
+        xs, us = np.array(self.solver.xs), np.array(self.solver.us)
+        self._last = (xs, us, [np.array(y) for y in self.solver.y])
+        return Solve(xs[:, :6].copy(), xs[:, 6:].copy(), converged, int(self.solver.iter), float(self.solver.cost))

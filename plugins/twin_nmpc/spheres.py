@@ -32,7 +32,9 @@ __all__ = [
     "clearance",
     "drop_covered",
     "object_spheres",
+    "path_gaps",
     "robot_spheres",
+    "segment_box_distance",
     "sphere_positions",
     "subdivide",
     "violation",
@@ -136,8 +138,8 @@ def violation(
     """Why the knot path (m+1, 6) (knots[0] = the current state, reached by the step `dq_prev` after the step
     `dq_prev2`) breaks a hard constraint, or None: a joint step beyond `step` (6,), a change of step beyond
     `dstep` (6,), a change of that change beyond `jstep` (6,) (None: not bounded), a knot outside the joint
-    limits, a sphere closer than CHECK_TOL_M inside a box grown by `box_margin_m` at `substeps` check points
-    per step, or inside a box itself between knots."""
+    limits, a sphere closer than CHECK_TOL_M inside a box grown by `box_margin_m` anywhere on the straight
+    lines between `substeps` check points per step (`path_gaps`), or inside a box itself between knots."""
     dq = np.diff(knots, axis=0)
     if np.any(np.abs(dq) > step + 1e-7):
         return f"a joint step of {np.abs(dq).max():.3f} rad exceeds {step.max():.3f} rad"
@@ -154,7 +156,7 @@ def violation(
     if np.any(knots < lim[:, 0] - 1e-9) or np.any(knots > lim[:, 1] + 1e-9):
         return "a knot leaves the joint limits"
     if boxes:
-        gaps = box_gaps(kin, knots, sph, boxes, box_margin_m=box_margin_m, substeps=substeps)
+        gaps = path_gaps(kin, knots, sph, boxes, box_margin_m=box_margin_m, substeps=substeps)
         for (name, _, _), gap in zip(boxes, gaps, strict=True):
             if gap < -CHECK_TOL_M:
                 return f"proxy spheres may come {-gap:.4f} m into box {name!r} (incl. margin) between check points"
@@ -163,6 +165,40 @@ def violation(
         if dense.min() < 0.0:
             return f"a proxy sphere enters an obstacle box by {-dense.min():.4f} m between knots"
     return None
+
+
+def segment_box_distance(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(...,) the distance of each segment a -> b (..., 3) from the box [lo, hi] (0 where it touches or
+    enters): the point-box distance along a line is convex, so a golden-section search finds its minimum
+    (to 1e-6 of the segment's length)."""
+
+    def dist(t: np.ndarray) -> np.ndarray:
+        p = a + t[..., None] * (b - a)
+        return np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=-1)
+
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    x0, x1 = np.zeros(a.shape[:-1]), np.ones(a.shape[:-1])
+    for _ in range(30):
+        m1, m2 = x1 - g * (x1 - x0), x0 + g * (x1 - x0)
+        left = dist(m1) <= dist(m2)
+        x0, x1 = np.where(left, x0, m1), np.where(left, m2, x1)
+    return np.minimum(np.minimum(dist(a[..., 0] * 0.0), dist(np.ones(a.shape[:-1]))), dist(0.5 * (x0 + x1)))
+
+
+def path_gaps(
+    kin: UR5e, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
+) -> np.ndarray:
+    """(n_boxes,) the smallest clearance (m) of the spheres from each box (grown by the margin) along straight
+    lines between `substeps` check points per step of the knot path (m+1, 6): what every MPC's box rows must
+    keep (nmpc's pairwise rows guarantee it; croc's face rows keep each line beyond one face). The path between
+    the check points curves off these lines by millimetres; `violation` checks it densely against the boxes."""
+    if not boxes:
+        return np.zeros(0)
+    m = box_margin_m
+    seq = np.vstack([knots[:1], subdivide(knots, substeps)])
+    c = sphere_positions(kin, seq, sph)
+    r = sph[:, 4]
+    return np.array([float((segment_box_distance(c[:-1], c[1:], lo - m, hi + m) - r).min()) for _, lo, hi in boxes])
 
 
 def box_gaps(

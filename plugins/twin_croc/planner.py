@@ -1,0 +1,197 @@
+"""`croc`: the receding-horizon MPC on the field's optimal-control stack, Crocoddyl's shooting problem solved by
+mim-solvers' constrained SQP (CSQP), in the loop `nmpc` uses (`twin_nmpc.receding`: checks, fallback,
+braking, segments), so the two differ only in the solver and, in `whole_arm` mode, in what they keep apart.
+
+Modes:
+* `seed`: `nmpc`'s formulation (horizon, dt, step bound, acceleration bound, tcp position cost, terminal
+  weight, soft table clearance, soft terminal facing-down, hard tool, wrist and held-object spheres against
+  the perceived boxes). The one difference: no jerk rows (the control is the step's change; its change is
+  not a row here), so croc is not `jerk_limited`.
+* `whole_arm`: the shoulder, upper arm and forearm spheres too (`arm_spheres`), against every primitive of
+  the planning scene (fixtures such as bins, perceived boxes and objects; each as its axis-aligned box),
+  except the table, which stays the soft table term: an MPC that can work in the RoboCup cell.
+
+Why these choices:
+* One problem per count of held-object spheres, built on first use (without: when the planner is
+  constructed): one row per sphere and knot holds the sphere beyond a face of every box near it
+  (`twin_croc.rows`), re-set per solve, so the QP's size does not depend on the number of boxes in the scene.
+* Warm starts: the last solution shifted by the executed steps, primal and dual, with an iteration budget
+  (`warm_rounds` x `iterations_per_round`) so that a warm solve ends within the step period; a cold solve
+  (the first of a goal, or after a rejected one) starts from the loop's over-the-box guess.
+* An iterate CSQP did not finish (its budget ran out) is still a plan if the loop's independent check of the
+  hard constraints passes it (a real-time MPC executes its best feasible iterate); the log says
+  `converged: false`. A solve whose plan fails the check is never executed: the loop follows the last plan
+  as a counted fallback.
+* The faces are chosen on the plan a solve starts from, so they hold a sphere beyond a face it has left
+  when the iterate moves faster than that plan (past the wall while the faces still say "above it"), and
+  CSQP, linearising the same faces for ten iterations, wandered off (cost 20 -> 140, never converging over
+  the warehouse wall). So a solve runs in rounds of `iterations_per_round` SQP iterations, the faces (and
+  the pairs: only those near the plan, `box_screen_m`, are bounded) chosen again on each round's iterate,
+  until CSQP converges with faces that no longer change, or `cold_rounds` / `warm_rounds` rounds.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from twin_croc.ocp import HorizonProblem, Weights
+from twin_croc.params import CrocParams
+from twin_croc.rows import Pairs, close_pairs, sphere_bounds
+from twin_nmpc.model import TCP_FRAME
+from twin_nmpc.receding import RecedingHorizonMPC, Solved
+from twin_nmpc.spheres import Box, sphere_positions
+
+if TYPE_CHECKING:
+    from twin.plugin import PluginContext
+
+__all__ = ["CrocPlanner"]
+
+log = logging.getLogger("twin")
+
+_TABLE_TOP_TOL_M = 1e-3  # a primitive whose top is this close to the table top is the table (the soft term)
+
+
+def _aabb(kind: str, size: tuple[float, ...], T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounds of a primitive (kinds and sizes as twin.urdf_model.Shape) at pose T."""
+    if kind == "box":
+        half = 0.5 * np.asarray(size[:3], dtype=float)
+    elif kind == "sphere":
+        half = np.full(3, float(size[0]))
+    else:  # cylinder or capsule about its local z
+        r, length = float(size[0]), float(size[1])
+        half = np.array([r, r, 0.5 * length + (r if kind == "capsule" else 0.0)])
+    ext = np.abs(T[:3, :3]) @ half
+    return T[:3, 3] - ext, T[:3, 3] + ext
+
+
+class CrocPlanner(RecedingHorizonMPC):
+    """Receding-horizon MPC over Crocoddyl + CSQP: `reset(request, scene)`, then `step(q)` until a MotionResult."""
+
+    Params = CrocParams
+    name = "croc"
+    params: CrocParams
+
+    def __init__(self, params: CrocParams | None, context: PluginContext):
+        super().__init__(params if params is not None else CrocParams(), context)
+        P = self.params
+        if P.mode == "whole_arm":
+            self._robot_sph = np.vstack([self._robot_sph, np.asarray(P.arm_spheres, dtype=float).reshape(-1, 5)])
+        self._problems: dict[int, HorizonProblem] = {}
+        self.build_time_s = 0.0
+        self.problem(0)  # built here, not in the first (timed) step; one per held-object sphere count
+
+    def problem(self, n_object: int) -> HorizonProblem:
+        """The problem for the robot's spheres and `n_object` held-object spheres (built on first use: ~0.1 s;
+        parked object frames would cost ~40 % more per iteration than none)."""
+        prob = self._problems.get(n_object)
+        if prob is None:
+            P = self.params
+            t0 = time.perf_counter()
+            prob = HorizonProblem(
+                self.kin,
+                self._robot_sph,
+                tcp_index=TCP_FRAME,
+                n_object=n_object,
+                horizon=P.horizon,
+                acceleration_rows=P.limit_acceleration,
+                weights=Weights(
+                    P.position_weight,
+                    P.terminal_weight_factor,
+                    P.step_weight,
+                    P.table_slack_weight,
+                    P.facing_down_weight,
+                ),
+                table_z_m=P.table_z_m,
+                table_clearance_m=P.table_clearance_m,
+                termination_tolerance=P.termination_tolerance,
+                qp_tolerance=P.qp_tolerance,
+            )
+            self.build_time_s += time.perf_counter() - t0
+            self._problems[n_object] = prob
+        return prob
+
+    def _boxes(self) -> list[Box]:
+        """seed: the perceived boxes; whole_arm: every primitive of the scene as its axis-aligned box, but the
+        table (the soft table term keeps the spheres above it)."""
+        if self.params.mode == "seed" or self._scene is None:
+            return super()._boxes()
+        out: list[Box] = []
+        for name, shapes in sorted(self._scene.environment_shapes().items()):
+            for i, (kind, size, T) in enumerate(shapes):
+                lo, hi = _aabb(kind, size, T)
+                if hi[2] <= self.params.table_z_m + _TABLE_TOP_TOL_M:
+                    continue
+                out.append((name if len(shapes) == 1 else f"{name}[{i}]", lo, hi))
+        return out
+
+    def _solve(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray, sph: np.ndarray) -> Solved:
+        """One CSQP solve (rounds when a solution comes close to a pair without a row), warm-started from the
+        last accepted one shifted by the steps executed since."""
+        P = self.params
+        t0 = time.perf_counter()
+        step, dstep, _ = self._step_bounds()
+        radii = sph[:, 4]
+        guess: np.ndarray | None = None
+        if self._ws is not None:
+            plan = self._plan[self._ws_offset :] if self._plan is not None else q[None]
+            start = np.vstack([plan, np.repeat(plan[-1:], P.horizon + 1 - plan.shape[0], axis=0)])
+        else:
+            guess = self._cold_guess(q, boxes, sph)
+            start = np.vstack([q[None], guess])
+        start[0] = q
+        centres = sphere_positions(self.kin, start, sph)
+        pairs: Pairs = close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m)
+        iterations, rounds, converged, cost = 0, 0, False, math.nan
+        prob = self.problem(obj.shape[0])
+        prob.set_object(obj)
+        prob.set_track(self._track)
+        qs, shift, warm = start, self._ws_offset, self._ws is prob
+        cold = not warm
+        bounds = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
+        while True:
+            rounds += 1
+            sol = prob.solve(
+                q,
+                self._dq_prev,
+                self._target,
+                bounds,
+                step_bound=step,
+                accel_bound=dstep,
+                guess=None if warm else qs,
+                shift=shift,
+                max_iterations=P.iterations_per_round,
+            )
+            iterations += sol.iterations
+            converged, cost, qs = sol.converged, sol.cost, sol.qs.copy()
+            qs[0] = q
+            # the faces follow the solution: a sphere it moved past a box (sooner than the plan the faces came
+            # from) is bounded by the face it is beyond now, and a pair it came close to is bounded
+            centres = sphere_positions(self.kin, qs, sph)
+            if P.box_screen_m is not None:
+                pairs |= close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m / 2)
+            again = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
+            if (converged and np.array_equal(again, bounds)) or rounds >= (P.cold_rounds if cold else P.warm_rounds):
+                break
+            bounds, warm, shift = again, True, 0  # on from this solution, primal and dual
+        entry = {
+            "converged": converged,
+            "iterations": iterations,
+            "rounds": rounds,
+            "pairs": len(pairs),
+            "boxes": len({b for _, b in pairs}),
+        }
+        return Solved(
+            qs,
+            None,
+            time.perf_counter() - t0,
+            cost,
+            entry,
+            guess=guess,
+            warm_start=prob,
+            warm=self._ws is not None,
+        )

@@ -1,0 +1,143 @@
+"""`croc` (issue 28): nmpc's receding-horizon loop around a Crocoddyl + CSQP solve. Registered like nmpc, its
+parameters validated; a closed-loop rollout over the warehouse wall with every segment FCL-checked by the
+checked loop and every proxy sphere measured against the box; a solve whose plan the loop rejects is followed
+by the last plan as a counted fallback; the whole-arm spheres cover the URDF's link cylinders, and the
+whole-arm mode keeps every fixture but the table."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("crocoddyl")
+pytest.importorskip("mim_solvers")
+
+from twin.collision.scene import PlanningScene
+from twin.config import PlannerBlock, load_config
+from twin.errors import ConfigError
+from twin.planning import RecedingHorizonPlanner, Segment, make_context, make_planner, plan_with
+from twin.registry import Kind, default_registry
+from twin.types import MotionResult
+from twin_croc.ocp import HorizonProblem
+from twin_croc.params import DEFAULT_ARM_SPHERES
+from twin_nmpc.params import NMPCParams, RecedingParams
+from twin_nmpc.scenarios import build_scene, check_trajectory, transfer_scenes
+from twin_nmpc.spheres import sphere_positions
+
+
+@pytest.fixture(scope="module")
+def settings():
+    return load_config("warehouse")
+
+
+@pytest.fixture(scope="module")
+def ctx(settings):
+    return make_context(settings)
+
+
+@pytest.fixture(scope="module")
+def scenes(settings):
+    return transfer_scenes(6, 0, settings=settings)
+
+
+@pytest.fixture(scope="module")
+def croc(ctx):
+    return make_planner(PlannerBlock(name="croc"), ctx)
+
+
+def test_croc_is_registered_as_receding_horizon_with_its_extra(croc):
+    e = default_registry().entry("croc")
+    assert e.kind is Kind.RECEDING_HORIZON and e.extra == "croc" and e.target == "twin_croc.planner:CrocPlanner"
+    assert isinstance(croc, RecedingHorizonPlanner) and not croc.jerk_limited
+    nmpc = NMPCParams()
+    shared = set(RecedingParams.model_fields) - {"limit_jerk"}
+    assert {k: getattr(croc.params, k) for k in shared} == {k: getattr(nmpc, k) for k in shared}
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"limit_jerk": True}, "no jerk rows"),
+        ({"mode": "fast"}, "mode"),
+        ({"arm_spheres": [[4, 0, 0, 0, 0.1]]}, "1, 2 or 3"),
+    ],
+)
+def test_bad_parameters_are_config_errors(ctx, params, message):
+    with pytest.raises(ConfigError, match=message):
+        make_planner(PlannerBlock(name="croc", params=params), ctx)
+
+
+def test_a_closed_loop_rollout_over_the_wall_keeps_every_sphere_out(croc, scenes, settings, ctx):
+    """Through the checked loop (every segment FCL-checked against the whole scene before it runs); the
+    executed trajectory's proxy spheres measured against the perceived box and the arm against the table."""
+    placed = 0
+    for ts in scenes:
+        res = plan_with(croc, ts.request, build_scene(settings, ts), ctx)
+        if res.trajectory is not None:
+            chk = check_trajectory(
+                res.trajectory, ts, croc.proxy_spheres, build_scene(settings, ts, with_fixtures=False), ctx.kinematics
+            )
+            assert chk.ok, (ts.index, chk)
+        placed += res.success
+        log = res.info["nmpc_solve_log"]
+        # warm from the last accepted solve, cold at the start and after a rejected one
+        assert [e["warm"] for e in log] == [False] + [not e.get("rejected") for e in log[:-1]]
+    assert placed >= len(scenes) - 1, placed
+
+
+def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx, scenes, settings, monkeypatch):
+    planner = make_planner(PlannerBlock(name="croc", params={"horizon": 8}), ctx)
+    ts = scenes[1]
+    planner.reset(ts.request, build_scene(settings, ts))
+    first = planner.step(ts.request.start)
+    assert isinstance(first, Segment) and not first.fallback
+    plan = planner._plan.copy()
+    real = HorizonProblem.solve
+
+    def through_the_table(self, *a, **k):  # a plan whose later knots leave the joint limits
+        out = real(self, *a, **k)
+        qs = out.qs.copy()
+        qs[2:, 1] = 10.0
+        return replace(out, qs=qs)
+
+    monkeypatch.setattr(HorizonProblem, "solve", through_the_table)
+    out = planner.step(first.trajectory.q[-1])
+    assert isinstance(out, Segment) and out.fallback and "joint" in out.info["rejected"]
+    assert np.allclose(out.trajectory.q[-1], plan[2])
+    res = out
+    while not isinstance(res, MotionResult):
+        res = planner.step(res.trajectory.q[-1])
+    assert res.info["nmpc_fallbacks"] >= 1
+
+
+def test_the_whole_arm_spheres_cover_the_link_cylinders(ctx):
+    """Points on the shoulder, upper arm and forearm collision cylinders of the URDF, at random configurations,
+    each lie within one sphere grown by the 1 cm box margin (what keeps the link out of a box)."""
+    scene = PlanningScene.from_settings(load_config("robocup"))
+    sph = np.asarray(DEFAULT_ARM_SPHERES, dtype=float)
+    rng = np.random.default_rng(0)
+    shapes = [s for s in scene._shapes if s.link in ("shoulder_link", "upper_arm_link", "forearm_link")]
+    assert len(shapes) == 5
+    for _ in range(5):
+        q = rng.uniform(-np.pi, np.pi, 6)
+        poses, centres = scene.link_poses(q), sphere_positions(ctx.kinematics, q, sph)[0]
+        for s in shapes:
+            r, length = s.size
+            a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(-length / 2, length / 2, 15))
+            local = np.stack([r * np.cos(a), r * np.sin(a), z, np.ones_like(a)], axis=-1).reshape(-1, 4)
+            pts = (poses[s.link] @ s.origin @ local.T).T[:, :3]
+            d = np.linalg.norm(pts[:, None] - centres[None], axis=-1) - sph[None, :, 4] - 0.01
+            assert d.min(axis=1).max() <= 1e-6, (s.link, d.min(axis=1).max())
+
+
+def test_the_whole_arm_mode_keeps_every_fixture_but_the_table(ctx):
+    robocup = load_config("robocup")
+    rctx = make_context(robocup)
+    planner = make_planner(PlannerBlock(name="croc", params={"mode": "whole_arm"}), rctx).inner
+    scene = PlanningScene.from_settings(robocup)
+    planner._scene = scene
+    names = {n.split("[")[0] for n, _, _ in planner._boxes()}
+    assert names == set(scene.environment_shapes()) - {"table"}
+    assert planner.spheres().shape[0] == 7 + len(DEFAULT_ARM_SPHERES)
