@@ -116,7 +116,34 @@ def test_sphere_bounds_keep_each_sphere_beyond_a_face_of_every_near_box_over_bot
     xs = np.array([0.05, 0.15, 0.25])
     c = np.stack([xs, np.full(3, 0.05), np.full(3, 0.4)], axis=1)[:, None, :]  # (3 knots, 1 sphere, 3)
     b = sphere_bounds(c, np.array([0.05]), boxes, {(0, 0), (0, 1)}, margin=0.01, tighten=0.0)
-    assert np.all(b[0, 0, 0] == -1e9) and np.all(b[0, 0, 1] == 1e9)  # the measured state: free
+    assert np.all(b[0, 0, 0] == -np.inf) and np.all(b[0, 0, 1] == np.inf)  # the measured state: free
     assert b[1, 0, 0, 2] == pytest.approx(0.3 + 0.01 + 0.05)  # box b's top, from both steps
     assert b[2, 0, 0, 2] == pytest.approx(0.3 + 0.01 + 0.05)  # step 1 (over b and past it) still over b
-    assert np.all(b[:, 0, 1] == 1e9) and np.all(b[:, 0, 0, :2] == -1e9)  # nothing else bounded
+    assert np.all(b[:, 0, 1] == np.inf) and np.all(b[:, 0, 0, :2] == -np.inf)  # nothing else bounded
+
+
+def test_sphere_bounds_always_leave_room_however_the_boxes_and_spheres_lie():
+    """Random plans, boxes and spheres (walls closer than a sphere, plans through boxes): every lower bound is
+    below its upper bound, which crocoddyl requires of a constraint row."""
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        c = rng.uniform(-0.5, 0.5, (7, 3, 3))
+        boxes = []
+        for b in range(4):
+            lo = rng.uniform(-0.5, 0.3, 3)
+            boxes.append((str(b), lo, lo + rng.uniform(0.01, 0.3, 3)))
+        pairs = {(s, b) for s in range(3) for b in range(4)}
+        out = sphere_bounds(c, rng.uniform(0.01, 0.1, 3), boxes, pairs, margin=0.01, tighten=0.002)
+        assert np.all(out[:, :, 0] < out[:, :, 1])
+
+
+def test_a_sphere_passing_over_a_box_stays_above_its_top_on_the_way_there():
+    """Before the plan is over the box, a sphere already above the top is bounded by the top face, not by the
+    side it is farther out of (which would let the cost pull it down against that side)."""
+    box = [("wall", np.array([0.0, -1.0, 0.0]), np.array([0.1, 1.0, 0.2]))]
+    xs = np.array([-0.5, -0.4, -0.3, 0.05, 0.4])  # in front (far, above the top), over, behind
+    c = np.stack([xs, np.zeros(5), np.array([0.1, 0.3, 0.3, 0.3, 0.3])], axis=1)[:, None, :]
+    b = sphere_bounds(c, np.array([0.05]), box, {(0, 0)}, margin=0.01, tighten=0.0)
+    top = 0.2 + 0.01 + 0.05
+    assert b[2, 0, 0, 2] == pytest.approx(top) and b[3, 0, 0, 2] == pytest.approx(top)  # approaching, above
+    assert b[1, 0, 1, 0] == pytest.approx(-0.01 - 0.05)  # step 0 starts low in front: the front face

@@ -62,14 +62,28 @@ class CrocParams(RecedingParams):
     iterations_per_round: int = Field(
         2, ge=1, le=100, description="SQP iterations before the faces are chosen again on the iterate"
     )
-    warm_rounds: int = Field(3, ge=1, le=100, description="rounds of a warm-started solve (its budget in the step)")
-    cold_rounds: int = Field(20, ge=1, le=200, description="rounds of a cold solve")
+    warm_rounds: int = Field(
+        1,
+        ge=1,
+        le=100,
+        description="rounds of a warm-started solve: its budget in the step (the next step's solve goes on from it)",
+    )
+    cold_rounds: int = Field(
+        3, ge=1, le=200, description="rounds of a cold solve (the warm solves of the next steps go on from it)"
+    )
     termination_tolerance: float = Field(
         1e-3, gt=0, description="CSQP's KKT tolerance (its 1e-6 default is never met here: twin_croc.ocp)"
     )
-    qp_tolerance: float = Field(1e-3, gt=0, description="absolute and relative tolerance of CSQP's ADMM QP")
+    qp_tolerance: float = Field(
+        3e-3,
+        gt=0,
+        description="absolute and relative tolerance of CSQP's ADMM QP (1e-3: ~100 ADMM iterations per QP, 3e-3: ~50)",
+    )
     row_tightening_m: float = Field(
-        0.002, ge=0, le=0.05, description="sphere rows hold this much beyond the margin (CSQP keeps bounds to ~1e-3)"
+        0.004,
+        ge=0,
+        le=0.05,
+        description="sphere rows hold this much beyond the margin (CSQP keeps bounds to about its QP tolerance)",
     )
 
     @model_validator(mode="after")

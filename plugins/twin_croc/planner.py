@@ -107,7 +107,7 @@ class CrocPlanner(RecedingHorizonMPC):
                     P.facing_down_weight,
                 ),
                 table_z_m=P.table_z_m,
-                table_clearance_m=P.table_clearance_m,
+                table_clearance_m=P.table_clearance_m + P.box_margin_m,
                 termination_tolerance=P.termination_tolerance,
                 qp_tolerance=P.qp_tolerance,
             )

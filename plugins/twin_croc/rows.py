@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = ["FREE", "Pairs", "close_pairs", "gaps", "sphere_bounds"]
 
-FREE = 1e9  # the bound of a coordinate nothing bounds
+FREE = np.inf  # the bound of a coordinate nothing bounds (CSQP gives a row open on both sides no weight)
 
 Pairs = set[tuple[int, int]]  # (sphere, box) pairs that are bounded
 
@@ -70,7 +70,9 @@ def sphere_bounds(
     (H+1, n, 3) (knot 0, the measured state: free): beyond, by `tighten` m more (CSQP holds bounds to ~1e-3),
     the face of each paired box the sphere is farthest out of at the middle of each step, for both knots of
     the step. Where a knot's two steps bound a coordinate from opposite sides with no room between (the plan
-    crosses a box there), the later step's bound is kept."""
+    crosses a box there), the later step's bound is kept; where two boxes of one step do (the sphere passes
+    between walls closer than its size), that coordinate is not bounded in the step. Every lower bound is
+    below its upper bound (crocoddyl refuses others)."""
     H, n = centres.shape[0] - 1, centres.shape[1]
     step = np.empty((H, n, 2, 3))
     step[:, :, 0], step[:, :, 1] = -FREE, FREE
@@ -85,8 +87,20 @@ def sphere_bounds(
         c = mid[:, s]  # (H, k, 3)
         outside = np.concatenate([c - hi_m, lo_m - c], axis=-1)  # +x +y +z -x -y -z
         face = np.argmax(outside, axis=-1)  # (H, k)
-        axis, upper = face % 3, face < 3
         r = radii[s][None, :]
+        # on the way to passing over the box, a sphere above its top stays above it: the side face it is
+        # farthest out of would let the position cost pull it down beside the box, where it waits pressed
+        # against that face until the face changes (over the warehouse wall: the tcp sat at the wall for 9 of
+        # 20 steps); after it has passed over, the side faces let it come down behind the box
+        knots = centres[:, s]  # (H+1, k, 3)
+        over = np.all(
+            (knots[..., :2] >= lo_m[:2] - r[..., None]) & (knots[..., :2] <= hi_m[:2] + r[..., None]), axis=-1
+        )
+        above = knots[..., 2] >= hi_m[2] + r
+        first = np.where(over.any(axis=0), np.argmax(over, axis=0), -1)  # first knot over the box, per sphere
+        approach = (np.arange(H)[:, None] < first[None, :]) & above[:-1]
+        face = np.where(approach, 2, face)
+        axis, upper = face % 3, face < 3
         kk, ss = np.meshgrid(np.arange(H), s, indexing="ij")
         up_k, up_s, up_a = kk[upper], ss[upper], axis[upper]
         value = hi_m[up_a] + np.broadcast_to(r, upper.shape)[upper] + tighten
@@ -95,13 +109,18 @@ def sphere_bounds(
         dn_k, dn_s, dn_a = kk[dn], ss[dn], axis[dn]
         value = lo_m[dn_a] - np.broadcast_to(r, upper.shape)[dn] - tighten
         np.minimum.at(step, (dn_k, dn_s, 1, dn_a), value)
+    # two boxes bounding a coordinate from opposite sides with no room for the sphere between them (it passes
+    # between two walls too close for it): that coordinate is left to the loop's check in this step
+    shut = step[:, :, 0] >= step[:, :, 1]
+    step[:, :, 0] = np.where(shut, -FREE, step[:, :, 0])
+    step[:, :, 1] = np.where(shut, FREE, step[:, :, 1])
     out = np.empty((H + 1, n, 2, 3))
     out[0, :, 0], out[0, :, 1] = -FREE, FREE
     out[1:] = step  # the step ending at knot k (k = 1..H)
     later = step[1:]  # the step starting at knot k (k = 1..H-1)
     lo = np.maximum(out[1:H, :, 0], later[:, :, 0])
     hi = np.minimum(out[1:H, :, 1], later[:, :, 1])
-    crossed = lo > hi
+    crossed = lo >= hi
     out[1:H, :, 0] = np.where(crossed, later[:, :, 0], lo)
     out[1:H, :, 1] = np.where(crossed, later[:, :, 1], hi)
     return out
