@@ -78,10 +78,10 @@ def sphere_bounds(
     step[:, :, 0], step[:, :, 1] = -FREE, FREE
     mid = 0.5 * (centres[:-1] + centres[1:])  # (H, n, 3)
     by_box: dict[int, list[int]] = {}
-    for s, b in pairs:
-        by_box.setdefault(b, []).append(s)
-    for b, spheres in by_box.items():
-        s = np.array(sorted(spheres))
+    for sphere, box in pairs:
+        by_box.setdefault(box, []).append(sphere)
+    for b, members in by_box.items():
+        s = np.array(sorted(members))
         lo_m = np.asarray(boxes[b][1], dtype=float) - margin
         hi_m = np.asarray(boxes[b][2], dtype=float) + margin
         c = mid[:, s]  # (H, k, 3)
@@ -104,11 +104,11 @@ def sphere_bounds(
         kk, ss = np.meshgrid(np.arange(H), s, indexing="ij")
         up_k, up_s, up_a = kk[upper], ss[upper], axis[upper]
         value = hi_m[up_a] + np.broadcast_to(r, upper.shape)[upper] + tighten
-        np.maximum.at(step, (up_k, up_s, 0, up_a), value)
+        np.maximum.at(step, (up_k, up_s, np.zeros_like(up_k), up_a), value)
         dn = ~upper
         dn_k, dn_s, dn_a = kk[dn], ss[dn], axis[dn]
         value = lo_m[dn_a] - np.broadcast_to(r, upper.shape)[dn] - tighten
-        np.minimum.at(step, (dn_k, dn_s, 1, dn_a), value)
+        np.minimum.at(step, (dn_k, dn_s, np.ones_like(dn_k), dn_a), value)
     # two boxes bounding a coordinate from opposite sides with no room for the sphere between them (it passes
     # between two walls too close for it): that coordinate is left to the loop's check in this step
     shut = step[:, :, 0] >= step[:, :, 1]
