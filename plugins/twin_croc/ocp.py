@@ -135,9 +135,7 @@ class HorizonProblem:
             barriers = []
             for s, fid in enumerate(self.sphere_ids):
                 floor = np.array([-_FAR, -_FAR, self._table_floor + self.radii[s]])
-                barrier = crocoddyl.ActivationModelQuadraticBarrier(
-                    crocoddyl.ActivationBounds(floor, np.full(3, _FAR))
-                )
+                barrier = crocoddyl.ActivationModelQuadraticBarrier(crocoddyl.ActivationBounds(floor, np.full(3, _FAR)))
                 row = crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu)
                 costs.addCost(f"table{s:03d}", crocoddyl.CostModelResidual(state, barrier, row), weights.table)
                 barriers.append(barrier)
