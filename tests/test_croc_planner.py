@@ -21,7 +21,7 @@ from twin.planning import RecedingHorizonPlanner, Segment, make_context, make_pl
 from twin.registry import Kind, default_registry
 from twin.types import MotionResult
 from twin_croc.ocp import HorizonProblem
-from twin_croc.params import DEFAULT_ARM_SPHERES
+from twin_croc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
 from twin_nmpc.params import NMPCParams, RecedingParams
 from twin_nmpc.scenarios import build_scene, check_trajectory, transfer_scenes
 from twin_nmpc.spheres import sphere_positions
@@ -61,7 +61,7 @@ def test_croc_is_registered_as_receding_horizon_with_its_extra(croc):
     [
         ({"limit_jerk": True}, "no jerk rows"),
         ({"mode": "fast"}, "mode"),
-        ({"arm_spheres": [[4, 0, 0, 0, 0.1]]}, "1, 2 or 3"),
+        ({"arm_spheres": [[6, 0, 0, 0, 0.1]]}, "1 to 5"),
     ],
 )
 def test_bad_parameters_are_config_errors(ctx, params, message):
@@ -112,24 +112,37 @@ def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx
     assert res.info["nmpc_fallbacks"] >= 1
 
 
-def test_the_whole_arm_spheres_cover_the_link_cylinders(ctx):
-    """Points on the shoulder, upper arm and forearm collision cylinders of the URDF, at random configurations,
-    each lie within one sphere grown by the 1 cm box margin (what keeps the link out of a box)."""
+def _surface(kind: str, size: tuple[float, ...]) -> np.ndarray:
+    """(m, 4) homogeneous points on a primitive's surface, in its own frame."""
+    if kind == "cylinder":
+        r, length = size
+        a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(-length / 2, length / 2, 15))
+        pts = np.stack([r * np.cos(a), r * np.sin(a), z], axis=-1).reshape(-1, 3)
+    else:  # box: a grid over its volume's bounding faces (corners and edges included)
+        g = [np.linspace(-e / 2, e / 2, 7) for e in size]
+        pts = np.stack(np.meshgrid(*g, indexing="ij"), axis=-1).reshape(-1, 3)
+    return np.hstack([pts, np.ones((pts.shape[0], 1))])
+
+
+def test_the_whole_arm_spheres_cover_every_link_beyond_the_base_at_any_gripper_opening(ctx):
+    """Points on every collision shape from the shoulder to the fingertips (fingers open and closed), at random
+    configurations, each lie within one whole-arm sphere grown by the 1 cm box margin (what keeps the link out
+    of a box)."""
     scene = PlanningScene.from_settings(load_config("robocup"))
-    sph = np.asarray(DEFAULT_ARM_SPHERES, dtype=float)
+    planner = make_planner(PlannerBlock(name="croc", params={"mode": "whole_arm"}), ctx).inner
+    sph = planner.spheres()
     rng = np.random.default_rng(0)
-    shapes = [s for s in scene._shapes if s.link in ("shoulder_link", "upper_arm_link", "forearm_link")]
-    assert len(shapes) == 5
-    for _ in range(5):
-        q = rng.uniform(-np.pi, np.pi, 6)
-        poses, centres = scene.link_poses(q), sphere_positions(ctx.kinematics, q, sph)[0]
-        for s in shapes:
-            r, length = s.size
-            a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(-length / 2, length / 2, 15))
-            local = np.stack([r * np.cos(a), r * np.sin(a), z, np.ones_like(a)], axis=-1).reshape(-1, 4)
-            pts = (poses[s.link] @ s.origin @ local.T).T[:, :3]
-            d = np.linalg.norm(pts[:, None] - centres[None], axis=-1) - sph[None, :, 4] - 0.01
-            assert d.min(axis=1).max() <= 1e-6, (s.link, d.min(axis=1).max())
+    shapes = [s for s in scene._shapes if s.link != "base_link"]
+    assert {s.link for s in shapes} >= {"upper_arm_link", "forearm_link", "wrist_2_link", "left_finger"}
+    for opening in (0.0, scene.max_opening_m):
+        scene.set_gripper_opening(opening)
+        for _ in range(4):
+            q = rng.uniform(-np.pi, np.pi, 6)
+            poses, centres = scene.link_poses(q), sphere_positions(ctx.kinematics, q, sph)[0]
+            for s in shapes:
+                pts = (poses[s.link] @ s.origin @ _surface(s.kind, s.size).T).T[:, :3]
+                d = np.linalg.norm(pts[:, None] - centres[None], axis=-1) - sph[None, :, 4] - 0.01
+                assert d.min(axis=1).max() <= 1e-6, (s.link, opening, d.min(axis=1).max())
 
 
 def test_the_whole_arm_mode_keeps_every_fixture_but_the_table(ctx):
@@ -140,4 +153,4 @@ def test_the_whole_arm_mode_keeps_every_fixture_but_the_table(ctx):
     planner._scene = scene
     names = {n.split("[")[0] for n, _, _ in planner._boxes()}
     assert names == set(scene.environment_shapes()) - {"table"}
-    assert planner.spheres().shape[0] == 7 + len(DEFAULT_ARM_SPHERES)
+    assert planner.spheres().shape[0] == len(DEFAULT_WHOLE_ARM_TOOL_SPHERES) + len(DEFAULT_ARM_SPHERES)

@@ -14,30 +14,56 @@ from pydantic import Field, model_validator
 
 from twin_nmpc.params import RecedingParams
 
-__all__ = ["DEFAULT_ARM_SPHERES", "CrocParams"]
+__all__ = ["DEFAULT_ARM_SPHERES", "DEFAULT_WHOLE_ARM_TOOL_SPHERES", "CrocParams"]
 
-# (DH frame, x, y, z, radius): the shoulder (frame 1), upper arm (2) and forearm (3) link cylinders of the
-# UR5e URDF, each cut into slabs along its axis and every slab enclosed, with the 1 cm box margin, by a sphere
-# at most 1 cm wider than the cylinder (radius = sqrt(r^2 + (slab/2)^2) - margin). tests/test_croc_planner.py
-# checks that they cover the URDF's collision cylinders. With the tool and wrist spheres (the gripper, wrist 3,
-# wrist 1 and 2) they are the whole arm beyond the base.
+# whole_arm mode's spheres, tight where the seed's are generous (its 5 cm sphere at the tcp, sized for a held
+# cube, reached 35 mm into a bin wall from starts the cell's queries keep 1 cm clear). Each covers its part of
+# the URDF's collision geometry with the 1 cm box margin (tests/test_croc_planner.py checks it):
+# (DH frame, x, y, z, radius): the shoulder (frame 1), upper arm (2), forearm (3), wrist 1 (4) and wrist 2 (5)
+# link cylinders, each cut into slabs along its axis, one sphere of the cylinder's radius or less per slab.
 DEFAULT_ARM_SPHERES: tuple[tuple[int, float, float, float, float], ...] = (
     (1, 0.0, -0.0588, 0.0, 0.0577),
     (1, 0.0, 0.0038, 0.0, 0.0577),
     (2, 0.425, 0.0, 0.07, 0.0571),
     (2, 0.425, 0.0, 0.13, 0.0571),
-    (2, 0.0425, 0.0, 0.138, 0.0588),
-    (2, 0.1275, 0.0, 0.138, 0.0588),
-    (2, 0.2125, 0.0, 0.138, 0.0588),
-    (2, 0.2975, 0.0, 0.138, 0.0588),
-    (2, 0.3825, 0.0, 0.138, 0.0588),
-    (3, 0.3922, 0.0, 0.05, 0.0527),
-    (3, 0.3922, 0.0, 0.12, 0.0527),
-    (3, 0.0394, 0.0, 0.02, 0.0461),
-    (3, 0.1178, 0.0, 0.02, 0.0461),
-    (3, 0.1962, 0.0, 0.02, 0.0461),
-    (3, 0.2746, 0.0, 0.02, 0.0461),
-    (3, 0.353, 0.0, 0.02, 0.0461),
+    (2, 0.0304, 0.0, 0.138, 0.052),
+    (2, 0.0911, 0.0, 0.138, 0.052),
+    (2, 0.1518, 0.0, 0.138, 0.052),
+    (2, 0.2125, 0.0, 0.138, 0.052),
+    (2, 0.2732, 0.0, 0.138, 0.052),
+    (2, 0.3339, 0.0, 0.138, 0.052),
+    (2, 0.3946, 0.0, 0.138, 0.052),
+    (3, 0.3922, 0.0, 0.0383, 0.047),
+    (3, 0.3922, 0.0, 0.085, 0.047),
+    (3, 0.3922, 0.0, 0.1317, 0.047),
+    (3, 0.0282, 0.0, 0.02, 0.0389),
+    (3, 0.0842, 0.0, 0.02, 0.0389),
+    (3, 0.1402, 0.0, 0.02, 0.0389),
+    (3, 0.1962, 0.0, 0.02, 0.0389),
+    (3, 0.2522, 0.0, 0.02, 0.0389),
+    (3, 0.3082, 0.0, 0.02, 0.0389),
+    (3, 0.3642, 0.0, 0.02, 0.0389),
+    (4, 0.0, -0.0633, 0.0, 0.04),
+    (4, 0.0, -0.02, 0.0, 0.04),
+    (4, 0.0, 0.0233, 0.0, 0.04),
+    (5, 0.0, 0.0325, 0.0, 0.0428),
+    (5, 0.0, -0.0225, 0.0, 0.0428),
+)
+# (x, y, z, radius) in the tcp frame: the finger region over the whole stroke (x +-0.0545 m, the fingertips
+# 12 mm past the tcp) in a 3 x 2 grid, the gripper body (0.14 x 0.06 x 0.07 m) in 4, wrist 3 and the flange in 2
+DEFAULT_WHOLE_ARM_TOOL_SPHERES: tuple[tuple[float, float, float, float], ...] = (
+    (-0.03633, 0.0, -0.03675, 0.0168),
+    (0.0, 0.0, -0.03675, 0.0168),
+    (0.03633, 0.0, -0.03675, 0.0168),
+    (-0.03633, 0.0, -0.00425, 0.0168),
+    (0.0, 0.0, -0.00425, 0.0168),
+    (0.03633, 0.0, -0.00425, 0.0168),
+    (-0.0525, 0.0, -0.088, 0.0394),
+    (-0.0175, 0.0, -0.088, 0.0394),
+    (0.0175, 0.0, -0.088, 0.0394),
+    (0.0525, 0.0, -0.088, 0.0394),
+    (0.0, 0.0, -0.138, 0.031),
+    (0.0, 0.0, -0.168, 0.031),
 )
 
 
@@ -47,8 +73,9 @@ class CrocParams(RecedingParams):
     mode: Literal["seed", "whole_arm"] = Field(
         "seed",
         description="seed: the tool, wrist and held-object spheres against the perceived boxes (nmpc's model);"
-        " whole_arm: every link's spheres (`arm_spheres` too) against every box of the planning scene (fixtures,"
-        " perceived boxes; the table stays the soft table term)",
+        " whole_arm: every link's spheres (`whole_arm_tool_spheres` and `arm_spheres` instead of the tool and wrist"
+        " spheres) against every box of the planning scene (fixtures, perceived boxes; the table stays the soft"
+        " table term)",
     )
     limit_jerk: bool = Field(
         False,
@@ -57,10 +84,15 @@ class CrocParams(RecedingParams):
     )
     arm_spheres: list[tuple[int, float, float, float, float]] = Field(
         default_factory=lambda: list(DEFAULT_ARM_SPHERES),
-        description="whole_arm mode: spheres (DH frame 1..3, x, y, z, r) on the shoulder, upper arm and forearm",
+        description="whole_arm mode: spheres (DH frame 1..5, x, y, z, r) on the shoulder, arm and wrist links",
+    )
+    whole_arm_tool_spheres: list[tuple[float, float, float, float]] = Field(
+        default_factory=lambda: list(DEFAULT_WHOLE_ARM_TOOL_SPHERES),
+        description="whole_arm mode: spheres (x, y, z, r) in the tcp frame on the fingers, gripper and flange",
+        min_length=1,
     )
     iterations_per_round: int = Field(
-        2, ge=1, le=100, description="SQP iterations before the faces are chosen again on the iterate"
+        1, ge=1, le=100, description="SQP iterations before the faces are chosen again on the iterate"
     )
     warm_rounds: int = Field(
         1,
@@ -91,6 +123,9 @@ class CrocParams(RecedingParams):
         if self.limit_jerk:
             raise ValueError("limit_jerk: croc has no jerk rows (its control is the step's change); allowed: false")
         for a in self.arm_spheres:
-            if a[0] not in (1, 2, 3) or a[4] <= 0:
-                raise ValueError(f"arm spheres need a DH frame 1, 2 or 3 and a positive radius, got {a}")
+            if a[0] not in (1, 2, 3, 4, 5) or a[4] <= 0:
+                raise ValueError(f"arm spheres need a DH frame 1 to 5 and a positive radius, got {a}")
+        for s in self.whole_arm_tool_spheres:
+            if s[3] <= 0:
+                raise ValueError(f"whole-arm tool sphere radii must be positive, got {s}")
         return self

@@ -7,7 +7,8 @@ Modes:
   weight, soft table clearance, soft terminal facing-down, hard tool, wrist and held-object spheres against
   the perceived boxes). The one difference: no jerk rows (the control is the step's change; its change is
   not a row here), so croc is not `jerk_limited`.
-* `whole_arm`: the shoulder, upper arm and forearm spheres too (`arm_spheres`), against every primitive of
+* `whole_arm`: tight spheres on every link from the shoulder to the fingertips (`arm_spheres`,
+  `whole_arm_tool_spheres`; the seed's tool spheres are sized for a held cube), against every primitive of
   the planning scene (fixtures such as bins, perceived boxes and objects; each as its axis-aligned box),
   except the table, which stays the soft table term: an MPC that can work in the RoboCup cell.
 
@@ -44,7 +45,7 @@ from twin_croc.params import CrocParams
 from twin_croc.rows import Pairs, close_pairs, sphere_bounds
 from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.spheres import Box, sphere_positions
+from twin_nmpc.spheres import Box, robot_spheres, sphere_positions
 
 if TYPE_CHECKING:
     from twin.plugin import PluginContext
@@ -80,7 +81,8 @@ class CrocPlanner(RecedingHorizonMPC):
         super().__init__(params if params is not None else CrocParams(), context)
         P = self.params
         if P.mode == "whole_arm":
-            self._robot_sph = np.vstack([self._robot_sph, np.asarray(P.arm_spheres, dtype=float).reshape(-1, 5)])
+            arm = np.asarray(P.arm_spheres, dtype=float).reshape(-1, 5)
+            self._robot_sph = robot_spheres(P.whole_arm_tool_spheres, arm)
         self._problems: dict[int, HorizonProblem] = {}
         self.build_time_s = 0.0
         self.problem(0)  # built here, not in the first (timed) step; one per held-object sphere count
@@ -141,12 +143,14 @@ class CrocPlanner(RecedingHorizonMPC):
             plan = self._plan[self._ws_offset :] if self._plan is not None else q[None]
             start = np.vstack([plan, np.repeat(plan[-1:], P.horizon + 1 - plan.shape[0], axis=0)])
         else:
+            g0 = time.perf_counter()
             guess = self._cold_guess(q, boxes, sph)
+            t0 += time.perf_counter() - g0  # the loop's guess (nmpc's too) is not the solve's time
             start = np.vstack([q[None], guess])
         start[0] = q
         centres = sphere_positions(self.kin, start, sph)
         pairs: Pairs = close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m)
-        iterations, rounds, converged, cost = 0, 0, False, math.nan
+        iterations, qp_iterations, rounds, converged, cost = 0, 0, 0, False, math.nan
         prob = self.problem(obj.shape[0])
         prob.set_object(obj)
         prob.set_track(self._track)
@@ -167,15 +171,18 @@ class CrocPlanner(RecedingHorizonMPC):
                 max_iterations=P.iterations_per_round,
             )
             iterations += sol.iterations
+            qp_iterations += int(prob.solver.qp_iters)
             converged, cost, qs = sol.converged, sol.cost, sol.qs.copy()
             qs[0] = q
+            if rounds >= (P.cold_rounds if cold else P.warm_rounds):
+                break  # (the next step's solve chooses its faces on this plan, shifted)
             # the faces follow the solution: a sphere it moved past a box (sooner than the plan the faces came
             # from) is bounded by the face it is beyond now, and a pair it came close to is bounded
             centres = sphere_positions(self.kin, qs, sph)
             if P.box_screen_m is not None:
                 pairs |= close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m / 2)
             again = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
-            if (converged and np.array_equal(again, bounds)) or rounds >= (P.cold_rounds if cold else P.warm_rounds):
+            if converged and np.array_equal(again, bounds):
                 break
             bounds, warm, shift = again, True, 0  # on from this solution, primal and dual
         entry = {
@@ -184,6 +191,7 @@ class CrocPlanner(RecedingHorizonMPC):
             "rounds": rounds,
             "pairs": len(pairs),
             "boxes": len({b for _, b in pairs}),
+            "qp_iterations": qp_iterations,
         }
         return Solved(
             qs,
