@@ -88,7 +88,7 @@ def test_a_closed_loop_rollout_over_the_wall_keeps_every_sphere_out(croc, scenes
 
 
 def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx, scenes, settings, monkeypatch):
-    planner = make_planner(PlannerBlock(name="croc", params={"horizon": 8}), ctx)
+    planner = make_planner(PlannerBlock(name="croc"), ctx)
     ts = scenes[1]
     planner.reset(ts.request, build_scene(settings, ts))
     first = planner.step(ts.request.start)
