@@ -101,7 +101,10 @@ class CrocParams(RecedingParams):
         description="rounds of a warm-started solve: its budget in the step (the next step's solve goes on from it)",
     )
     cold_rounds: int = Field(
-        3, ge=1, le=200, description="rounds of a cold solve (the warm solves of the next steps go on from it)"
+        3, ge=1, le=200, description="rounds of a cold solve at least (the warm solves of the next steps go on from it)"
+    )
+    cold_max_rounds: int = Field(
+        15, ge=1, le=500, description="rounds of a cold solve at most, while its plan does not pass the loop's check"
     )
     termination_tolerance: float = Field(
         1e-3, gt=0, description="CSQP's KKT tolerance (its 1e-6 default is never met here: twin_croc.ocp)"
@@ -120,6 +123,10 @@ class CrocParams(RecedingParams):
 
     @model_validator(mode="after")
     def _croc(self) -> CrocParams:
+        if self.cold_max_rounds < self.cold_rounds:
+            raise ValueError(
+                f"cold_max_rounds ({self.cold_max_rounds}) must not be below cold_rounds ({self.cold_rounds})"
+            )
         if self.limit_jerk:
             raise ValueError("limit_jerk: croc has no jerk rows (its control is the step's change); allowed: false")
         for a in self.arm_spheres:

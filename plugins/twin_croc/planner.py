@@ -28,7 +28,9 @@ Why these choices:
   CSQP, linearising the same faces for ten iterations, wandered off (cost 20 -> 140, never converging over
   the warehouse wall). So a solve runs in rounds of `iterations_per_round` SQP iterations, the faces (and
   the pairs: only those near the plan, `box_screen_m`, are bounded) chosen again on each round's iterate,
-  until CSQP converges with faces that no longer change, or `cold_rounds` / `warm_rounds` rounds.
+  until CSQP converges with faces that no longer change, or `warm_rounds` rounds (one: a real-time
+  iteration per step), or for a cold solve `cold_rounds` and a plan the loop's check passes (at most
+  `cold_max_rounds`: a goal's first plan has no earlier one to fall back on).
 """
 
 from __future__ import annotations
@@ -174,8 +176,14 @@ class CrocPlanner(RecedingHorizonMPC):
             qp_iterations += int(prob.solver.qp_iters)
             converged, cost, qs = sol.converged, sol.cost, sol.qs.copy()
             qs[0] = q
-            if rounds >= (P.cold_rounds if cold else P.warm_rounds):
+            if not cold and rounds >= P.warm_rounds:
                 break  # (the next step's solve chooses its faces on this plan, shifted)
+            if (
+                cold
+                and rounds >= P.cold_rounds
+                and (rounds >= P.cold_max_rounds or self._violation(qs, sph, boxes) is None)
+            ):
+                break  # a first plan the loop's check passes: the warm solves of the next steps go on from it
             # the faces follow the solution: a sphere it moved past a box (sooner than the plan the faces came
             # from) is bounded by the face it is beyond now, and a pair it came close to is bounded
             centres = sphere_positions(self.kin, qs, sph)
