@@ -147,3 +147,26 @@ def test_a_sphere_passing_over_a_box_stays_above_its_top_on_the_way_there():
     top = 0.2 + 0.01 + 0.05
     assert b[2, 0, 0, 2] == pytest.approx(top) and b[3, 0, 0, 2] == pytest.approx(top)  # approaching, above
     assert b[1, 0, 1, 0] == pytest.approx(-0.01 - 0.05)  # step 0 starts low in front: the front face
+
+
+def test_a_sphere_starting_within_a_margin_may_stay_as_deep_but_not_go_deeper():
+    """A held can lifted 8 mm into the margin of the bottle beside it: its bounds give way by exactly what the
+    start lacks, and the loop's check (`path_gaps`) lets a path stay that deep but not go deeper."""
+    from twin.plugin import UR5e
+    from twin_nmpc.spheres import path_gaps
+
+    box = [("bottle", np.array([0.0, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))]
+    r, margin = 0.05, 0.01
+    c = np.array([[-0.052, 0.0, 0.1], [-0.06, 0.0, 0.1], [-0.2, 0.0, 0.1]])[:, None, :]  # 8 mm short, then away
+    b = sphere_bounds(c, np.array([r]), box, {(0, 0)}, margin=margin, tighten=0.0)
+    assert b[1, 0, 1, 0] == pytest.approx(-0.052)  # x <= where it starts, not -0.06
+    kin = UR5e()
+    q0 = np.array([0.0, -1.2, 1.4, -1.77, -1.57, 0.0])
+    sph = np.array([[7.0, 0.0, 0.0, 0.0, r]])
+    tcp = kin.fk(q0)[:3, 3]
+    near = [("b", tcp + np.array([r + margin - 0.008, -0.1, -0.1]), tcp + np.array([0.3, 0.1, 0.1]))]
+    still = np.vstack([q0, q0])
+    assert path_gaps(kin, still, sph, near, box_margin_m=margin, substeps=2)[0] == pytest.approx(0.0, abs=1e-9)
+    towards = next(q for q in (q0 + d for d in np.eye(6)[:3] * 0.02) if kin.fk(q)[0, 3] > tcp[0] + 0.002)  # +x
+    deeper = np.vstack([q0, towards])
+    assert path_gaps(kin, deeper, sph, near, box_margin_m=margin, substeps=2)[0] < -0.001

@@ -27,6 +27,8 @@ __all__ = ["FREE", "Pairs", "close_pairs", "gaps", "sphere_bounds"]
 
 FREE = np.inf  # the bound of a coordinate nothing bounds (CSQP gives a row open on both sides no weight)
 
+_SHORT_M = 1e-3  # a start nearer a bound than this is not relaxed (the QP holds bounds to ~its tolerance)
+
 Pairs = set[tuple[int, int]]  # (sphere, box) pairs that are bounded
 
 
@@ -104,10 +106,19 @@ def sphere_bounds(
         kk, ss = np.meshgrid(np.arange(H), s, indexing="ij")
         up_k, up_s, up_a = kk[upper], ss[upper], axis[upper]
         value = hi_m[up_a] + np.broadcast_to(r, upper.shape)[upper] + tighten
+        # a sphere that starts within the box's margin (not the box: the loop refuses that start) may not go
+        # deeper than it started, and the loop's check holds it to the same: every face bound of the pair gives
+        # way by how far the start falls short of it (a can lifted beside a bottle has nowhere else to start)
+        start = centres[0]  # (n, 3)
+        dist = np.linalg.norm(np.maximum(np.maximum(lo_m - start, start - hi_m), 0.0), axis=-1)
+        short = radii + tighten - dist  # (n,); a sphere the last plan left on its bound, short by round-off,
+        short = np.where(short > _SHORT_M, short, 0.0)  # keeps its bounds (and its duals: warm starts)
+        value = value - short[up_s]
         np.maximum.at(step, (up_k, up_s, np.zeros_like(up_k), up_a), value)
         dn = ~upper
         dn_k, dn_s, dn_a = kk[dn], ss[dn], axis[dn]
         value = lo_m[dn_a] - np.broadcast_to(r, upper.shape)[dn] - tighten
+        value = value + short[dn_s]
         np.minimum.at(step, (dn_k, dn_s, np.ones_like(dn_k), dn_a), value)
     # two boxes bounding a coordinate from opposite sides with no room for the sphere between them (it passes
     # between two walls too close for it): that coordinate is left to the loop's check in this step

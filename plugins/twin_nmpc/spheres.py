@@ -160,6 +160,7 @@ def violation(
         for (name, _, _), gap in zip(boxes, gaps, strict=True):
             if gap < -CHECK_TOL_M:
                 return f"proxy spheres may come {-gap:.4f} m into box {name!r} (incl. margin) between check points"
+                # (or that much deeper than they started, when they start within its margin)
         # belt and braces: the joint-linear path, densely, against the boxes themselves
         dense = clearance(kin, subdivide(knots, 8), sph, boxes, margin=0.0)
         if dense.min() < 0.0:
@@ -190,15 +191,23 @@ def path_gaps(
 ) -> np.ndarray:
     """(n_boxes,) the smallest clearance (m) of the spheres from each box (grown by the margin) along straight
     lines between `substeps` check points per step of the knot path (m+1, 6): what every MPC's box rows must
-    keep (nmpc's pairwise rows guarantee it; croc's face rows keep each line beyond one face). The path between
-    the check points curves off these lines by millimetres; `violation` checks it densely against the boxes."""
+    keep (nmpc's pairwise rows guarantee it; croc's face rows keep each line beyond one face). A sphere that
+    starts inside a box's margin (not the box: that start is refused) is held only to going no deeper than it
+    started, so its clearance counts from there (a can lifted beside a bottle has nowhere else to start from).
+    The path between the check points curves off these lines by millimetres; `violation` checks it densely
+    against the boxes."""
     if not boxes:
         return np.zeros(0)
     m = box_margin_m
     seq = np.vstack([knots[:1], subdivide(knots, substeps)])
     c = sphere_positions(kin, seq, sph)
     r = sph[:, 4]
-    return np.array([float((segment_box_distance(c[:-1], c[1:], lo - m, hi + m) - r).min()) for _, lo, hi in boxes])
+    out = []
+    for _, lo, hi in boxes:
+        start = np.linalg.norm(np.maximum(np.maximum(lo - m - c[0], c[0] - hi - m), 0.0), axis=-1) - r
+        gap = segment_box_distance(c[:-1], c[1:], lo - m, hi + m) - r
+        out.append(float((gap - np.minimum(start, 0.0)).min()))
+    return np.array(out)
 
 
 def box_gaps(
