@@ -154,3 +154,12 @@ def test_the_whole_arm_mode_keeps_every_fixture_but_the_table(ctx):
     names = {n.split("[")[0] for n, _, _ in planner._boxes()}
     assert names == set(scene.environment_shapes()) - {"table"}
     assert planner.spheres().shape[0] == len(DEFAULT_WHOLE_ARM_TOOL_SPHERES) + len(DEFAULT_ARM_SPHERES)
+
+
+def test_check_planner_takes_planner_parameters_and_the_whole_arm_mode_keeps_the_contract():
+    from cli_runner import twin
+
+    r = twin("check-planner", "croc", "--param", "mode=whole_arm")
+    assert r.returncode == 0 and "croc: keeps every rule" in r.stdout, (r.stdout, r.stderr)
+    bad = twin("check-planner", "croc", "--param", "mode=fast")
+    assert bad.returncode == 2 and "parameter 'mode'" in bad.stderr and "Traceback" not in bad.stderr

@@ -291,6 +291,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--time-limit", type=float, default=1.0, help="the requests' planning time limit, s (default 1)")
     p.add_argument(
+        "--param",
+        dest="params",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a planner parameter (validated by the planner), e.g. --param mode=whole_arm; repeatable",
+    )
+    p.add_argument(
         "--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here"
     )
     add_exchange_parsers(sub)
@@ -683,10 +691,18 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
         from twin.config import load_config
 
         settings = load_config(args.config)
+    planner: str | dict[str, Any] = args.name
+    if args.params:
+        from twin.config.loader import apply_override
+
+        params: dict[str, Any] = {}
+        for item in args.params:
+            apply_override(params, item)
+        planner = {"name": args.name, "params": params}
     console = Console(stderr=True)
     with console.status(f"checking {args.name}") as status:
         report = check_planner(
-            args.name,
+            planner,
             settings=settings,
             seed=args.seed,
             time_limit_s=args.time_limit,
