@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -152,6 +153,7 @@ def run(planner_name: str, name: str, params: dict[str, Any], n: int, seed: int)
         "cold": (float(np.median(cold)), pct(cold, 95)),
         "iterations": float(np.median(iterations)) if iterations else math.nan,
         "worst_step": (max(steps_wall), period),
+        "worst_warm": max(warm) if warm else math.nan,
         "min_box_mm": 1e3 * min(min_box) if min_box else math.nan,
         "violating": bad_checks,
         "wall": float(np.median(wall)),
@@ -163,7 +165,7 @@ def side_by_side(rows: list[dict[str, Any]]) -> None:
     print("== side by side (the same scenes; times in ms; x nmpc = nmpc's median / this one's)")
     print(
         f"{'planner':18s} {'config':8s} {'success':>8s} {'warm med':>9s} {'p95':>7s} {'cold med':>9s} {'p95':>7s}"
-        f" {'iters':>6s} {'worst step/period':>18s} {'min box mm':>10s} {'viol':>5s} {'goal s':>7s}"
+        f" {'iters':>6s} {'worst warm':>10s} {'worst step/period':>18s} {'min box mm':>10s} {'viol':>5s} {'goal s':>7s}"
         f" {'warm x nmpc':>11s} {'cold x nmpc':>11s}"
     )
     ref = {r["config"]: r for r in rows if r["planner"] == "nmpc"}
@@ -175,10 +177,67 @@ def side_by_side(rows: list[dict[str, Any]]) -> None:
         print(
             f"{r['planner']:18s} {r['config']:8s} {r['success']:>8s}"
             f" {1e3 * r['warm'][0]:9.1f} {1e3 * r['warm'][1]:7.1f}"
-            f" {1e3 * r['cold'][0]:9.1f} {1e3 * r['cold'][1]:7.1f} {r['iterations']:6.0f}"
+            f" {1e3 * r['cold'][0]:9.1f} {1e3 * r['cold'][1]:7.1f} {r['iterations']:6.0f} {1e3 * r['worst_warm']:10.1f}"
             f" {1e3 * worst:8.0f}/{1e3 * period:<9.0f} {r['min_box_mm']:10.1f} {r['violating']:5d} {r['wall']:7.2f}"
             f" {wx:11.1f} {cx:11.1f}"
         )
+    print()
+
+
+def position_queries(planners: list[str], count: int, seeds: list[int]) -> None:
+    """The planners on the position-goal scenarios of configs/compare.yaml (RoboCup: the table and both bins;
+    the warehouse wall), through `twin compare`'s runner and judge: successes per planner and scenario."""
+    import json
+    import tempfile
+
+    from twin.compare import compare_spec_from_dict, run_comparison
+
+    yaml_spec: dict[str, Any] = {
+        "name": "bench-nmpc-positions",
+        "seeds": seeds,
+        "time_limit_s": 2.0,
+        "planners": [
+            {
+                "name": p.partition(":")[0],
+                "label": p.replace(":", "."),
+                **({"params": {"mode": p.partition(":")[2]}} if ":" in p else {}),
+            }
+            for p in planners
+        ],
+        "scenarios": [
+            {
+                "name": "warehouse-position",
+                "scene": "warehouse",
+                "random": {"count": count, "goal": "position", "straight": "blocked"},
+            },
+            {
+                "name": "robocup-position",
+                "scene": "robocup",
+                "random": {
+                    "count": count,
+                    "goal": "position",
+                    "straight": "blocked",
+                    "region_x": [-0.60, -0.05],
+                    "region_y": [-0.55, 0.55],
+                    "region_z": [0.05, 0.30],
+                    "min_clearance_m": 0.01,
+                },
+            },
+        ],
+    }
+    with tempfile.TemporaryDirectory() as d:
+        spec = compare_spec_from_dict(yaml_spec, base_dir=Path(d))
+        result = run_comparison(spec, out_dir=Path(d) / "out", workers=0, plots=False)
+        rows = [json.loads(line) for line in result.results_path.read_text().splitlines()]
+    print(f"== position queries ({count} per scenario and seed, seeds {seeds}; compare.yaml's scenarios)")
+    for p in planners:
+        cells = []
+        for sc in ("warehouse-position", "robocup-position"):
+            mine = [r for r in rows if r["planner"] == p.replace(":", ".") and r["scenario"] == sc]
+            times = [r["timing"].get("planning_time_s") for r in mine if r["success"]]
+            med = f", planning median {np.median([x for x in times if x is not None]):.2f} s" if times else ""
+            cells.append(f"{sc} {sum(r['success'] for r in mine)}/{len(mine)}{med}")
+        print(f"{p:18s} " + ";  ".join(cells))
     print()
 
 
@@ -213,6 +272,7 @@ def main() -> None:
     ap.add_argument("--guesses", type=int, default=20, help="scenes for the initial-guess comparison (0: skip)")
     ap.add_argument("--alternatives", type=int, default=10, help="transfers replayed through other solvers (0: skip)")
     ap.add_argument("--planners", default="nmpc,croc,croc:whole_arm", help="comma-separated; croc:whole_arm = mode")
+    ap.add_argument("--queries", type=int, default=4, help="position queries per scenario and seed (0: skip)")
     args = ap.parse_args()
     names = list(CONFIGS) if args.config == "both" else [args.config]
     rows = []
@@ -223,6 +283,9 @@ def main() -> None:
             except DependencyMissing as err:
                 print(f"== {planner}: skipped ({err})\n")
     side_by_side(rows)
+    if args.queries:
+        available = [p for p in args.planners.split(",") if any(r["planner"] == p for r in rows)]
+        position_queries(available, args.queries, [0, 1, 2])
     if args.guesses:
         guess_comparison(args.guesses, args.seed)
     if args.alternatives:
