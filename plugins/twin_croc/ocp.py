@@ -29,11 +29,12 @@ import numpy as np
 import pinocchio as pin
 
 from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
+from twin_nmpc.model import Weights  # the seed's cost weights, nmpc's too
 
 if TYPE_CHECKING:
     from twin.plugin import UR5e
 
-__all__ = ["HorizonProblem", "Solve", "Weights"]
+__all__ = ["HorizonProblem", "Solve"]
 
 # a constraint row's open bound: infinite, which CSQP recognises (a row open on both sides gets the smallest ADMM
 # penalty, rho_min, so it costs the QP nothing: with 1e9 instead, the QP of a warm solve took ~100 ADMM
@@ -41,17 +42,7 @@ __all__ = ["HorizonProblem", "Solve", "Weights"]
 _OPEN = np.inf
 _FAR = 1e9
 _AHEAD_M = 0.1  # the facing-down point: this far along the tool axis
-
-
-@dataclass(frozen=True)
-class Weights:
-    """The seed's cost weights."""
-
-    position: float = 1.0
-    terminal_factor: float = 10.0
-    step: float = 0.02
-    table: float = 1e4
-    facing_down: float = 1e3
+SEED_WEIGHTS = Weights(1.0, 10.0, 0.02, 1e4, 1e3)  # position, terminal factor, step, table, facing down
 
 
 @dataclass(frozen=True)
@@ -79,7 +70,7 @@ class HorizonProblem:
         n_object: int = 0,
         horizon: int = 30,
         acceleration_rows: bool = True,
-        weights: Weights = Weights(),
+        weights: Weights = SEED_WEIGHTS,
         table_z_m: float = 0.0,
         table_clearance_m: float = 0.0,
         termination_tolerance: float = 1e-3,
@@ -137,12 +128,13 @@ class HorizonProblem:
                 floor = np.array([-_FAR, -_FAR, self._table_floor + self.radii[s]])
                 barrier = crocoddyl.ActivationModelQuadraticBarrier(crocoddyl.ActivationBounds(floor, np.full(3, _FAR)))
                 row = crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu)
-                costs.addCost(f"table{s:03d}", crocoddyl.CostModelResidual(state, barrier, row), weights.table)
+                costs.addCost(f"table{s:03d}", crocoddyl.CostModelResidual(state, barrier, row), weights.table_slack)
                 barriers.append(barrier)
             self._table_rows.append(barriers)
             if terminal:
                 self._ahead_row = crocoddyl.ResidualModelFrameTranslation(state, ahead_id, np.zeros(3), nu)
-                costs.addCost("facing_down", crocoddyl.CostModelResidual(state, self._ahead_row), weights.facing_down)
+                facing = crocoddyl.CostModelResidual(state, self._ahead_row)
+                costs.addCost("facing_down", facing, weights.facing_down_slack)
             # the manager orders its rows by name: a_accel (6), b_limits (12), c_sphere000 .. (3 each)
             constraints = crocoddyl.ConstraintModelManager(state, nu)
             accel = limits = None

@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from twin_croc.ocp import HorizonProblem, Weights
+from twin_croc.ocp import HorizonProblem
 from twin_croc.params import CrocParams
 from twin_croc.rows import Pairs, close_pairs, sphere_bounds
 from twin_nmpc.model import TCP_FRAME
@@ -103,13 +103,7 @@ class CrocPlanner(RecedingHorizonMPC):
                 n_object=n_object,
                 horizon=P.horizon,
                 acceleration_rows=P.limit_acceleration,
-                weights=Weights(
-                    P.position_weight,
-                    P.terminal_weight_factor,
-                    P.step_weight,
-                    P.table_slack_weight,
-                    P.facing_down_weight,
-                ),
+                weights=self._weights(),
                 table_z_m=P.table_z_m,
                 table_clearance_m=P.table_clearance_m + P.box_margin_m,
                 termination_tolerance=P.termination_tolerance,

@@ -31,34 +31,11 @@ Why these choices:
   therefore seeded over the box: lift, transfer, lower, through IK waypoints (measured on the bench
   scenes: ~35 IPOPT iterations from this guess, ~180 from the straight one, which only the chord terms of
   the pairwise box rows pull out of the box at all).
-* A solve that fails, or whose steps do not pass an independent numpy check of the hard constraints, is
-  never executed: the remaining steps of the last feasible plan are (after the same check; when the very
-  first solve of a goal fails, its checked initial guess is that plan), else the planner stops with a
-  typed failure and a reason. The solve after a failure starts cold, from a fresh guess.
-* The model knows the perceived boxes and the table height, not the cell's fixtures (bins) nor the arm's
-  own links: every segment is checked against the whole FCL scene it was given (at the configured
-  `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
-  knots, as far as the arm needs to stop, coarsely). When either collides the arm brakes, as a real
-  controller's protective stop does: a shortest stop within the step, acceleration and jerk bounds
-  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair; with no
-  free stop, COLLISION at once. A start in collision is refused with INVALID_START naming the pair. Every
-  other end while the arm moves (no plan left, 40 solves) brakes the same way before its status.
-* A segment's samples are the knots, dt apart, and their derivatives are the knots' backward differences:
-  qd_i = (q_i - q_{i-1}) / dt, qdd_i = (qd_i - qd_{i-1}) / dt, the first sample's from the steps that
-  brought the arm to the measured state (zero at rest). So a segment starts with the state the previous
-  one ended in, what it declares is exactly what its positions measure, and the NLP's step, step-change
-  and jerk rows are the velocity, acceleration and jerk limits of what it declares. Within the goal
-  tolerance a moving arm comes to rest as soon as its bounds allow (along its last plan or on the shortest
-  stop, whichever is shorter and still ends within the tolerance, as the seed stops as soon as it is
-  within it), and the last segment ends with a zero step: declared at rest.
-* NMPC tracks a position and stops within a tolerance of it (`goal_tolerance_m`, or the goal's own
-  `position_tolerance_m` when that is tighter); it does not track an orientation (only a soft terminal
-  facing-down term) and it does not reach joint goals. So it declares `goal_kinds = {"position"}`: a
-  config that asks it for joint or oriented pose goals fails before anything runs, and `twin.planning`
-  judges its end like every planner's, against the goal's tolerances.
-* Segments that follow an earlier plan or the initial guess after a failed solve are marked
-  `Segment.fallback`; the checked loop FCL-checks and counts them like any other segment. Braking
-  segments (no solve) have `info["braking"]` and a solve time of 0.
+* Everything around a solve is the receding-horizon loop's (`twin_nmpc.receding`, shared with `croc`): the
+  independent numpy check of every plan, the fallback to the last feasible plan, the FCL check of every
+  segment and the braking before a collision, segments whose derivatives are their knots' differences, the
+  `goal_kinds` (positions) and what the result's info counts. The NLP's step, step-change and jerk rows are
+  the velocity, acceleration and jerk limits of what a segment declares.
 
 The pieces: `twin_nmpc.params` (the parameter model, the default spheres), `twin_nmpc.model` (the NLP and
 its cache), `twin_nmpc.spheres` (the proxy spheres and the numpy check of a plan), `twin_nmpc.guess` (the
@@ -75,7 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin_nmpc.guess import guess_slack
-from twin_nmpc.model import NMPCProblem, ProblemShape, Weights, cached_problem
+from twin_nmpc.model import NMPCProblem, ProblemShape, cached_problem
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.receding import RecedingHorizonMPC, Solved
 from twin_nmpc.spheres import Box, box_gaps
@@ -130,13 +107,7 @@ class NMPCPlanner(RecedingHorizonMPC):
                 robot_spheres=self._robot_sph,
                 dh=self.kin.dh,
                 tcp_offset_m=self.kin.tcp_offset_m,
-                weights=Weights(
-                    P.position_weight,
-                    P.terminal_weight_factor,
-                    P.step_weight,
-                    P.table_slack_weight,
-                    P.facing_down_weight,
-                ),
+                weights=self._weights(),
                 table_clearance_m=P.table_clearance_m,
                 facing_down_cos=math.cos(P.facing_down_tol_rad),
                 cold_options=self._ipopt_options(cold=True),

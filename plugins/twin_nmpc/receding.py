@@ -63,6 +63,7 @@ from twin.plugin import (
 )
 from twin_nmpc.braking import can_stop_now, stopping_steps
 from twin_nmpc.guess import initial_guess
+from twin_nmpc.model import Weights
 from twin_nmpc.params import RecedingParams
 from twin_nmpc.spheres import (
     Box,
@@ -129,6 +130,13 @@ class RecedingHorizonMPC:
         """Declared (`twin.planning.jerk_limited`): the solve bounds the change of the step's change by the
         request's jerk limit x dt^3 unless `limit_jerk` is off."""
         return bool(self.params.limit_jerk)
+
+    def _weights(self) -> Weights:
+        """The seed's cost weights, from the parameters."""
+        P = self.params
+        return Weights(
+            P.position_weight, P.terminal_weight_factor, P.step_weight, P.table_slack_weight, P.facing_down_weight
+        )
 
     def _solve(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray, sph: np.ndarray) -> Solved:
         """One solve from the measured state `q`, warm-started from `self._ws` (the last accepted solve's
