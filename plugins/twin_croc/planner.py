@@ -5,8 +5,9 @@ braking, segments), so the two differ only in the solver and, in `whole_arm` mod
 Modes:
 * `seed`: `nmpc`'s formulation (horizon, dt, step bound, acceleration bound, tcp position cost, terminal
   weight, soft table clearance, soft terminal facing-down, hard tool, wrist and held-object spheres against
-  the perceived boxes). The one difference: no jerk rows (the control is the step's change; its change is
-  not a row here), so croc is not `jerk_limited`.
+  the perceived boxes). The differences: no jerk rows (the control is the step's change; its change is not
+  a row here), so croc is not `jerk_limited`; the soft table clearance counts the box margin (the spheres
+  cover their links only with it: without, a gripper corner met the table on a bench scene).
 * `whole_arm`: tight spheres on every link from the shoulder to the fingertips (`arm_spheres`,
   `whole_arm_tool_spheres`; the seed's tool spheres are sized for a held cube), against every primitive of
   the planning scene (fixtures such as bins, perceived boxes and objects; each as its axis-aligned box),
@@ -35,7 +36,6 @@ Why these choices:
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from typing import TYPE_CHECKING
@@ -53,8 +53,6 @@ if TYPE_CHECKING:
     from twin.plugin import PluginContext
 
 __all__ = ["CrocPlanner"]
-
-log = logging.getLogger("twin")
 
 _TABLE_TOP_TOL_M = 1e-3  # a primitive whose top is this close to the table top is the table (the soft term)
 
