@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -103,7 +103,7 @@ class Solved:
     log: dict[str, Any]
     guess: np.ndarray | None = None
     warm_start: Any = None
-    warm: bool = field(default=False)
+    warm: bool = False
 
 
 class RecedingHorizonMPC:
