@@ -225,14 +225,13 @@ class HorizonProblem:
             row.updateBounds(lo, hi)
             self._bounds_now[key] = now
 
-    def _set_spheres(self, bounds: np.ndarray) -> np.ndarray:
-        """Set the sphere rows to `bounds` (H+1, n, 2, 3) where they changed; (H+1, n) which changed."""
+    def _set_spheres(self, bounds: np.ndarray) -> None:
+        """Set the sphere rows to `bounds` (H+1, n, 2, 3) where they changed."""
         changed = np.any(bounds != self._bounds, axis=(2, 3))
         changed[0] = False  # the first knot has no sphere rows (the measured state)
         for k, j in zip(*np.nonzero(changed), strict=True):
             self._spheres[k][j].updateBounds(bounds[k, j, 0], bounds[k, j, 1])
         self._bounds = bounds.copy()
-        return changed
 
     # ---- solving ----------------------------------------------------------------------------------------
     def centres(self, qs: np.ndarray) -> np.ndarray:
@@ -270,12 +269,12 @@ class HorizonProblem:
         eps = self._bound_slack
         lo_x = np.concatenate([self.model.lowerPositionLimit + eps, -(step_bound - eps)])
         hi_x = np.concatenate([self.model.upperPositionLimit - eps, step_bound - eps])
+        a = np.full(6, _OPEN) if accel_bound is None else np.asarray(accel_bound, dtype=float) - eps
         for k in range(self.horizon + 1):
             lim, acc = self._limits[k], self._accel[k]
             if lim is not None:
                 self._set(f"l{k}", lim, lo_x, hi_x)
             if acc is not None:
-                a = np.full(6, _OPEN) if accel_bound is None else np.asarray(accel_bound, dtype=float) - eps
                 self._set(f"a{k}", acc, -a, a)
         before = self._bounds
         self._set_spheres(np.asarray(bounds, dtype=float))

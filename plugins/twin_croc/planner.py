@@ -126,8 +126,8 @@ class CrocPlanner(RecedingHorizonMPC):
         return out
 
     def _solve(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray, sph: np.ndarray) -> Solved:
-        """One CSQP solve (rounds when a solution comes close to a pair without a row), warm-started from the
-        last accepted one shifted by the steps executed since."""
+        """One CSQP solve, in rounds while the faces its iterate is beyond change (module docstring), warm-started
+        from the last accepted one shifted by the steps executed since."""
         P = self.params
         t0 = time.perf_counter()
         step, dstep, _ = self._step_bounds()
@@ -201,5 +201,5 @@ class CrocPlanner(RecedingHorizonMPC):
             entry,
             guess=guess,
             warm_start=prob,
-            warm=self._ws is not None,
+            warm=not cold,
         )
