@@ -73,10 +73,10 @@ def arm_model(kin: UR5e) -> pin.Model:
     return model
 
 
-def sphere_frames(model: pin.Model, spheres: np.ndarray, *, tcp_index: int) -> list[int]:
+def sphere_frames(model: pin.Model, spheres: np.ndarray, *, tcp_index: int, prefix: str = "sphere") -> list[int]:
     """Add one frame per sphere (n, 5) = (frame, x, y, z, r) of twin's sphere proxies, where `frame` is a DH
     frame index 1..6 or `tcp_index` for the tcp, and the offset is in that frame; returns their frame ids
-    (the model gains frames `sphere0` .. `sphere{n-1}`)."""
+    (the model gains frames `{prefix}0` .. `{prefix}{n-1}`)."""
     ids = []
     for k, (f, x, y, z, _) in enumerate(np.asarray(spheres, dtype=float)):
         base = TCP_FRAME_NAME if int(f) == tcp_index else dh_frame_name(int(f))
@@ -84,5 +84,5 @@ def sphere_frames(model: pin.Model, spheres: np.ndarray, *, tcp_index: int) -> l
             raise ValueError(f"sphere {k}: frame {int(f)} is neither a DH frame 1..6 nor the tcp ({tcp_index})")
         owner = model.frames[model.getFrameId(base)]
         offset = owner.placement * pin.SE3(np.eye(3), np.array([x, y, z]))
-        ids.append(model.addFrame(pin.Frame(f"sphere{k}", owner.parentJoint, offset, pin.FrameType.OP_FRAME)))
+        ids.append(model.addFrame(pin.Frame(f"{prefix}{k}", owner.parentJoint, offset, pin.FrameType.OP_FRAME)))
     return ids

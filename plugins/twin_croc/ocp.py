@@ -12,7 +12,8 @@ limit bounds (`nmpc`'s `limit_acceleration`). The rows:
   acceleration bound; and one row per sphere and knot: its centre (a frame translation) within bounds, the
   axis-aligned region that keeps it beyond a face of every box near it (`twin_croc.rows`), re-set at each
   solve. Only rows whose bounds changed are touched: a warm start shifts the plan, and the bounds with it,
-  so most stay as they were.
+  so most stay as they were; and, in a problem built with self slots, up to `self_slots` rows per knot, each
+  the distance of two spheres on links that are not neighbours (`twin_croc.selfrows`), re-targeted per solve.
 
 The held object's spheres are frames on the tcp whose placements change per goal (`set_object`), so the
 problem is built once per sphere model and horizon.
@@ -20,6 +21,7 @@ problem is built once per sphere model and horizon.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -29,12 +31,13 @@ import numpy as np
 import pinocchio as pin
 
 from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
+from twin_croc.selfrows import SelfRows
 from twin_nmpc.model import Weights  # the seed's cost weights, nmpc's too
 
 if TYPE_CHECKING:
     from twin.plugin import UR5e
 
-__all__ = ["HorizonProblem", "Solve"]
+__all__ = ["HorizonProblem", "PairDistances", "Solve"]
 
 # a constraint row's open bound: infinite, which CSQP recognises (a row open on both sides gets the smallest ADMM
 # penalty, rho_min, so it costs the QP nothing: with 1e9 instead, the QP of a warm solve took ~100 ADMM
@@ -43,6 +46,47 @@ _OPEN = np.inf
 _FAR = 1e9
 _AHEAD_M = 0.1  # the facing-down point: this far along the tool axis
 SEED_WEIGHTS = Weights(1.0, 10.0, 0.02, 1e4, 1e3)  # position, terminal factor, step, table, facing down
+
+
+class PairDistances(crocoddyl.ResidualModelAbstract):  # type: ignore[misc]
+    """The distances between pairs of frames' origins (sphere centres), one row per slot, re-targetable (`pairs`:
+    per slot a pair of frame ids, or None: the row reads 0 and is left open). A Python residual: crocoddyl has no
+    point-to-point distance, and one residual for all of a knot's slots makes one call from C++ instead of one
+    per slot."""
+
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, slots: int):
+        super().__init__(state, slots, nu, True, False, False)
+        self.pairs: list[tuple[int, int] | None] = [None] * slots
+        self._model = state.pinocchio
+        self._nv = state.nv
+        self._r = np.zeros(slots)
+        self._rx = np.zeros((slots, state.nx))
+
+    def calc(self, data: crocoddyl.ResidualDataAbstract, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        pd, m, r = data.shared.pinocchio, self._model, self._r
+        for i, pair in enumerate(self.pairs):
+            if pair is None:
+                r[i] = 0.0
+                continue
+            a, b = pair
+            d = pin.updateFramePlacement(m, pd, a).translation - pin.updateFramePlacement(m, pd, b).translation
+            r[i] = math.sqrt(float(d @ d))
+        data.r[:] = r
+
+    def calcDiff(self, data: crocoddyl.ResidualDataAbstract, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        pd, m, rx, nv = data.shared.pinocchio, self._model, self._rx, self._nv
+        frame = pin.LOCAL_WORLD_ALIGNED
+        for i, pair in enumerate(self.pairs):
+            if pair is None:
+                rx[i] = 0.0
+                continue
+            a, b = pair
+            d = pin.updateFramePlacement(m, pd, a).translation - pin.updateFramePlacement(m, pd, b).translation
+            n = d / max(math.sqrt(float(d @ d)), 1e-9)
+            ja = pin.getFrameJacobian(m, pd, a, frame)[:3]
+            jb = pin.getFrameJacobian(m, pd, b, frame)[:3]
+            rx[i, :nv] = n @ (ja - jb)
+        data.Rx[:] = rx
 
 
 @dataclass(frozen=True)
@@ -59,7 +103,8 @@ class Solve:
 
 class HorizonProblem:
     """The formulation for a fixed horizon, sphere model (`spheres` (n, 5) = frame, x, y, z, r; frame a DH
-    frame 1..6 or `tcp_index`) and number of held-object spheres."""
+    frame 1..6 or `tcp_index`) and number of held-object spheres; with `self_slots` > 0, that many self rows per
+    knot between the spheres `self_spheres` (m, 5), then the held object's."""
 
     def __init__(
         self,
@@ -75,6 +120,8 @@ class HorizonProblem:
         table_clearance_m: float = 0.0,
         termination_tolerance: float = 1e-3,
         qp_tolerance: float = 3e-3,
+        self_spheres: np.ndarray | None = None,
+        self_slots: int = 0,
     ):
         self.model = arm_model(kin)
         robot = np.asarray(spheres, dtype=float).reshape(-1, 5)
@@ -82,6 +129,15 @@ class HorizonProblem:
         self.n_robot, self.n_object = robot.shape[0], n_object
         self.radii = np.concatenate([robot[:, 4], obj[:, 4]])
         self.sphere_ids = sphere_frames(self.model, np.vstack([robot, obj]), tcp_index=tcp_index)
+        # the self set's frames only where self rows read them (crocoddyl places every frame of the model at every
+        # knot: the whole arm's 38 more cost seed mode ~25 % per iteration)
+        own = np.zeros((0, 5)) if self_spheres is None or not self_slots else np.asarray(self_spheres, dtype=float)
+        own = own.reshape(-1, 5)
+        self.self_slots = self_slots if own.shape[0] else 0
+        self._self_ids = np.array(
+            sphere_frames(self.model, own, tcp_index=tcp_index, prefix="self") + self.sphere_ids[len(robot) :],
+            dtype=int,
+        )
         tcp = self.model.getFrameId(TCP_FRAME_NAME)
         self._tcp_placement = self.model.frames[tcp].placement.copy()
         joint = self.model.frames[tcp].parentJoint
@@ -102,6 +158,7 @@ class HorizonProblem:
         self._spheres: list[list[crocoddyl.ConstraintModelResidual]] = []  # per knot: one row per sphere
         self._limits: list[crocoddyl.ConstraintModelResidual | None] = []
         self._accel: list[crocoddyl.ConstraintModelResidual | None] = []
+        self._self: list[tuple[PairDistances, crocoddyl.ConstraintModelResidual] | None] = []  # per knot
         models = []
         for k in range(horizon + 1):
             terminal = k == horizon
@@ -161,6 +218,13 @@ class HorizonProblem:
                 )
                 constraints.addConstraint(f"c_sphere{j:03d}", row)
                 rows.append(row)
+            self_row = None
+            if self.self_slots and k > 0:
+                dist = PairDistances(state, nu, self.self_slots)
+                open_ = np.full(self.self_slots, _OPEN)
+                self_row = (dist, crocoddyl.ConstraintModelResidual(state, dist, -open_, open_))
+                constraints.addConstraint("d_self", self_row[1])
+            self._self.append(self_row)
             self._accel.append(accel)
             self._limits.append(limits)
             self._spheres.append(rows)
@@ -171,6 +235,9 @@ class HorizonProblem:
         self._bounds = np.empty((horizon + 1, len(self.sphere_ids), 2, 3))  # what the sphere rows hold now
         self._bounds[:, :, 0], self._bounds[:, :, 1] = -_OPEN, _OPEN
         self._bounds_now: dict[str, tuple[bytes, bytes]] = {}
+        # what the self rows hold now: the pair (sphere indices of the self set, -1: open) and lower bound
+        self._self_pairs = np.full((horizon + 1, self.self_slots, 2), -1, dtype=int)
+        self._self_lo = np.full((horizon + 1, self.self_slots), -_OPEN)
         self.problem = crocoddyl.ShootingProblem(np.zeros(state.nx), models[:-1], models[-1])
         # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
         # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
@@ -233,6 +300,27 @@ class HorizonProblem:
             self._spheres[k][j].updateBounds(bounds[k, j, 0], bounds[k, j, 1])
         self._bounds = bounds.copy()
 
+    def _set_self(self, rows: SelfRows | None) -> None:
+        """Set the self rows to `rows` (sphere indices of the self set, then the held object's); None opens them
+        all."""
+        if not self.self_slots:
+            if rows is not None:
+                raise ValueError("self rows for a problem built without self slots")
+            return
+        if rows is None:
+            pairs = np.full_like(self._self_pairs, -1)
+            lo = np.full_like(self._self_lo, -_OPEN)
+        else:
+            pairs, lo = np.asarray(rows.pairs, dtype=int), np.asarray(rows.lo, dtype=float)
+        changed = np.any(pairs != self._self_pairs, axis=(1, 2)) | np.any(lo != self._self_lo, axis=1)
+        changed[0] = False
+        for k in np.nonzero(changed)[0]:
+            dist, row = self._self[k]  # type: ignore[misc]
+            ids = self._self_ids
+            dist.pairs = [None if a < 0 else (int(ids[a]), int(ids[b])) for a, b in pairs[k]]
+            row.updateBounds(np.where(pairs[k, :, 0] < 0, -_OPEN, lo[k]), np.full(self.self_slots, _OPEN))
+        self._self_pairs, self._self_lo = pairs.copy(), lo.copy()
+
     # ---- solving ----------------------------------------------------------------------------------------
     def centres(self, qs: np.ndarray) -> np.ndarray:
         """(m, n, 3) sphere centres for joints (m, 6) (pinocchio's; twin's own are `sphere_positions`)."""
@@ -254,13 +342,16 @@ class HorizonProblem:
         guess: np.ndarray | None = None,
         shift: int = 0,
         max_iterations: int = 50,
+        self_rows: SelfRows | None = None,
+        source: HorizonProblem | None = None,
     ) -> Solve:
         """Solve from joints `q0` and last step `step0` towards the goal position `goal` (3,) of the tracked point
         with each sphere's centre within `bounds` (H+1, n, 2, 3) (`twin_croc.rows`; knot 0's are not used; n: the
         robot's spheres, then the object's, parked ones free), steps within `step_bound` (6,) and step changes within
-        `accel_bound` (6,). Cold from the joint plan `guess` (H+1, 6), or warm (guess None): the last solution
-        shifted by `shift` executed steps, primal and dual (a sphere row's duals kept only where its bounds are
-        those of the knot `shift` later)."""
+        `accel_bound` (6,), and the self rows `self_rows` (`twin_croc.selfrows`; None: none). Cold from the joint
+        plan `guess` (H+1, 6), or warm (guess None): the last solution (of `source`, the same problem with or
+        without self rows, if given) shifted by `shift` executed steps, primal and dual (a row's duals kept only
+        where its bounds are those of the knot `shift` later)."""
         goal = np.asarray(goal, dtype=float)
         for row in self._goal_rows:
             row.reference = goal
@@ -276,32 +367,46 @@ class HorizonProblem:
                 self._set(f"l{k}", lim, lo_x, hi_x)
             if acc is not None:
                 self._set(f"a{k}", acc, -a, a)
-        before = self._bounds
+        before, self_before = self._bounds, (self._self_pairs, self._self_lo)
         self._set_spheres(np.asarray(bounds, dtype=float))
+        self._set_self(self_rows)
         x0 = np.concatenate([q0, step0])
         self.problem.x0 = x0
         H = self.horizon
         if guess is None:
-            if self._last is None:
+            src_prob = self if source is None else source
+            if src_prob._last is None:
                 raise ValueError("a warm solve needs an earlier solve; give a guess")
-            xs_prev, us_prev, y_prev = self._last
+            if src_prob is not self:
+                if len(src_prob.sphere_ids) != len(self.sphere_ids) or src_prob.horizon != H:
+                    raise ValueError("a warm start from a problem with other sphere rows or another horizon")
+                before = src_prob._bounds
+                self_before = (src_prob._self_pairs, src_prob._self_lo)
+            xs_prev, us_prev, y_prev = src_prob._last
+            same_slots = src_prob.self_slots == self.self_slots
             idx = np.minimum(np.arange(H + 1) + shift, H)
             X = xs_prev[idx].copy()
             X[idx == H, 6:] = 0.0  # past the old horizon: resting at its last knot
             U = np.vstack([us_prev[shift:], np.zeros((min(shift, H), 6))])[:H]
             duals = []
-            for k in range(H + 1):
+            for k, now in enumerate(self.solver.y):
                 # a knot's duals come from the knot `shift` later when that one has the same rows (a running knot's
                 # from a running knot; the terminal knot has no acceleration row): giving CSQP a dual vector of
-                # another length corrupts its memory (NaN steps some solves later)
+                # another length corrupts its memory (NaN steps some solves later). From the problem without (or
+                # with) self rows, the rows before them are the same, the self rows' duals start at zero
+                y = np.zeros(len(now))
                 src = k + shift
                 if k > 0 and src <= H and (src < H) == (k < H):
-                    y = y_prev[src].copy()
                     off = self._sphere_offset[k]
+                    common = off + 3 * len(self.sphere_ids)
+                    y[:common] = y_prev[src][:common]
                     for j in np.nonzero(np.any(self._bounds[k] != before[src], axis=(1, 2)))[0]:
                         y[off + 3 * j : off + 3 * j + 3] = 0.0
-                else:
-                    y = np.zeros_like(y_prev[k])
+                    if same_slots and self.self_slots:
+                        y[common:] = y_prev[src][common:]
+                        moved = np.any(self._self_pairs[k] != self_before[0][src], axis=1)
+                        moved |= self._self_lo[k] != self_before[1][src]
+                        y[common:][moved] = 0.0
                 duals.append(y)
         else:
             steps = np.vstack([step0, np.diff(guess, axis=0)])

@@ -121,6 +121,21 @@ class CrocParams(RecedingParams):
         description="sphere rows hold this much beyond the margin (CSQP keeps bounds to about its QP tolerance)",
     )
 
+    self_slots: int = Field(
+        4,
+        ge=0,
+        le=20,
+        description="self-collision rows per knot (the nearest pairs of spheres on links that are not neighbours:"
+        " `arm_spheres`, `whole_arm_tool_spheres` and the held object's, in both modes); 0: the arm is not kept"
+        " from itself (the seeds' formulation; the loop's FCL check still stops a plan that folds into itself)",
+    )
+    self_screen_m: float = Field(
+        0.03,
+        gt=0,
+        le=1.0,
+        description="a pair of the arm's own spheres gets a row at a knot only within this distance there",
+    )
+
     @model_validator(mode="after")
     def _croc(self) -> CrocParams:
         if self.cold_max_rounds < self.cold_rounds:

@@ -45,9 +45,10 @@ import numpy as np
 from twin_croc.ocp import HorizonProblem
 from twin_croc.params import CrocParams
 from twin_croc.rows import Pairs, close_pairs, sphere_bounds
+from twin_croc.selfrows import SelfRows, self_pairs, self_rows
 from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.spheres import Box, robot_spheres, sphere_positions
+from twin_nmpc.spheres import Box, robot_spheres, sphere_positions, with_object
 
 if TYPE_CHECKING:
     from twin.plugin import PluginContext
@@ -80,17 +81,20 @@ class CrocPlanner(RecedingHorizonMPC):
     def __init__(self, params: CrocParams | None, context: PluginContext):
         super().__init__(params if params is not None else CrocParams(), context)
         P = self.params
+        arm = np.asarray(P.arm_spheres, dtype=float).reshape(-1, 5)
+        self._self_sph = robot_spheres(P.whole_arm_tool_spheres, arm)  # kept apart pairwise (self rows)
         if P.mode == "whole_arm":
-            arm = np.asarray(P.arm_spheres, dtype=float).reshape(-1, 5)
-            self._robot_sph = robot_spheres(P.whole_arm_tool_spheres, arm)
-        self._problems: dict[int, HorizonProblem] = {}
+            self._robot_sph = self._self_sph
+        self._problems: dict[tuple[int, int], HorizonProblem] = {}
+        self._self_pairs: dict[int, np.ndarray] = {}  # per held-object sphere count
         self.build_time_s = 0.0
         self.problem(0)  # built here, not in the first (timed) step; one per held-object sphere count
 
-    def problem(self, n_object: int) -> HorizonProblem:
-        """The problem for the robot's spheres and `n_object` held-object spheres (built on first use: ~0.1 s;
-        parked object frames would cost ~40 % more per iteration than none)."""
-        prob = self._problems.get(n_object)
+    def problem(self, n_object: int, self_slots: int = 0) -> HorizonProblem:
+        """The problem for the robot's spheres and `n_object` held-object spheres, with `self_slots` self rows
+        per knot (built on first use: ~0.1 s; parked object frames would cost ~40 % more per iteration than
+        none, and idle self rows ~4 us per knot and row: a horizon with no pair near is solved without them)."""
+        prob = self._problems.get((n_object, self_slots))
         if prob is None:
             P = self.params
             t0 = time.perf_counter()
@@ -106,10 +110,32 @@ class CrocPlanner(RecedingHorizonMPC):
                 table_clearance_m=P.table_clearance_m + P.box_margin_m,
                 termination_tolerance=P.termination_tolerance,
                 qp_tolerance=P.qp_tolerance,
+                self_spheres=self._self_sph,
+                self_slots=self_slots,
             )
             self.build_time_s += time.perf_counter() - t0
-            self._problems[n_object] = prob
+            self._problems[(n_object, self_slots)] = prob
         return prob
+
+    def _self_rows(
+        self, qs: np.ndarray, self_sph: np.ndarray, pairs: np.ndarray, centres: np.ndarray | None = None
+    ) -> SelfRows | None:
+        """The self rows of the plan `qs` (H+1, 6) (`twin_croc.selfrows`; `centres`: the self set's there, when
+        known), None if it needs none."""
+        P = self.params
+        if not P.self_slots:
+            return None
+        if centres is None:
+            centres = sphere_positions(self.kin, qs, self_sph)
+        radii = self_sph[:, 4]
+        return self_rows(
+            centres,
+            radii,
+            pairs,
+            slots=P.self_slots,
+            within=P.self_screen_m,
+            extra=P.box_margin_m + P.row_tightening_m,
+        )
 
     def _boxes(self) -> list[Box]:
         """seed: the perceived boxes; whole_arm: every primitive of the scene as its axis-aligned box, but the
@@ -145,14 +171,23 @@ class CrocPlanner(RecedingHorizonMPC):
         centres = sphere_positions(self.kin, start, sph)
         pairs: Pairs = close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m)
         iterations, qp_iterations, rounds, converged, cost = 0, 0, 0, False, math.nan
-        prob = self.problem(obj.shape[0])
-        prob.set_object(obj)
-        prob.set_track(self._track)
-        qs, shift, warm = start, self._ws_offset, self._ws is prob
-        cold = not warm
+        self_sph = with_object(self._self_sph, obj)
+        spairs = self._self_pairs.get(obj.shape[0])
+        if spairs is None:
+            spairs = self._self_pairs[obj.shape[0]] = self_pairs(self_sph)
+        same = P.mode == "whole_arm"  # the self set is the robot's (both with the held object's spheres last)
+        srows = self._self_rows(start, self_sph, spairs, centres if same else None)
+        prob = self.problem(obj.shape[0], P.self_slots if srows is not None else 0)
+        # warm: from the last solution, primal and dual (also across the switch to or from the problem with self
+        # rows: `source`); cold: from the loop's guess
+        cold = self._ws is None
+        source = None if cold or self._ws is prob else self._ws
+        qs, shift = start, self._ws_offset
         bounds = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
         while True:
             rounds += 1
+            prob.set_object(obj)
+            prob.set_track(self._track)
             sol = prob.solve(
                 q,
                 self._dq_prev,
@@ -160,9 +195,11 @@ class CrocPlanner(RecedingHorizonMPC):
                 bounds,
                 step_bound=step,
                 accel_bound=dstep,
-                guess=None if warm else qs,
+                guess=qs if cold and rounds == 1 else None,
                 shift=shift,
                 max_iterations=P.iterations_per_round,
+                self_rows=srows,
+                source=source,
             )
             iterations += sol.iterations
             qp_iterations += int(prob.solver.qp_iters)
@@ -182,9 +219,15 @@ class CrocPlanner(RecedingHorizonMPC):
             if P.box_screen_m is not None:
                 pairs |= close_pairs(centres, radii, boxes, P.box_margin_m, P.box_screen_m / 2)
             again = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
-            if converged and np.array_equal(again, bounds):
+            srows_again = self._self_rows(qs, self_sph, spairs, centres if same else None)
+            # done when no pair is closer than its bound by more than the QP's slack (the nearest pairs of a knot may
+            # take turns in its slots from round to round, each held in its turn)
+            self_held = srows_again is None or srows_again.deficit <= P.row_tightening_m
+            if converged and np.array_equal(again, bounds) and self_held:
                 break
-            bounds, warm, shift = again, True, 0  # on from this solution, primal and dual
+            bounds, srows, shift, source = again, srows_again, 0, None  # on from this solution, primal and dual
+            if srows is not None and not prob.self_slots:  # a pair came near: on in the problem with self rows
+                prob, source = self.problem(obj.shape[0], P.self_slots), prob
         entry = {
             "converged": converged,
             "iterations": iterations,
@@ -192,6 +235,7 @@ class CrocPlanner(RecedingHorizonMPC):
             "pairs": len(pairs),
             "boxes": len({b for _, b in pairs}),
             "qp_iterations": qp_iterations,
+            "self_rows": 0 if srows is None else int((srows.pairs[:, :, 0] >= 0).sum()),
         }
         return Solved(
             qs,

@@ -114,12 +114,15 @@ def sphere_bounds(
         short = radii + tighten - dist  # (n,); a sphere the last plan left on its bound, short by round-off,
         short = np.where(short > _SHORT_M, short, 0.0)  # keeps its bounds (and its duals: warm starts)
         value = value - short[up_s]
-        np.maximum.at(step, (up_k, up_s, np.zeros_like(up_k), up_a), value)
+        # (one face per step and sphere for this box: the indices are unique, so no ufunc.at is needed)
+        at = (up_k, up_s, np.zeros_like(up_k), up_a)
+        step[at] = np.maximum(step[at], value)
         dn = ~upper
         dn_k, dn_s, dn_a = kk[dn], ss[dn], axis[dn]
         value = lo_m[dn_a] - np.broadcast_to(r, upper.shape)[dn] - tighten
         value = value + short[dn_s]
-        np.minimum.at(step, (dn_k, dn_s, np.ones_like(dn_k), dn_a), value)
+        at = (dn_k, dn_s, np.ones_like(dn_k), dn_a)
+        step[at] = np.minimum(step[at], value)
     # two boxes bounding a coordinate from opposite sides with no room for the sphere between them (it passes
     # between two walls too close for it): that coordinate is left to the loop's check in this step
     shut = step[:, :, 0] >= step[:, :, 1]

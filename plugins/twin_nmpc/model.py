@@ -123,14 +123,17 @@ def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, c
 
 def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
     """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
-    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP."""
+    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP (`twin_nmpc.centres_kernel`)."""
+    from twin_nmpc.centres_kernel import sphere_centres_into
+
     tool = np.eye(4)
     tool[2, 3] = tcp_offset_m
+    spheres = np.asarray(spheres, dtype=float)
     out = np.empty((frames.shape[0], spheres.shape[0], 3))
-    for f in np.unique(spheres[:, 0]).astype(int):
-        F = frames[:, 6] @ tool if f == TCP_FRAME else frames[:, f]
-        sel = spheres[:, 0] == f
-        out[:, sel] = np.einsum("mij,nj->mni", F[:, :3, :3], spheres[sel, 1:4]) + F[:, None, :3, 3]
+    frame = spheres[:, 0].astype(np.int64)
+    if np.any((frame < 0) | (frame > TCP_FRAME)):
+        raise ValueError(f"sphere frames must be DH frames 0..6 or the tcp ({TCP_FRAME}), got {sorted(set(frame))}")
+    sphere_centres_into(np.ascontiguousarray(frames), tool, frame, np.ascontiguousarray(spheres[:, 1:4]), out)
     return out
 
 
