@@ -186,3 +186,19 @@ def test_the_closed_loop_plans_a_drop_that_folds_the_elbow_without_touching_itse
     assert not scene.in_collision_batch(qs).any()
     assert any(e["self_rows"] > 0 for e in res.info["nmpc_solve_log"])
     assert not results[0].success and "wrist_1_link" in results[0].reason
+
+
+def test_a_goal_planned_again_after_others_gives_the_same_plan():
+    """The problems a goal used (with and without self rows) start the next goal as new: crocoddyl's data and
+    CSQP's ADMM state outlived a solve, and the same request took another path after other goals."""
+    settings = load_config("warehouse")
+    ctx = make_context(settings)
+    scenes = transfer_scenes(9, 0, settings=settings)
+    planner = make_planner(PlannerBlock(name="croc", params={"dt": 0.08}), ctx)
+    a, fold = scenes[0], scenes[8]
+    first = plan_with(planner, a.request, build_scene(settings, a), ctx)
+    folded = plan_with(planner, fold.request, build_scene(settings, fold), ctx)
+    again = plan_with(planner, a.request, build_scene(settings, a), ctx)
+    assert any(e["self_rows"] > 0 for e in folded.info["nmpc_solve_log"])
+    assert first.success and again.success
+    np.testing.assert_array_equal(first.trajectory.q, again.trajectory.q)

@@ -242,23 +242,45 @@ class HorizonProblem:
         # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
         # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
         self.problem.nthreads = 1
-        self.solver = mim_solvers.SolverCSQP(self.problem)
-        self.solver.reg_min = 1e-2  # the default cycles on these problems (issue 28's spike)
-        self.solver.max_qp_iters = 1000
+        self._bound_slack = 2 * qp_tolerance
+        self._tolerances = (termination_tolerance, qp_tolerance)
+        self.solver = self._new_solver()
+        self._last: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None  # xs, us, duals
+        self.set_track(np.zeros(3))
+
+    def renew(self) -> None:
+        """Crocoddyl's data of every knot and the solver as new (~5 ms for the whole arm with self rows). Some
+        state of the data outlives a solve: with sphere rows re-targeted between problems (tried, not kept: it
+        saved no time), the same request planned again after other goals took other QP iterations and another
+        path while every model, bound and input was the same (the contract's determinism check). The planner
+        renews the problems a goal used before the next goal, so a goal's plan cannot depend on the goals before
+        it."""
+        self.problem = crocoddyl.ShootingProblem(
+            self.problem.x0, list(self.problem.runningModels), self.problem.terminalModel
+        )
+        self.problem.nthreads = 1
+        self.solver = self._new_solver()
+        self._last = None
+
+    def _new_solver(self) -> mim_solvers.SolverCSQP:
+        """A CSQP solver of this problem in its first state (~0.1 ms): a cold solve, and the first from another
+        problem's solution, get a new one (CSQP keeps its ADMM state, the QP's slacks and the penalty it adapted,
+        from solve to solve)."""
+        solver = mim_solvers.SolverCSQP(self.problem)
+        solver.reg_min = 1e-2  # the default cycles on these problems (issue 28's spike)
+        solver.max_qp_iters = 1000
         # CSQP's defaults (1e-6 on the KKT residual, 1e-4 on the ADMM QP's) are never met here once the
         # acceleration rows are active: over the warehouse wall every SQP iteration ran its QP to 1000 ADMM
         # iterations (~30 ms) and the KKT residual stalled near 1e-4 for 100 iterations while the plan no longer
         # moved. The QP's tolerance is also how well it keeps bounds: the joint, step and acceleration bounds
         # are tightened by twice it (one QP tolerance let a step of 0.152 rad through a 0.15 bound), the sphere
         # rows by the planner's `row_tightening_m`
-        self.solver.termination_tolerance = termination_tolerance
-        self.solver.eps_abs = qp_tolerance
-        self.solver.eps_rel = qp_tolerance
-        self._bound_slack = 2 * qp_tolerance
-        self.solver.reset_y = False  # the duals are warm-started (shifted) by `solve`
-        self.solver.reset_rho = True  # the ADMM penalty starts from rho_sparse at every solve (deterministic)
-        self._last: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None  # xs, us, duals
-        self.set_track(np.zeros(3))
+        solver.termination_tolerance, qp_tolerance = self._tolerances
+        solver.eps_abs = qp_tolerance
+        solver.eps_rel = qp_tolerance
+        solver.reset_y = False  # the duals are warm-started (shifted) by `solve`
+        solver.reset_rho = True  # (from the penalty it adapted last: within a goal)
+        return solver
 
     # ---- re-targeting -----------------------------------------------------------------------------------
     def set_object(self, obj: np.ndarray) -> None:
@@ -370,6 +392,8 @@ class HorizonProblem:
         before, self_before = self._bounds, (self._self_pairs, self._self_lo)
         self._set_spheres(np.asarray(bounds, dtype=float))
         self._set_self(self_rows)
+        if guess is not None or source not in (None, self):
+            self.solver = self._new_solver()
         x0 = np.concatenate([q0, step0])
         self.problem.x0 = x0
         H = self.horizon

@@ -51,7 +51,7 @@ from twin_nmpc.receding import RecedingHorizonMPC, Solved
 from twin_nmpc.spheres import Box, robot_spheres, sphere_positions, with_object
 
 if TYPE_CHECKING:
-    from twin.plugin import PluginContext
+    from twin.plugin import MotionRequest, PlanningScene, PluginContext
 
 __all__ = ["CrocPlanner"]
 
@@ -87,6 +87,7 @@ class CrocPlanner(RecedingHorizonMPC):
             self._robot_sph = self._self_sph
         self._problems: dict[tuple[int, int], HorizonProblem] = {}
         self._self_pairs: dict[int, np.ndarray] = {}  # per held-object sphere count
+        self._used: set[HorizonProblem] = set()  # the problems this goal solved (renewed before the next goal)
         self.build_time_s = 0.0
         self.problem(0)  # built here, not in the first (timed) step; one per held-object sphere count
 
@@ -116,6 +117,14 @@ class CrocPlanner(RecedingHorizonMPC):
             self.build_time_s += time.perf_counter() - t0
             self._problems[(n_object, self_slots)] = prob
         return prob
+
+    def reset(self, request: MotionRequest, scene: PlanningScene) -> None:
+        """A new goal: the problems the last goal solved start as new (`HorizonProblem.renew`: a goal's plan does
+        not depend on the goals before it)."""
+        for prob in self._used:
+            prob.renew()
+        self._used.clear()
+        super().reset(request, scene)
 
     def _self_rows(
         self, qs: np.ndarray, self_sph: np.ndarray, pairs: np.ndarray, centres: np.ndarray | None = None
@@ -186,6 +195,7 @@ class CrocPlanner(RecedingHorizonMPC):
         bounds = sphere_bounds(centres, radii, boxes, pairs, margin=P.box_margin_m, tighten=P.row_tightening_m)
         while True:
             rounds += 1
+            self._used.add(prob)
             prob.set_object(obj)
             prob.set_track(self._track)
             sol = prob.solve(
