@@ -112,6 +112,37 @@ def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx
     assert res.info["nmpc_fallbacks"] >= 1
 
 
+def test_a_fallback_from_a_state_off_the_plan_takes_the_plans_steps_from_there(ctx, scenes, settings, monkeypatch):
+    """The arm tracks a plan only to within its controller's error: when the step from the measured state to the
+    plan's next knot breaks the acceleration bound, the fallback takes the plan's own steps from the measured
+    state instead of ending the goal."""
+    planner = make_planner(PlannerBlock(name="croc"), ctx)
+    ts = scenes[1]
+    planner.reset(ts.request, build_scene(settings, ts))
+    seg = planner.step(ts.request.start)
+    for _ in range(3):  # under way, the arm moving
+        seg = planner.step(seg.trajectory.q[-1])
+    inner = planner.inner
+    plan, idx = inner._plan.copy(), inner._plan_idx
+    _, dstep, _ = inner._step_bounds()
+    # measured: behind the plan by 3/4 of the acceleration bound on every joint, against the direction of motion
+    lag = -0.75 * dstep * np.sign(plan[idx + 1] - plan[idx])
+    q = plan[idx] + lag
+    assert np.any(np.abs((plan[idx + 1] - q) - inner._dq_prev) > dstep)  # the knot itself is out of reach
+    real = HorizonProblem.solve
+
+    def through_the_table(self, *a, **k):  # a plan whose later knots leave the joint limits
+        out = real(self, *a, **k)
+        qs = out.qs.copy()
+        qs[2:, 1] = 10.0
+        return replace(out, qs=qs)
+
+    monkeypatch.setattr(HorizonProblem, "solve", through_the_table)
+    out = planner.step(q)
+    assert isinstance(out, Segment) and out.fallback
+    np.testing.assert_allclose(out.trajectory.q[-1], q + plan[idx + 1] - plan[idx], atol=1e-12)
+
+
 def _surface(kind: str, size: tuple[float, ...]) -> np.ndarray:
     """(m, 4) homogeneous points on a primitive's surface, in its own frame."""
     if kind == "cylinder":

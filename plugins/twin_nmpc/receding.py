@@ -483,7 +483,10 @@ class RecedingHorizonMPC:
         )
 
     def _fallback_knots(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], k: int) -> np.ndarray | None:
-        """Up to k remaining steps of the last feasible plan, from the measured state, if they still pass."""
+        """Up to k remaining steps of the last feasible plan, from the measured state, if they still pass: its
+        knots, or else its steps taken from the measured state (the arm tracks a plan only to within its
+        controller's error, and the first step from there to the plan's next knot can break the acceleration
+        bound the plan's own steps keep: a RoboCup transfer ended there)."""
         if self._plan is None:
             return None
         rest = self._plan[self._plan_idx + 1 : self._plan_idx + 1 + k]
@@ -491,10 +494,15 @@ class RecedingHorizonMPC:
             return None
         knots = np.vstack([q[None], rest])
         why = self._violation(knots, sph, boxes)
-        if why is not None:
-            log.info("%s: the last feasible plan no longer passes (%s)", self.name, why)
-            return None
-        return knots
+        if why is None:
+            return knots
+        steps = np.diff(self._plan[self._plan_idx : self._plan_idx + 1 + k], axis=0)
+        shifted = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
+        also = self._violation(shifted, sph, boxes)
+        if also is None:
+            return shifted
+        log.info("%s: the last feasible plan no longer passes (%s; its steps from here: %s)", self.name, why, also)
+        return None
 
     def _stop_along_plan(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
         """The last plan's next knots up to the first one the arm may stop at (`braking.can_stop_now`), then a
