@@ -17,14 +17,14 @@ pytest.importorskip("mim_solvers")
 from twin.collision.scene import PlanningScene
 from twin.config import PlannerBlock, load_config
 from twin.errors import ConfigError
-from twin.planning import RecedingHorizonPlanner, Segment, make_context, make_planner, plan_with
+from twin.planning import RecedingHorizonPlanner, Segment, densify_path, make_context, make_planner, plan_with
 from twin.registry import Kind, default_registry
 from twin.types import MotionResult
 from twin_croc.ocp import HorizonProblem
 from twin_croc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
 from twin_nmpc.params import NMPCParams, RecedingParams
 from twin_nmpc.scenarios import build_scene, check_trajectory, transfer_scenes
-from twin_nmpc.spheres import sphere_positions
+from twin_nmpc.spheres import clearance, sphere_positions
 
 
 @pytest.fixture(scope="module")
@@ -141,6 +141,36 @@ def test_a_fallback_from_a_state_off_the_plan_takes_the_plans_steps_from_there(c
     out = planner.step(q)
     assert isinstance(out, Segment) and out.fallback
     np.testing.assert_allclose(out.trajectory.q[-1], q + plan[idx + 1] - plan[idx], atol=1e-12)
+
+
+def test_the_whole_arm_mode_starts_with_a_sphere_in_a_box_the_link_is_clear_of_and_takes_it_no_deeper(ctx, settings):
+    """Its spheres cover the links only with the box margin: a small wall 4 mm from the gripper (FCL) overlaps a
+    finger sphere by 6 mm. The start is not refused (the seed mode, whose NLP cannot start inside a box, refuses
+    it); the plan reaches the goal and that sphere never goes deeper into the wall than it started."""
+    ts = transfer_scenes(1, 0, settings=settings)[0]
+    q0 = ts.request.start
+    planner = make_planner(PlannerBlock(name="croc", params={"mode": "whole_arm"}), ctx)
+    sph = planner.inner.spheres()
+    c, r = sphere_positions(ctx.kinematics, q0, sph)[0, 0], sph[0, 4]  # a fingertip sphere
+    out = ctx.kinematics.fk(q0)[:3, 0]  # the finger's outside: along the tcp's -x
+    ax = int(np.argmax(np.abs(out)))
+    lo, hi = c - 0.012, c + 0.012
+    face = c[ax] - np.sign(out[ax]) * (r - 0.006)
+    if out[ax] > 0:
+        lo[ax], hi[ax] = face - 0.01, face
+    else:
+        lo[ax], hi[ax] = face, face + 0.01
+    scene = build_scene(settings, ts)
+    scene.add_box_bounds("wall", lo, hi)
+    wall = [("wall", lo, hi)]
+    start = clearance(ctx.kinematics, q0[None], sph, wall, margin=0.0).min()
+    assert start < -0.005 and not scene.in_collision(q0)
+    res = plan_with(planner, ts.request, scene, ctx)
+    assert res.success, res.reason
+    along = clearance(ctx.kinematics, densify_path(res.trajectory.q, 0.01), sph, wall, margin=0.0)
+    assert along.min() >= start - 1e-3
+    seed = make_planner(PlannerBlock(name="croc"), ctx).inner
+    assert seed._refuses_sphere_overlap() and not planner.inner._refuses_sphere_overlap()
 
 
 def _surface(kind: str, size: tuple[float, ...]) -> np.ndarray:

@@ -146,6 +146,12 @@ class CrocPlanner(RecedingHorizonMPC):
             extra=P.box_margin_m + P.row_tightening_m,
         )
 
+    def _refuses_sphere_overlap(self) -> bool:
+        """whole_arm: no. Its spheres cover the links only with the box margin, so one can overlap a box the link
+        is clear of (a fingertip sphere 7 mm into a bin wall from a start 1 cm clear of it); the rows let a sphere
+        that starts inside a margin-grown box come out but not go deeper, and FCL has judged the start."""
+        return self.params.mode == "seed"
+
     def _boxes(self) -> list[Box]:
         """seed: the perceived boxes; whole_arm: every primitive of the scene as its axis-aligned box, but the
         table (the soft table term keeps the spheres above it)."""

@@ -315,7 +315,7 @@ class RecedingHorizonMPC:
             if np.any(np.all((self._target >= lo) & (self._target <= hi))):
                 return self._end(Status.INVALID_GOAL, f"the goal lies inside obstacle box {name!r}", q)
         clear = clearance(self.kin, q[None], sph, boxes, margin=0.0)
-        if clear.size and clear.min() < 0.0:
+        if clear.size and clear.min() < 0.0 and self._refuses_sphere_overlap():
             when = "at the start" if self._solves == 0 else f"at the state measured for solve {self._solves + 1}"
             why = f"a proxy sphere is {-clear.min():.3f} m inside an obstacle box {when}"
             return self._end(Status.INVALID_START, why, q)
@@ -459,6 +459,12 @@ class RecedingHorizonMPC:
         dstep = lim.max_joint_acc * P.dt**2 if P.limit_acceleration else None
         jstep = lim.max_joint_jerk * P.dt**3 if P.limit_jerk else None
         return step, dstep, jstep
+
+    def _refuses_sphere_overlap(self) -> bool:
+        """Whether a measured state with a proxy sphere inside a box is refused (invalid_start): the seed's spheres
+        are generous, but its NLP cannot start inside a box. A formulation whose rows let a sphere that starts
+        inside stay as deep (not deeper) may say no; the FCL check of the start decides then."""
+        return True
 
     def _moving(self) -> bool:
         """Whether the last commanded step moved (a stop ends with a zero step: the arm is declared at rest)."""

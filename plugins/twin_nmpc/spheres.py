@@ -161,10 +161,13 @@ def violation(
             if gap < -CHECK_TOL_M:
                 return f"proxy spheres may come {-gap:.4f} m into box {name!r} (incl. margin) between check points"
                 # (or that much deeper than they started, when they start within its margin)
-        # belt and braces: the joint-linear path, densely, against the boxes themselves
+        # belt and braces: the joint-linear path, densely, against the boxes themselves (a sphere a planner lets
+        # start inside one, `RecedingHorizonMPC._refuses_sphere_overlap`, no deeper than it started)
         dense = clearance(kin, subdivide(knots, 8), sph, boxes, margin=0.0)
-        if dense.min() < 0.0:
-            return f"a proxy sphere enters an obstacle box by {-dense.min():.4f} m between knots"
+        start = np.minimum(clearance(kin, knots[:1], sph, boxes, margin=0.0)[0], 0.0)
+        if np.any(dense < start - CHECK_TOL_M * (start < 0.0)):
+            deepest = float((start - dense).max())
+            return f"a proxy sphere enters an obstacle box by {deepest:.4f} m between knots"
     return None
 
 
