@@ -87,6 +87,19 @@ def test_a_closed_loop_rollout_over_the_wall_keeps_every_sphere_out(croc, scenes
     assert placed >= len(scenes) - 1, placed
 
 
+def _reject_every_solve(monkeypatch: pytest.MonkeyPatch) -> None:
+    """From now on every solve's plan leaves the joint limits after its first step (the loop rejects it)."""
+    real = HorizonProblem.solve
+
+    def through_the_table(self, *a, **k):
+        out = real(self, *a, **k)
+        qs = out.qs.copy()
+        qs[2:, 1] = 10.0
+        return replace(out, qs=qs)
+
+    monkeypatch.setattr(HorizonProblem, "solve", through_the_table)
+
+
 def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx, scenes, settings, monkeypatch):
     planner = make_planner(PlannerBlock(name="croc"), ctx)
     ts = scenes[1]
@@ -94,15 +107,7 @@ def test_a_rejected_solve_is_followed_by_the_last_plan_as_a_counted_fallback(ctx
     first = planner.step(ts.request.start)
     assert isinstance(first, Segment) and not first.fallback
     plan = planner._plan.copy()
-    real = HorizonProblem.solve
-
-    def through_the_table(self, *a, **k):  # a plan whose later knots leave the joint limits
-        out = real(self, *a, **k)
-        qs = out.qs.copy()
-        qs[2:, 1] = 10.0
-        return replace(out, qs=qs)
-
-    monkeypatch.setattr(HorizonProblem, "solve", through_the_table)
+    _reject_every_solve(monkeypatch)
     out = planner.step(first.trajectory.q[-1])
     assert isinstance(out, Segment) and out.fallback and "joint" in out.info["rejected"]
     assert np.allclose(out.trajectory.q[-1], plan[2])
@@ -129,15 +134,7 @@ def test_a_fallback_from_a_state_off_the_plan_takes_the_plans_steps_from_there(c
     lag = -0.75 * dstep * np.sign(plan[idx + 1] - plan[idx])
     q = plan[idx] + lag
     assert np.any(np.abs((plan[idx + 1] - q) - inner._dq_prev) > dstep)  # the knot itself is out of reach
-    real = HorizonProblem.solve
-
-    def through_the_table(self, *a, **k):  # a plan whose later knots leave the joint limits
-        out = real(self, *a, **k)
-        qs = out.qs.copy()
-        qs[2:, 1] = 10.0
-        return replace(out, qs=qs)
-
-    monkeypatch.setattr(HorizonProblem, "solve", through_the_table)
+    _reject_every_solve(monkeypatch)
     out = planner.step(q)
     assert isinstance(out, Segment) and out.fallback
     np.testing.assert_allclose(out.trajectory.q[-1], q + plan[idx + 1] - plan[idx], atol=1e-12)

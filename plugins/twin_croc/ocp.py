@@ -21,7 +21,6 @@ problem is built once per sphere model and horizon.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -62,15 +61,15 @@ class PairDistances(crocoddyl.ResidualModelAbstract):  # type: ignore[misc]
         self._r = np.zeros(slots)
         self._rx = np.zeros((slots, state.nx))
 
+    def _delta(self, pd: pin.Data, pair: tuple[int, int]) -> np.ndarray:
+        a, b = pair
+        m = self._model
+        return pin.updateFramePlacement(m, pd, a).translation - pin.updateFramePlacement(m, pd, b).translation
+
     def calc(self, data: crocoddyl.ResidualDataAbstract, x: np.ndarray, u: np.ndarray | None = None) -> None:
-        pd, m, r = data.shared.pinocchio, self._model, self._r
+        pd, r = data.shared.pinocchio, self._r
         for i, pair in enumerate(self.pairs):
-            if pair is None:
-                r[i] = 0.0
-                continue
-            a, b = pair
-            d = pin.updateFramePlacement(m, pd, a).translation - pin.updateFramePlacement(m, pd, b).translation
-            r[i] = math.sqrt(float(d @ d))
+            r[i] = 0.0 if pair is None else float(np.linalg.norm(self._delta(pd, pair)))
         data.r[:] = r
 
     def calcDiff(self, data: crocoddyl.ResidualDataAbstract, x: np.ndarray, u: np.ndarray | None = None) -> None:
@@ -80,11 +79,10 @@ class PairDistances(crocoddyl.ResidualModelAbstract):  # type: ignore[misc]
             if pair is None:
                 rx[i] = 0.0
                 continue
-            a, b = pair
-            d = pin.updateFramePlacement(m, pd, a).translation - pin.updateFramePlacement(m, pd, b).translation
-            n = d / max(math.sqrt(float(d @ d)), 1e-9)
-            ja = pin.getFrameJacobian(m, pd, a, frame)[:3]
-            jb = pin.getFrameJacobian(m, pd, b, frame)[:3]
+            d = self._delta(pd, pair)
+            n = d / max(float(np.linalg.norm(d)), 1e-9)
+            ja = pin.getFrameJacobian(m, pd, pair[0], frame)[:3]
+            jb = pin.getFrameJacobian(m, pd, pair[1], frame)[:3]
             rx[i, :nv] = n @ (ja - jb)
         data.Rx[:] = rx
 

@@ -11,7 +11,14 @@ Modes:
 * `whole_arm`: tight spheres on every link from the shoulder to the fingertips (`arm_spheres`,
   `whole_arm_tool_spheres`; the seed's tool spheres are sized for a held cube), against every primitive of
   the planning scene (fixtures such as bins, perceived boxes and objects; each as its axis-aligned box),
-  except the table, which stays the soft table term: an MPC that can work in the RoboCup cell.
+  except the table, which stays the soft table term: an MPC that can work in the RoboCup cell. Its spheres
+  cover the links only with the box margin, so a measured state with a sphere inside a box the link is
+  clear of (FCL) is not refused: the rows hold that sphere no deeper than it started.
+* Both modes keep the arm from itself (`twin_croc.selfrows`, `self_slots`): the seeds' formulation does not,
+  and croc's plans folded the elbow until the upper arm met wrist 1 (a warehouse drop near the base) or
+  swung the gripper into the forearm; the loop's FCL check stopped them, the goal was lost. The rows are
+  there only while a pair of the arm's spheres comes near (`self_screen_m`), so most solves are the seeds'
+  formulation exactly.
 
 Why these choices:
 * One problem per count of held-object spheres, built on first use (without: when the planner is
