@@ -43,4 +43,7 @@ pip_install --upgrade pip
 pip_install -e ".[all,test]"
 .venv/bin/python -c "import twin, pybullet, fcl, ruckig, toppra, ompl, casadi, open3d, ray, matplotlib" \
   || { echo "setup: install failed" >&2; exit 1; }
+# Rerun (recordings, twin[viz]) sends usage statistics unless told not to; this turns them off for this user
+# (`.venv/bin/rerun analytics enable` turns them back on)
+.venv/bin/rerun analytics disable >/dev/null
 echo "setup: ready (.venv, versions: ${TWIN_RESOLVE:-locked})"

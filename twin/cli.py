@@ -204,6 +204,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera"
     )
+    p.add_argument(
+        "--rerun",
+        default=None,
+        metavar="OUT.rrd",
+        help="write a Rerun recording of the run (3-D cell over simulated time, stages, plans, verdicts; open it"
+        " with `rerun OUT.rrd`; needs twin[viz])",
+    )
     p.add_argument("--json", dest="json_path", default=None, help="write the run summary here")
 
     p = sub.add_parser(
@@ -468,6 +475,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             settings,
             gui=args.gui,
             record=args.record,
+            rerun=args.rerun,
             config_name=str(args.config),
             on_stage=lambda text: progress.update(bar, description=f"{settings.name} seed {settings.seed}: {text}"),
         )

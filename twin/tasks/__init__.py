@@ -44,17 +44,22 @@ def run_task(
     planner: str | None = None,
     gui: bool = False,
     record: str | None = None,
+    rerun: str | None = None,
     on_stage: Callable[[str], None] | None = None,
     config_name: str = "",
 ) -> RunSummary:
     """Run the configured task once on scene `seed` (default: the config's); `planner` replaces the
-    transfer planner; `record` writes a video (.mp4/.gif) from the overview camera. Bad config or
-    planner names raise before anything is simulated."""
+    transfer planner; `record` writes a video (.mp4/.gif) from the overview camera, `rerun` a Rerun
+    recording (.rrd: `twin.rerun_log`). Bad config or planner names raise before anything is simulated."""
     from twin.recording import Recorder
     from twin.tasks.cell import Cell, stage_planners
 
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record) if record else None
+    if rerun:
+        from twin.rerun_log import rerun_module
+
+        rerun_module()  # a missing SDK fails here, before anything is built
     t0 = time.perf_counter()
     with collect_timings() as clock:
         with stage("setup"):  # planners built, task, the world and its bodies
@@ -68,6 +73,18 @@ def run_task(
             cell = Cell(settings, world, planner_override=planner, on_stage=on_stage, planners=planners)
             if recorder is not None:
                 recorder.attach(world)
+            recording = None
+            if rerun:
+                from twin.collision import PlanningScene
+                from twin.rerun_log import RerunRecording
+
+                recording = RerunRecording(
+                    rerun,
+                    scene=PlanningScene.from_settings(settings),  # every fixture, as the cell has them
+                    kin=cell.kin,
+                    recording_id=f"{config_name or settings.name}-seed{seed}",
+                )
+                cell.trace = recording.attach(world)
             if gui:
                 world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
             outcomes = task.run(cell)
@@ -75,6 +92,10 @@ def run_task(
         if recorder is not None:
             with stage("recording"):
                 recorder.save()
+        if recording is not None:
+            with stage("recording"):
+                recording.verdicts(sim_time, outcomes)
+                recording.close()
     wall = time.perf_counter() - t0
     return RunSummary(
         config=config_name or settings.name,

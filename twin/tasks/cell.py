@@ -194,6 +194,14 @@ class GraspCheck:
         return self.status is GripStatus.HOLDING
 
 
+class RunTrace(Protocol):
+    """What a run's recording (`twin.rerun_log.RerunRecording`) is told by the cell: every stage it planned."""
+
+    def motion(
+        self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult
+    ) -> None: ...
+
+
 @dataclass
 class Cell:
     """Everything a task needs to move the robot; built once per run."""
@@ -203,6 +211,7 @@ class Cell:
     planner_override: str | None = None
     on_stage: Callable[[str], None] | None = None
     records: list[MotionRecord] = field(default_factory=list)
+    trace: RunTrace | None = None  # told every planned stage (a recording; None: none)
 
     planners: dict[str, CheckedPlanner] = field(default_factory=dict)  # built ahead by `stage_planners`, else here
 
@@ -258,6 +267,7 @@ class Cell:
                     self.world.joint_positions(), goal, self.limits, time_limit_s=time_limit_s, seed=self.world.seed
                 )
                 ignore: tuple[int, ...] = (self.held_body,) if self.held_body is not None else ()
+                planned_at = self.world.sim_time
                 if retreat:
                     ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
                 result, record = plan_and_execute(
@@ -272,6 +282,8 @@ class Cell:
                     fingers_may_touch_objects=stage in _GRASPING_STAGES,
                 )
                 self.records.append(record)
+                if self.trace is not None:
+                    self.trace.motion(planned_at, stage, name, request, result)
                 if (
                     backed_off
                     or result.status is not Status.INVALID_START

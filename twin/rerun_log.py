@@ -1,0 +1,178 @@
+"""A run as a Rerun recording (`twin run CONFIG --rerun OUT.rrd`): the cell in 3-D on the simulated-time timeline
+`sim`, what was planned and done, and the judge's verdicts, in one file a user opens later (`rerun OUT.rrd`).
+
+The only module that imports `rerun` (extra `twin[viz]`); a missing SDK is a one-line DependencyMissing.
+Rerun sends usage statistics unless told not to (`rerun analytics disable`, a per-user setting, which
+setup.sh and CI run; the SDK reads no environment switch for it but `CI`).
+
+What goes where (entity paths):
+- `world/robot/<link>`: each robot link's pose over time (ground truth; the world's observer, `POSE_RATE_HZ`),
+  its collision primitives as static boxes, cylinders and spheres in the link's frame;
+- `world/fixtures/<name>`: the cell's fixtures (table, bins, obstacles), static;
+- `world/objects/<name>`: each object's pose over time and its box;
+- `world/plans/<n>_<stage>`: each stage's planned TCP path (from the planned joints, the project's kinematics);
+- `robot/joints/<joint>`, `robot/gripper_opening_m`: measured joint positions and finger opening over time;
+- `events`: a text line per stage (stage, planner, status, reason) and per object's verdict.
+
+Why the world's observer and the cell's trace: the recorder sees the world only through the read-only
+`WorldView` an observer gets, and the stages through `RunTrace.motion`, so a recorded run is the run without it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from twin.errors import ConfigError, DependencyMissing
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.kinematics import UR5e
+    from twin.types import MotionRequest, MotionResult, ObjectOutcome
+    from twin.world import World, WorldView
+
+__all__ = ["POSE_RATE_HZ", "RerunRecording", "rerun_module"]
+
+POSE_RATE_HZ = 30.0  # body poses and joint states per simulated second (the physics runs at 480 Hz)
+_PATH_POINTS = 60  # points of a planned TCP path
+
+
+def rerun_module() -> Any:
+    """`rerun`; DependencyMissing naming the extra when it is not installed."""
+    try:
+        import rerun
+    except ImportError:
+        raise DependencyMissing(
+            "recording a run needs the Rerun SDK: pip install 'twin[viz]' (setup.sh installs it)"
+        ) from None
+    return rerun
+
+
+def _quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """Rotation matrix -> quaternion (x, y, z, w)."""
+    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2.0
+    x = math.copysign(math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2.0, R[2, 1] - R[1, 2])
+    y = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2.0, R[0, 2] - R[2, 0])
+    z = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2.0, R[1, 0] - R[0, 1])
+    return np.array([x, y, z, w])
+
+
+class RerunRecording:
+    """`RerunRecording(path, scene=..., kin=...)`, `.attach(world)` before the run, `.motion(...)` per stage (the
+    cell's trace), `.verdicts(outcomes)` and `.close()` after it."""
+
+    def __init__(self, path: str | Path, *, scene: PlanningScene, kin: UR5e, recording_id: str):
+        self.path = Path(path)
+        if self.path.suffix.lower() != ".rrd":
+            raise ConfigError(f"--rerun must name an .rrd file, got {str(self.path)!r}")
+        rr = rerun_module()
+        self._rr = rr
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise ConfigError(f"cannot write {self.path}: {e.strerror}") from None
+        self.rec = rr.RecordingStream("twin", recording_id=recording_id)
+        self.rec.save(str(self.path))
+        from twin.collision.geometry import primitive_shapes
+
+        self._scene, self._kin = scene, kin
+        self._n_motion = 0
+        self._robot_shapes = primitive_shapes(scene.model)
+        self._links = sorted({s.link for s in self._robot_shapes})
+        self._objects_logged: set[str] = set()
+        self._log_static()
+
+    # ---- static: the cell ------------------------------------------------------------------------
+    def _shape(self, kind: str, size: tuple[float, ...], T: np.ndarray | None = None) -> Any:
+        """A primitive (twin.urdf_model.Shape kinds) as a rerun archetype at pose T (None: the identity)."""
+        rr = self._rr
+        centre = [0.0, 0.0, 0.0] if T is None else T[:3, 3].tolist()
+        quat = None if T is None else rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3]))
+        if kind == "box":
+            half = (0.5 * np.asarray(size[:3], dtype=float)).tolist()
+            return rr.Boxes3D(half_sizes=[half], centers=[centre], quaternions=None if quat is None else [quat])
+        if kind == "sphere":
+            r = float(size[0])
+            return rr.Ellipsoids3D(half_sizes=[[r, r, r]], centers=[centre])
+        r, length = float(size[0]), float(size[1])
+        quats = None if quat is None else [quat]
+        if kind == "capsule":  # rerun's capsule starts at its translation and runs along +z; twin's is centred
+            R = np.eye(3) if T is None else T[:3, :3]
+            start = (np.asarray(centre) - R[:, 2] * 0.5 * length).tolist()
+            return rr.Capsules3D(lengths=[length], radii=[r], translations=[start], quaternions=quats)
+        return rr.Cylinders3D(lengths=[length], radii=[r], centers=[centre], quaternions=quats)
+
+    def _log_static(self) -> None:
+        rr, rec = self._rr, self.rec
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        by_link: dict[str, list[tuple[str, tuple[float, ...], np.ndarray]]] = {}
+        for s in self._robot_shapes:
+            by_link.setdefault(s.link, []).append((s.kind, tuple(s.size), s.origin))
+        for link, shapes in by_link.items():
+            for i, (kind, size, T) in enumerate(shapes):
+                rec.log(f"world/robot/{link}/shape{i}", self._shape(kind, size, T), static=True)
+        for name, shapes in sorted(self._scene.environment_shapes().items()):
+            for i, (kind, size, T) in enumerate(shapes):
+                rec.log(f"world/fixtures/{name}/shape{i}", self._shape(kind, size, T), static=True)
+
+    # ---- over time: the world's observer ---------------------------------------------------------------
+    def attach(self, world: World) -> RerunRecording:
+        world.observe(self._sample, every_s=1.0 / POSE_RATE_HZ)
+        self._names = list(self._kin.joint_names)
+        self._sample(world.view())
+        return self
+
+    def _sample(self, view: WorldView) -> None:
+        rr, rec = self._rr, self.rec
+        rec.set_time("sim", duration=view.sim_time)
+        for link in self._links:
+            T = view.link_matrix(link)
+            rec.log(
+                f"world/robot/{link}",
+                rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3]))),
+            )
+        for o in view.objects():
+            path = f"world/objects/{o.name}"
+            if o.name not in self._objects_logged:
+                half = (0.5 * np.asarray(o.size, dtype=float)).tolist()
+                rec.log(f"{path}/box", rr.Boxes3D(half_sizes=[half], labels=[o.cls]), static=True)
+                self._objects_logged.add(o.name)
+            rec.log(path, rr.Transform3D(translation=o.position, quaternion=rr.Quaternion(xyzw=o.orientation_xyzw)))
+        q = view.joint_positions()
+        for name, value in zip(self._names, q, strict=True):
+            rec.log(f"robot/joints/{name}", rr.Scalars([float(value)]))
+        rec.log("robot/gripper_opening_m", rr.Scalars([float(view.gripper_opening())]))
+
+    # ---- the cell's trace: what was planned and done --------------------------------------------------
+    def motion(self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult) -> None:
+        """A stage planned at `sim_time_s`: its event line, and its planned TCP path (if it has a trajectory)."""
+        rr, rec = self._rr, self.rec
+        self._n_motion += 1
+        rec.set_time("sim", duration=sim_time_s)
+        line = f"{stage}: {planner}: {result.status.value}" + (f" ({result.reason})" if not result.success else "")
+        rec.log("events", rr.TextLog(line, level="INFO" if result.success else "WARN"))
+        traj = result.trajectory
+        if traj is None or traj.q.shape[0] == 0:
+            return
+        idx = np.unique(np.linspace(0, traj.q.shape[0] - 1, _PATH_POINTS).round().astype(int))
+        pts = np.array([self._kin.fk(q)[:3, 3] for q in traj.q[idx]])
+        colour = [40, 160, 255] if result.success else [255, 80, 40]
+        rec.log(f"world/plans/{self._n_motion:03d}_{stage}", rr.LineStrips3D([pts], colors=[colour], labels=[planner]))
+
+    def verdicts(self, sim_time_s: float, outcomes: list[ObjectOutcome] | tuple[ObjectOutcome, ...]) -> None:
+        """The judge's verdict per object, as event lines at the end of the run."""
+        rr, rec = self._rr, self.rec
+        rec.set_time("sim", duration=sim_time_s)
+        for o in outcomes:
+            line = f"verdict {o.id}: {'placed' if o.placed else 'not placed'} in {o.target_bin}"
+            line += f" ({o.error})" if o.error else ""
+            rec.log("events", rr.TextLog(line, level="INFO" if o.placed else "ERROR"))
+
+    def close(self) -> Path:
+        """Flush and end the recording; its file."""
+        self.rec.flush()
+        self.rec.disconnect()
+        return self.path
