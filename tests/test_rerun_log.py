@@ -33,6 +33,19 @@ def _column(batches: list, name: str) -> list:
     return [v for b in batches for v in b.column(name).to_pylist()]
 
 
+def _events(ents: dict[str, list]) -> tuple[list[str], np.ndarray]:
+    """The event lines in the order they were logged (rerun's row ids are time-ordered; chunks are not) and
+    their simulated times, s."""
+    rows = []
+    for b in ents["/events"]:
+        ids = b.column("rerun.controls.RowId").to_pylist()
+        sims = b.column("sim").cast("int64").to_pylist()
+        texts = [t[0] for t in b.column("TextLog:text").to_pylist()]  # (one text per row, as a list of one)
+        rows += list(zip(ids, sims, texts, strict=True))
+    rows.sort()
+    return [t for _, _, t in rows], np.array([s for _, s, _ in rows], dtype=float) / 1e9
+
+
 def _seconds(batches: list) -> np.ndarray:
     """The `sim` timeline's values (durations, ns) in seconds."""
     return np.concatenate([b.column("sim").cast("int64").to_numpy() for b in batches]) / 1e9
@@ -64,10 +77,9 @@ def test_the_recording_holds_the_cell_over_the_runs_simulated_time(recorded):
 def test_the_recording_has_a_path_per_planned_stage_the_events_in_order_and_the_verdicts(recorded):
     path, summary, stages = recorded
     ents = _read(path)
-    text = [t[0] for t in _column(ents["/events"], "TextLog:text")]  # (one text per row, as a list of one)
-    when = _seconds(ents["/events"])
-    assert np.all(np.diff(when) >= 0)
-    planned = [t for t in text if not t.startswith("verdict")]
+    text, when = _events(ents)
+    assert np.all(np.diff(when) >= 0)  # logged as the run went
+    planned = [t for t in text if not t.startswith(("verdict", "capture"))]
     # one event per stage the cell planned, in the order the progress display showed them
     assert [t.split(":")[0] for t in planned] == [s.split(": ")[-1] for s in stages]
     plans = sorted(e for e in ents if e.startswith("/world/plans/"))
@@ -115,3 +127,15 @@ def test_a_recorded_run_is_the_plain_run(recorded):
         return {p: {k: v for k, v in d.items() if "time" not in k} for p, d in m.items()}
 
     assert untimed(summary.metrics) == untimed(plain.metrics)
+
+
+def test_every_capture_has_its_image_depth_camera_and_what_perception_saw(recorded):
+    path, summary, _ = recorded
+    ents = _read(path)
+    text, _ = _events(ents)
+    captures = [t for t in text if t.startswith("capture")]
+    assert captures  # the warehouse looks at least once
+    for entity in ("/world/camera/image/rgb", "/world/camera/image/depth", "/world/camera", "/world/perceived/objects"):
+        assert sum(b.num_rows for b in ents[entity]) == len(captures), entity
+    first = captures[0]
+    assert f"{len(summary.objects)} objects" in first  # the first look sees every cube (none is placed yet)

@@ -11,6 +11,8 @@ What goes where (entity paths):
 - `world/fixtures/<name>`: the cell's fixtures (table, bins, obstacles), static;
 - `world/objects/<name>`: each object's pose over time and its box;
 - `world/plans/<n>_<stage>`: each stage's planned TCP path (from the planned joints, the project's kinematics);
+- `world/camera` (and `/image/rgb`, `/image/depth`): each capture, where the task believed the camera was;
+  `world/perceived/objects` and `/boxes`: what perception made of it (labels, positions, obstacle boxes);
 - `robot/joints/<joint>`, `robot/gripper_opening_m`: measured joint positions and finger opening over time;
 - `events`: a text line per stage (stage, planner, status, reason) and per object's verdict.
 
@@ -29,6 +31,9 @@ import numpy as np
 from twin.errors import ConfigError, DependencyMissing
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from twin.camera import RGBDFrame
     from twin.collision import PlanningScene
     from twin.kinematics import UR5e
     from twin.types import MotionRequest, MotionResult, ObjectOutcome
@@ -38,6 +43,7 @@ __all__ = ["POSE_RATE_HZ", "RerunRecording", "rerun_module"]
 
 POSE_RATE_HZ = 30.0  # body poses and joint states per simulated second (the physics runs at 480 Hz)
 _PATH_POINTS = 60  # points of a planned TCP path
+_JPEG_QUALITY = 80  # a capture's colour image
 
 
 def rerun_module() -> Any:
@@ -80,6 +86,7 @@ class RerunRecording:
 
         self._scene, self._kin = scene, kin
         self._n_motion = 0
+        self._n_capture = 0
         self._robot_shapes = primitive_shapes(scene.model)
         self._links = sorted({s.link for s in self._robot_shapes})
         self._objects_logged: set[str] = set()
@@ -161,6 +168,44 @@ class RerunRecording:
         pts = np.array([self._kin.fk(q)[:3, 3] for q in traj.q[idx]])
         colour = [40, 160, 255] if result.success else [255, 80, 40]
         rec.log(f"world/plans/{self._n_motion:03d}_{stage}", rr.LineStrips3D([pts], colors=[colour], labels=[planner]))
+
+    def perceived(
+        self,
+        sim_time_s: float,
+        frame: RGBDFrame,
+        T_base_camera: np.ndarray,
+        objects: Sequence[tuple[str, np.ndarray]],
+        boxes: Sequence[tuple[str, np.ndarray, np.ndarray]],
+    ) -> None:
+        """A capture: the camera where the task believed it was, its colour image (JPEG) and depth (mm, shown in
+        3-D as points through the camera model), the objects perception saw and the obstacle boxes it made."""
+        rr, rec = self._rr, self.rec
+        self._n_capture += 1
+        rec.set_time("sim", duration=sim_time_s)
+        T = T_base_camera
+        rec.log(
+            "world/camera", rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3])))
+        )
+        intr = frame.intrinsics
+        rec.log(
+            "world/camera/image",
+            rr.Pinhole(
+                image_from_camera=intr.matrix(), resolution=[intr.width, intr.height], camera_xyz=rr.ViewCoordinates.RDF
+            ),
+        )
+        rec.log("world/camera/image/rgb", rr.Image(frame.rgb).compress(jpeg_quality=_JPEG_QUALITY))
+        depth_mm = np.clip(np.round(frame.depth_m * 1000.0), 0, np.iinfo(np.uint16).max).astype(np.uint16)
+        rec.log("world/camera/image/depth", rr.DepthImage(depth_mm, meter=1000.0))
+        labels = [label for label, _ in objects]
+        pts = np.array([p for _, p in objects], dtype=float).reshape(-1, 3)
+        rec.log("world/perceived/objects", rr.Points3D(pts, labels=labels, radii=0.01, colors=[255, 200, 0]))
+        centres = [0.5 * (lo + hi) for _, lo, hi in boxes]
+        halves = [0.5 * (hi - lo) for _, lo, hi in boxes]
+        rec.log(
+            "world/perceived/boxes",
+            rr.Boxes3D(centers=centres, half_sizes=halves, labels=[n for n, _, _ in boxes], colors=[255, 120, 0]),
+        )
+        rec.log("events", rr.TextLog(f"capture {self._n_capture}: {len(objects)} objects, {len(boxes)} obstacle boxes"))
 
     def verdicts(self, sim_time_s: float, outcomes: list[ObjectOutcome] | tuple[ObjectOutcome, ...]) -> None:
         """The judge's verdict per object, as event lines at the end of the run."""

@@ -15,6 +15,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from twin.camera import RGBDFrame
 from twin.collision import PlanningScene
 from twin.config import PlannerBlock, Settings
 from twin.errors import ConfigError
@@ -195,10 +196,20 @@ class GraspCheck:
 
 
 class RunTrace(Protocol):
-    """What a run's recording (`twin.rerun_log.RerunRecording`) is told by the cell: every stage it planned."""
+    """What a run's recording (`twin.rerun_log.RerunRecording`) is told by the cell: every stage it planned, and
+    what every capture saw (`Cell.perceived`)."""
 
     def motion(
         self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult
+    ) -> None: ...
+
+    def perceived(
+        self,
+        sim_time_s: float,
+        frame: RGBDFrame,
+        T_base_camera: np.ndarray,
+        objects: Sequence[tuple[str, np.ndarray]],
+        boxes: Sequence[tuple[str, np.ndarray, np.ndarray]],
     ) -> None: ...
 
 
@@ -238,6 +249,18 @@ class Cell:
 
     def planner(self, group: str) -> CheckedPlanner:
         return self.planners[group]
+
+    def perceived(
+        self,
+        frame: RGBDFrame,
+        T_base_camera: np.ndarray,
+        objects: Sequence[tuple[str, np.ndarray]],
+        boxes: Sequence[tuple[str, np.ndarray, np.ndarray]] = (),
+    ) -> None:
+        """A task's capture and what it made of it: the frame, the camera pose it used (base frame), each object
+        it saw as (label, position (3,)) and each obstacle box as (name, lo, hi), for the run's trace."""
+        if self.trace is not None:
+            self.trace.perceived(self.world.sim_time, frame, T_base_camera, objects, boxes)
 
     # ---- motion ---------------------------------------------------------------------------------
     def move(

@@ -459,6 +459,8 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             T_bc = camera_extrinsics(settings, cap, None)
         # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
+        unknown = [(f"unknown_{i}", lo, hi) for i, (lo, hi) in enumerate(seen.unknown)]
+        cell.perceived(cap.frame, T_bc, [(e.label, e.position) for e in seen.objects], unknown)
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
         if est is None:

@@ -146,6 +146,10 @@ def _perceive(cell: Cell) -> WarehouseResult:
     capture = capture_frame(world, settings)
     calib = calibrate(capture.frame, settings)
     seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+    boxes = [] if seen.obstacle is None else [("obstacle", seen.obstacle.lo, seen.obstacle.hi)]
+    cell.perceived(
+        capture.frame, calib.T_base_camera, [(f"{c.color_label} cube", c.centroid) for c in seen.cubes], boxes
+    )
     prefetch_next_capture(world, settings)
     return seen
 
