@@ -14,7 +14,9 @@ What goes where (entity paths):
 - `world/camera` (and `/image/rgb`, `/image/depth`): each capture, where the task believed the camera was;
   `world/perceived/objects` and `/boxes`: what perception made of it (labels, positions, obstacle boxes);
 - `robot/joints/<joint>`, `robot/gripper_opening_m`: measured joint positions and finger opening over time;
-- `events`: a text line per stage (stage, planner, status, reason) and per object's verdict.
+- `events`: a text line per stage (stage, planner, status, reason), per capture and per object's verdict.
+
+It opens with a saved layout (`_layout`): the cell in 3-D, the camera image, the joint plot, the stage log.
 
 Why the world's observer and the cell's trace: the recorder sees the world only through the read-only
 `WorldView` an observer gets, and the stages through `RunTrace.motion`, so a recorded run is the run without it.
@@ -82,15 +84,36 @@ class RerunRecording:
             raise ConfigError(f"cannot write {self.path}: {e.strerror}") from None
         self.rec = rr.RecordingStream("twin", recording_id=recording_id)
         self.rec.save(str(self.path))
+        self.rec.send_blueprint(self._layout())
         from twin.collision.geometry import primitive_shapes
 
         self._scene, self._kin = scene, kin
         self._n_motion = 0
         self._n_capture = 0
+        self._times: list[float] = []  # the samples of the world's observer (sent as columns by `close`)
+        self._link_poses: list[np.ndarray] = []
+        self._joints: list[np.ndarray] = []
+        self._objects: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {}
         self._robot_shapes = primitive_shapes(scene.model)
         self._links = sorted({s.link for s in self._robot_shapes})
-        self._objects_logged: set[str] = set()
         self._log_static()
+
+    def _layout(self) -> Any:
+        """The saved layout a recording opens with: the cell in 3-D beside the camera image, the joint plot and
+        the stage log."""
+        rrb = self._rr.blueprint
+        return rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.Spatial3DView(origin="world", name="cell"),
+                rrb.Vertical(
+                    rrb.Spatial2DView(origin="world/camera/image", name="camera"),
+                    rrb.TimeSeriesView(origin="robot", name="joints (rad) and finger opening (m)"),
+                    rrb.TextLogView(origin="events", name="stages and verdicts"),
+                ),
+                column_shares=[3, 2],
+            ),
+            collapse_panels=True,
+        )
 
     # ---- static: the cell ------------------------------------------------------------------------
     def _shape(self, kind: str, size: tuple[float, ...], T: np.ndarray | None = None) -> Any:
@@ -133,25 +156,50 @@ class RerunRecording:
         return self
 
     def _sample(self, view: WorldView) -> None:
-        rr, rec = self._rr, self.rec
-        rec.set_time("sim", duration=view.sim_time)
-        for link in self._links:
-            T = view.link_matrix(link)
-            rec.log(
-                f"world/robot/{link}",
-                rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3]))),
-            )
+        """Keep the poses and joint states of this instant; they are sent as columns when the recording closes
+        (one call per entity: logging each sample, ~25 calls of ~0.1 ms at 30 Hz, made a RoboCup run 1.8x slower)."""
+        self._times.append(view.sim_time)
+        self._link_poses.append(np.stack([view.link_matrix(link) for link in self._links]))
         for o in view.objects():
-            path = f"world/objects/{o.name}"
-            if o.name not in self._objects_logged:
+            if o.name not in self._objects:
                 half = (0.5 * np.asarray(o.size, dtype=float)).tolist()
-                rec.log(f"{path}/box", rr.Boxes3D(half_sizes=[half], labels=[o.cls]), static=True)
-                self._objects_logged.add(o.name)
-            rec.log(path, rr.Transform3D(translation=o.position, quaternion=rr.Quaternion(xyzw=o.orientation_xyzw)))
-        q = view.joint_positions()
-        for name, value in zip(self._names, q, strict=True):
-            rec.log(f"robot/joints/{name}", rr.Scalars([float(value)]))
-        rec.log("robot/gripper_opening_m", rr.Scalars([float(view.gripper_opening())]))
+                self.rec.log(
+                    f"world/objects/{o.name}/box", self._rr.Boxes3D(half_sizes=[half], labels=[o.cls]), static=True
+                )
+                self._objects[o.name] = []
+            self._objects[o.name].append((len(self._times) - 1, o.position.copy(), o.orientation_xyzw.copy()))
+        self._joints.append(np.append(view.joint_positions(), view.gripper_opening()))
+
+    def _send_samples(self) -> None:
+        rr, rec = self._rr, self.rec
+        if not self._times:
+            return
+        t = np.asarray(self._times, dtype=float)
+        poses = np.asarray(self._link_poses)  # (m, links, 4, 4)
+        for i, link in enumerate(self._links):
+            T = poses[:, i]
+            quats = np.array([_quat_xyzw(R) for R in T[:, :3, :3]])
+            rec.send_columns(
+                f"world/robot/{link}",
+                indexes=[rr.TimeColumn("sim", duration=t)],
+                columns=rr.Transform3D.columns(translation=T[:, :3, 3], quaternion=quats),
+            )
+        for name, rows in self._objects.items():
+            k = np.array([r[0] for r in rows])
+            rec.send_columns(
+                f"world/objects/{name}",
+                indexes=[rr.TimeColumn("sim", duration=t[k])],
+                columns=rr.Transform3D.columns(
+                    translation=np.array([r[1] for r in rows]), quaternion=np.array([r[2] for r in rows])
+                ),
+            )
+        joints = np.asarray(self._joints)  # (m, 7): the six joints, then the finger opening
+        for j, name in enumerate([*(f"joints/{n}" for n in self._names), "gripper_opening_m"]):
+            rec.send_columns(
+                f"robot/{name}",
+                indexes=[rr.TimeColumn("sim", duration=t)],
+                columns=rr.Scalars.columns(scalars=joints[:, j]),
+            )
 
     # ---- the cell's trace: what was planned and done --------------------------------------------------
     def motion(self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult) -> None:
@@ -217,7 +265,8 @@ class RerunRecording:
             rec.log("events", rr.TextLog(line, level="INFO" if o.placed else "ERROR"))
 
     def close(self) -> Path:
-        """Flush and end the recording; its file."""
+        """Send the observer's samples, flush and end the recording; its file."""
+        self._send_samples()
         self.rec.flush()
         self.rec.disconnect()
         return self.path
