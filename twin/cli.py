@@ -285,6 +285,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", dest="json_path", default=None, help="write the calibration (errors and poses) here")
 
     p = sub.add_parser(
+        "replay", help="run one comparison row again with a Rerun recording, and say what differs from the stored row"
+    )
+    p.add_argument("results", help="a sweep's results.jsonl (or its folder, with the compare.json beside it)")
+    p.add_argument("run_id", help="the row's run_id (the summary lists the replay command of each failed row)")
+    p.add_argument("--rerun", required=True, metavar="OUT.rrd", help="where the recording goes (needs twin[viz])")
+
+    p = sub.add_parser(
         "check-planner", help="check a planner against the planner contract (twin.testing.check_planner)"
     )
     p.add_argument("name", help="registered planner name, e.g. ompl.rrtconnect (see `twin planners`)")
@@ -738,6 +745,29 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
 
 
 _COMMANDS["check-planner"] = _cmd_check_planner
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from twin.compare.replay import replay_row
+    from twin.errors import ConfigError
+    from twin.rerun_log import rerun_module
+
+    if not str(args.rerun).lower().endswith(".rrd"):
+        raise ConfigError(f"--rerun must name an .rrd file, got {args.rerun!r}")
+    rerun_module()  # a missing SDK fails before the run
+    r = replay_row(args.results, args.run_id, args.rerun)
+    print(f"{args.run_id}: {r.replayed.get('status')} ({r.replayed.get('reason') or 'no reason'})")
+    print(f"recording: {r.recording} (open it with `rerun {r.recording}`)")
+    if r.differences:
+        print(f"the replayed row differs from the stored one in {len(r.differences)} field(s) that are not times:")
+        for d in r.differences[:20]:
+            print(f"  {d}")
+        return EXIT_NO_SOLUTION
+    print("the replayed row equals the stored one (every field but times)")
+    return EXIT_OK
+
+
+_COMMANDS["replay"] = _cmd_replay
 _COMMANDS.update(EXCHANGE_COMMANDS)
 
 

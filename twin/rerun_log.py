@@ -170,6 +170,15 @@ class RerunRecording:
             self._objects[o.name].append((len(self._times) - 1, o.position.copy(), o.orientation_xyzw.copy()))
         self._joints.append(np.append(view.joint_positions(), view.gripper_opening()))
 
+    def configuration(self, t: float, q: np.ndarray) -> None:
+        """A sample of the robot at joints `q` (6,) at time `t` without a world: its links placed by the planning
+        scene's kinematics at the scene's finger opening (a comparison query's start, plan and goal)."""
+        poses = self._scene.link_poses(np.asarray(q, dtype=float))
+        self._times.append(float(t))
+        self._link_poses.append(np.stack([poses[link] for link in self._links]))
+        self._joints.append(np.append(np.asarray(q, dtype=float), self._scene.gripper_opening))
+        self._names = list(self._kin.joint_names)
+
     def _send_samples(self) -> None:
         rr, rec = self._rr, self.rec
         if not self._times:
@@ -263,6 +272,45 @@ class RerunRecording:
             line = f"verdict {o.id}: {'placed' if o.placed else 'not placed'} in {o.target_bin}"
             line += f" ({o.error})" if o.error else ""
             rec.log("events", rr.TextLog(line, level="INFO" if o.placed else "ERROR"))
+
+    def query(self, request: MotionRequest, result: MotionResult, label: str) -> None:
+        """A comparison query on the `sim` timeline of its trajectory: the robot at the start (t = 0), then along the
+        planned trajectory if the planner returned one, else at the goal joints (a joint goal); the start and goal
+        TCP, the planned TCP path, the straight joint motion's (a joint goal), and the verdict line."""
+        rr, rec = self._rr, self.rec
+        start = np.asarray(request.start, dtype=float)
+        self.configuration(0.0, start)
+        rec.set_time("sim", duration=0.0)
+        from twin.types import JointGoal
+
+        goal = request.goal
+        goal_q: np.ndarray | None = None
+        if isinstance(goal, JointGoal):
+            goal_q = np.asarray(goal.q, dtype=float)
+            goal_p = self._kin.fk(goal_q)[:3, 3]
+        else:
+            goal_p = goal.pose.matrix()[:3, 3]
+        p0 = self._kin.fk(start)[:3, 3]
+        rec.log(
+            "world/query/start_goal",
+            rr.Points3D([p0, goal_p], labels=["start", "goal"], radii=0.015, colors=[[0, 200, 0], [220, 0, 220]]),
+        )
+        if goal_q is not None:
+            line = np.array(
+                [self._kin.fk(start + f * (np.asarray(goal_q) - start))[:3, 3] for f in np.linspace(0, 1, 30)]
+            )
+            rec.log(
+                "world/query/straight",
+                rr.LineStrips3D([line], colors=[[160, 160, 160]], labels=["straight joint motion"]),
+            )
+        traj = result.trajectory
+        if traj is not None and traj.q.shape[0] > 1:
+            idx = np.unique(np.linspace(0, traj.q.shape[0] - 1, 120).round().astype(int))
+            for i in idx[1:]:
+                self.configuration(float(traj.t[i]), traj.q[i])
+        elif goal_q is not None:
+            self.configuration(1.0, np.asarray(goal_q, dtype=float))
+        self.motion(0.0, label, label, request, result)
 
     def close(self) -> Path:
         """Send the observer's samples, flush and end the recording; its file."""

@@ -335,7 +335,7 @@ def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> Motion
     )
 
 
-def _run_query(task: RunTask, row: dict[str, Any]) -> None:
+def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> None:
     from twin.config import PlannerBlock
     from twin.planning import limit_ratios, make_context, make_planner, plan_with
 
@@ -363,6 +363,12 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
     fallback = result.info.get("fallback_steps") if isinstance(result.info, dict) else None
     row["metrics"]["fallback_steps"] = None if fallback is None else int(fallback)
     row["metrics"].update(limit_metrics(limit_ratios(result)))  # a refused motion's too: why it was refused
+    if rerun is not None:  # `twin replay`: the query, its plan and its verdict as a recording
+        from twin.rerun_log import RerunRecording
+
+        recording = RerunRecording(rerun, scene=cell.scene, kin=cell.kin, recording_id=task.run_id)
+        recording.query(request, result, task.planner_id)
+        recording.close()
     if not result.success or result.trajectory is None:
         return
     traj = result.trajectory
@@ -376,7 +382,7 @@ def _run_query(task: RunTask, row: dict[str, Any]) -> None:
         row["contact_pairs"] = pairs
 
 
-def _run_task(task: RunTask, row: dict[str, Any]) -> None:
+def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> None:
     try:
         from twin.tasks import run_task
     except ImportError:
@@ -389,7 +395,7 @@ def _run_task(task: RunTask, row: dict[str, Any]) -> None:
     settings = load_config(task.config, task.overrides)
     block = PlannerBlock(**task.planner)
     settings = settings.model_copy(update={"planners": {**settings.planners, "transfer": block}})
-    summary = run_task(settings, seed=task.seed, config_name=os.path.basename(task.config))
+    summary = run_task(settings, seed=task.seed, config_name=os.path.basename(task.config), rerun=rerun)
     m = task_metrics(summary)
     row["metrics"].update(m)
     row["success"] = summary.success_rate >= 1.0
@@ -446,8 +452,9 @@ def json_safe(x: Any) -> Any:
     return str(x)
 
 
-def execute_run(task: RunTask) -> dict[str, Any]:
-    """Run one (planner, case, seed) and return its row (a JSON-ready dict).
+def execute_run(task: RunTask, *, rerun: str | None = None) -> dict[str, Any]:
+    """Run one (planner, case, seed) and return its row (a JSON-ready dict); `rerun`: also write a Rerun recording
+    of it there (`twin replay`).
 
     A planner that raises (a broken contract, a missing backend) gives a row with status 'error' and
     the message, so one bad run never stops a sweep.
@@ -456,9 +463,9 @@ def execute_run(task: RunTask) -> dict[str, Any]:
     row = _new_row(task)
     try:
         if task.kind == "query":
-            _run_query(task, row)
+            _run_query(task, row, rerun)
         else:
-            _run_task(task, row)
+            _run_task(task, row, rerun)
     except Exception as e:  # noqa: BLE001 - one failing run is a result, not the end of the sweep
         if isinstance(e, TwinError):  # a typed error says what is wrong; its traceback is noise
             log.warning("run %s failed: %s", task.run_id, e)
