@@ -6,6 +6,7 @@ without the saved spec is a one-line error (exit 2 from the CLI)."""
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -87,3 +88,19 @@ def test_an_unknown_row_or_a_folder_without_its_spec_is_a_one_line_error(sweep, 
         check=False,
     )
     assert r.returncode == 2 and "no row 'nope'" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_summary_lists_the_replay_command_of_each_planners_failed_rows_and_it_runs(sweep, tmp_path):
+    out, rows = sweep
+    text = (out / "summary.md").read_text()
+    failed = [r for r in rows if not r["success"] and r["status"] != "skipped"]
+    commands = [line for line in text.splitlines() if line.startswith("- ") and "twin replay" in line]
+    assert len(commands) == len(failed)  # (fewer than three per planner here)
+    for r in failed:
+        assert any(f"'{r['run_id']}'" in c and c.startswith(f"- {r['planner']}: ") for c in commands)
+    command = shlex.split(commands[0].split("`")[1])  # as a shell would read it
+    done = subprocess.run(
+        [sys.executable, "-m", "twin", *command[1:]], cwd=out, capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert "equals the stored one" in done.stdout

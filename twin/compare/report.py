@@ -38,6 +38,7 @@ from __future__ import annotations
 import csv
 import difflib
 import json
+import re
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -154,6 +155,7 @@ class SummaryRow:
     task_failed_in_planner: int = 0
     task_failed_elsewhere: int = 0
     task_failed_stages: dict[str, int] = field(default_factory=dict)
+    failed_runs: tuple[str, ...] = ()  # run ids of the runs that did not succeed (`twin replay` takes them)
 
     @property
     def success_rate(self) -> float | None:
@@ -314,6 +316,7 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
         task_failed_in_planner=in_planner,
         task_failed_elsewhere=elsewhere,
         task_failed_stages=stages,
+        failed_runs=tuple(str(r["run_id"]) for r in rows if not r.get("success")),
     )
 
 
@@ -630,6 +633,9 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
     return [csv_path, md_path, paired_path] + ([out / "sweep.csv"] if summary.sweeps else [])
 
 
+_REPLAYS_LISTED = 3  # failed rows per planner whose replay command summary.md lists
+
+
 def _markdown(summary: Summary) -> str:
     defs = {d.key: d for d in _DEFS}
     keys = summary.metric_keys()
@@ -699,6 +705,17 @@ def _markdown(summary: Summary) -> str:
         lines += _paired_markdown(summary, defs)
     if summary.skipped:
         lines += ["", "## Skipped", ""] + [f"- `{rid}`: {why}" for rid, why in summary.skipped]
+    if any(r.failed_runs for r in summary.overall):
+        lines += ["", "## See why a run failed", ""]
+        lines += [
+            f"From this folder, `twin replay` runs a failed row again and writes a Rerun recording of it (open it with"
+            f" `rerun OUT.rrd`); the first {_REPLAYS_LISTED} failed rows of each planner:",
+            "",
+        ]
+        for r in summary.overall:
+            for rid in r.failed_runs[:_REPLAYS_LISTED]:
+                name = re.sub(r"[^A-Za-z0-9]+", "_", rid.rsplit("|", 1)[0]).strip("_")
+                lines.append(f"- {r.planner}: `twin replay results.jsonl '{rid}' --rerun {name}.rrd`")
     lines += ["", "## Metric definitions", ""]
     lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in _DEFS if d.key in keys]
     return "\n".join(lines) + "\n"
