@@ -52,8 +52,20 @@ def test_a_failed_row_replays_to_the_same_row_with_a_recording_of_its_query(swee
     replay = replay_row(out / "results.jsonl", row["run_id"], tmp_path / "row.rrd")
     assert replay.differences == ()
     assert replay.replayed["status"] == row["status"] and replay.replayed["reason"] == row["reason"]
-    ents = {c.entity_path for c in rr.chunk.RrdReader(str(tmp_path / "row.rrd")).store().stream()}
+    chunks = list(rr.chunk.RrdReader(str(tmp_path / "row.rrd")).store().stream())
+    ents = {c.entity_path for c in chunks}
     assert {"/world/query/start_goal", "/events", "/world/robot/base_link", "/world/fixtures/obstacle/shape0"} <= ents
+    # the refused motion, and where it first collides: the pair the row's reason names
+    assert {"/world/query/refused", "/world/query/first_collision"} <= ents
+    texts = [
+        t[0]
+        for c in chunks
+        if c.entity_path == "/events"
+        for t in c.to_record_batch().column("TextLog:text").to_pylist()
+    ]
+    pair = row["reason"].split("collides (", 1)[1].split(",")[0]  # "the trajectory collides (A with B, densified ...)"
+    assert f"first collision: {pair}" in texts
+    assert any(t.startswith(f"query: {row['planner']}: collision") for t in texts)
 
 
 def test_differences_leave_out_times_and_name_every_other_field():

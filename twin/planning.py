@@ -679,6 +679,7 @@ def _checked(
             result,
             status=Status.LIMIT_VIOLATION,
             trajectory=None,
+            path=result.path if result.path is not None else traj.q,  # the refused motion (for seeing why)
             reason=f"the trajectory exceeds the joint limits: {over}",
             info=dict(result.info, rejected_by=FINAL_CHECK),
         )
@@ -690,6 +691,7 @@ def _checked(
             result,
             status=Status.COLLISION,
             trajectory=None,
+            path=result.path if result.path is not None else traj.q,  # the refused motion (for seeing why)
             reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})",
             info=dict(result.info, rejected_by=FINAL_CHECK),
         )

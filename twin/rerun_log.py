@@ -308,9 +308,35 @@ class RerunRecording:
             idx = np.unique(np.linspace(0, traj.q.shape[0] - 1, 120).round().astype(int))
             for i in idx[1:]:
                 self.configuration(float(traj.t[i]), traj.q[i])
+        elif result.path is not None and len(result.path) > 1:
+            self._refused(np.asarray(result.path, dtype=float))
         elif goal_q is not None:
             self.configuration(1.0, np.asarray(goal_q, dtype=float))
-        self.motion(0.0, label, label, request, result)
+        self.motion(0.0, "query", label, request, result)
+
+    def _refused(self, path: np.ndarray) -> None:
+        """A refused motion (`MotionResult.path`): its TCP path in red, the robot moving along it (one second per
+        radian of the largest joint change, densified at 0.01 rad) up to the first configuration in collision in
+        the planning scene, which is marked; the robot stays there."""
+        from twin.planning import densify_path
+
+        rr, rec = self._rr, self.rec
+        qs = densify_path(path, 0.01)
+        hit = self._scene.first_collision(qs)
+        tcp = np.array([self._kin.fk(q)[:3, 3] for q in qs[:: max(1, len(qs) // 120)]])
+        rec.log("world/query/refused", rr.LineStrips3D([tcp], colors=[[255, 60, 40]], labels=["refused motion"]))
+        end = len(qs) - 1 if hit is None else hit
+        step = np.abs(np.diff(qs, axis=0)).max(axis=1)
+        times = np.concatenate([[0.0], np.cumsum(step)])
+        for i in np.unique(np.linspace(0, end, min(end + 1, 120)).round().astype(int))[1:]:
+            self.configuration(float(times[i]), qs[i])
+        if hit is not None:
+            rec.set_time("sim", duration=float(times[hit]))
+            p = self._kin.fk(qs[hit])[:3, 3]
+            pair = self._scene.min_distance(qs[hit])
+            what = f"first collision: {pair.robot_part} with {pair.other}"
+            rec.log("world/query/first_collision", rr.Points3D([p], radii=0.02, colors=[[255, 0, 0]], labels=[what]))
+            rec.log("events", rr.TextLog(what, level="WARN"))
 
     def close(self) -> Path:
         """Send the observer's samples, flush and end the recording; its file."""

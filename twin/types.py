@@ -257,7 +257,9 @@ class MotionResult:
     reason: str = ""
     trajectory: Trajectory | None = None
     planning_time_s: float = 0.0
-    path: np.ndarray | None = None  # (m, 6) geometric waypoints before time parameterisation, if any
+    # (m, 6) geometric waypoints before time parameterisation, if any; on a refusal (collision, joint limits) the
+    # joints of the refused motion when the planner or the judge had one (never executed: for seeing why)
+    path: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
     # A planner that stops near a goal rather than on it (NMPC) says how near it aimed (m); None: exact.
     goal_tolerance_m: float | None = None

@@ -193,7 +193,7 @@ class MotionPlannerBase:
                 Status.COLLISION,
                 f"the trajectory collides ({colliding_pair(scene, q_hit)}, densified sample {hit}, "
                 f"checked every {self.check_rad:g} rad / {self.check_m:g} m)",
-                path=path,
+                path=path if path is not None else traj.q,  # the refused motion, for seeing why (twin replay)
                 info=dict(info or {}),
             )
         return MotionResult(Status.SUCCESS, "ok", traj, path=path, info=dict(info or {}, duration_s=traj.duration))
