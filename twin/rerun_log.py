@@ -104,9 +104,13 @@ class RerunRecording:
         rrb = self._rr.blueprint
         return rrb.Blueprint(
             rrb.Horizontal(
-                rrb.Spatial3DView(origin="world", name="cell"),
+                # the depth image stays in the camera view: as points in 3-D it hid the robot
+                rrb.Spatial3DView(origin="world", name="cell", contents=["+ world/**", "- world/camera/image/depth"]),
                 rrb.Vertical(
-                    rrb.Spatial2DView(origin="world/camera/image", name="camera"),
+                    rrb.Tabs(
+                        rrb.Spatial2DView(origin="world/camera/image", name="camera", contents=["+ $origin/rgb"]),
+                        rrb.Spatial2DView(origin="world/camera/image", name="depth", contents=["+ $origin/depth"]),
+                    ),
                     rrb.TimeSeriesView(origin="robot", name="joints (rad) and finger opening (m)"),
                     rrb.TextLogView(origin="events", name="stages and verdicts"),
                 ),
@@ -224,7 +228,8 @@ class RerunRecording:
         idx = np.unique(np.linspace(0, traj.q.shape[0] - 1, _PATH_POINTS).round().astype(int))
         pts = np.array([self._kin.fk(q)[:3, 3] for q in traj.q[idx]])
         colour = [40, 160, 255] if result.success else [255, 80, 40]
-        rec.log(f"world/plans/{self._n_motion:03d}_{stage}", rr.LineStrips3D([pts], colors=[colour], labels=[planner]))
+        # (no label: thirty stages' labels covered the cell; the stage log names them)
+        rec.log(f"world/plans/{self._n_motion:03d}_{stage}", rr.LineStrips3D([pts], colors=[colour]))
 
     def perceived(
         self,
