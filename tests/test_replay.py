@@ -116,3 +116,24 @@ def test_the_summary_lists_the_replay_command_of_each_planners_failed_rows_and_i
     )
     assert done.returncode == 0, done.stderr
     assert "equals the stored one" in done.stdout
+
+
+def test_a_task_row_replays_to_the_same_row_with_the_runs_recording(tmp_path):
+    pytest.importorskip("crocoddyl")  # a short warehouse run
+    spec = tmp_path / "task.yaml"
+    spec.write_text(
+        "name: replay-task\nseeds: [0]\nplanners: [croc]\nscenarios:\n  - {name: wh, task: warehouse.yaml}\n"
+    )
+    result = run_comparison(str(spec), out_dir=tmp_path / "out", workers=0, plots=False)
+    (row,) = [json.loads(line) for line in result.results_path.read_text().splitlines()]
+    replay = replay_row(result.results_path, row["run_id"], tmp_path / "task.rrd")
+    assert replay.differences == ()
+    chunks = list(rr.chunk.RrdReader(str(tmp_path / "task.rrd")).store().stream())
+    texts = [
+        t[0]
+        for c in chunks
+        if c.entity_path == "/events"
+        for t in c.to_record_batch().column("TextLog:text").to_pylist()
+    ]
+    placed = [o for o in row["task"]["objects"] if o["placed"]]
+    assert len([t for t in texts if t.startswith("verdict") and ": placed" in t]) == len(placed)
