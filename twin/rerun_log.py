@@ -33,11 +33,9 @@ import numpy as np
 from twin.errors import ConfigError, DependencyMissing
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-
-    from twin.camera import RGBDFrame
     from twin.collision import PlanningScene
     from twin.kinematics import UR5e
+    from twin.tasks.cell import Sighting
     from twin.types import MotionRequest, MotionResult, ObjectOutcome
     from twin.world import World, WorldView
 
@@ -231,20 +229,14 @@ class RerunRecording:
         # (no label: thirty stages' labels covered the cell; the stage log names them)
         rec.log(f"world/plans/{self._n_motion:03d}_{stage}", rr.LineStrips3D([pts], colors=[colour]))
 
-    def perceived(
-        self,
-        sim_time_s: float,
-        frame: RGBDFrame,
-        T_base_camera: np.ndarray,
-        objects: Sequence[tuple[str, np.ndarray]],
-        boxes: Sequence[tuple[str, np.ndarray, np.ndarray]],
-    ) -> None:
-        """A capture: the camera where the task believed it was, its colour image (JPEG) and depth (mm, shown in
-        3-D as points through the camera model), the objects perception saw and the obstacle boxes it made."""
+    def perceived(self, sim_time_s: float, sighting: Sighting) -> None:
+        """A capture: the camera where the task believed it was, its colour image (JPEG) and depth (mm, points in
+        3-D through the camera model where a view shows it), the objects perception saw and the obstacle boxes it
+        made."""
         rr, rec = self._rr, self.rec
+        frame, T, objects, boxes = sighting.frame, sighting.T_base_camera, sighting.objects, sighting.boxes
         self._n_capture += 1
         rec.set_time("sim", duration=sim_time_s)
-        T = T_base_camera
         rec.log(
             "world/camera", rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3])))
         )

@@ -195,6 +195,17 @@ class GraspCheck:
         return self.status is GripStatus.HOLDING
 
 
+@dataclass(frozen=True)
+class Sighting:
+    """One capture and what a task made of it: the frame, the camera pose it used (base frame), each object it saw
+    as (label, position (3,)) and each obstacle box as (name, lo, hi)."""
+
+    frame: RGBDFrame
+    T_base_camera: np.ndarray
+    objects: Sequence[tuple[str, np.ndarray]]
+    boxes: Sequence[tuple[str, np.ndarray, np.ndarray]] = ()
+
+
 class RunTrace(Protocol):
     """What a run's recording (`twin.rerun_log.RerunRecording`) is told by the cell: every stage it planned, and
     what every capture saw (`Cell.perceived`)."""
@@ -203,14 +214,7 @@ class RunTrace(Protocol):
         self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult
     ) -> None: ...
 
-    def perceived(
-        self,
-        sim_time_s: float,
-        frame: RGBDFrame,
-        T_base_camera: np.ndarray,
-        objects: Sequence[tuple[str, np.ndarray]],
-        boxes: Sequence[tuple[str, np.ndarray, np.ndarray]],
-    ) -> None: ...
+    def perceived(self, sim_time_s: float, sighting: Sighting) -> None: ...
 
 
 @dataclass
@@ -257,10 +261,9 @@ class Cell:
         objects: Sequence[tuple[str, np.ndarray]],
         boxes: Sequence[tuple[str, np.ndarray, np.ndarray]] = (),
     ) -> None:
-        """A task's capture and what it made of it: the frame, the camera pose it used (base frame), each object
-        it saw as (label, position (3,)) and each obstacle box as (name, lo, hi), for the run's trace."""
+        """A task's capture and what it made of it (`Sighting`), for the run's trace."""
         if self.trace is not None:
-            self.trace.perceived(self.world.sim_time, frame, T_base_camera, objects, boxes)
+            self.trace.perceived(self.world.sim_time, Sighting(frame, T_base_camera, objects, boxes))
 
     # ---- motion ---------------------------------------------------------------------------------
     def move(
