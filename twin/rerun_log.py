@@ -14,9 +14,12 @@ What goes where (entity paths):
 - `world/camera` (and `/image/rgb`, `/image/depth`): each capture, where the task believed the camera was;
   `world/perceived/objects` and `/boxes`: what perception made of it (labels, positions, obstacle boxes);
 - `robot/joints/<joint>`, `robot/gripper_opening_m`: measured joint positions and finger opening over time;
-- `events`: a text line per stage (stage, planner, status, reason), per capture and per object's verdict.
+- `events`: a text line per stage (stage, planner, status, reason), per capture and per object's verdict;
+- a comparison query (`twin replay`, `query`): `world/query/start_goal`, `/straight`, `/refused` (a refused motion)
+  and `/first_collision`, the robot moving along the plan (or the refused motion up to its first collision).
 
-It opens with a saved layout (`_layout`): the cell in 3-D, the camera image, the joint plot, the stage log.
+It opens with a saved layout (`_layout`): the cell in 3-D, the camera image (a tab: the depth), the joint plot,
+the stage log.
 
 Why the world's observer and the cell's trace: the recorder sees the world only through the read-only
 `WorldView` an observer gets, and the stages through `RunTrace.motion`, so a recorded run is the run without it.
@@ -24,13 +27,13 @@ Why the world's observer and the cell's trace: the recorder sees the world only 
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from twin.errors import ConfigError, DependencyMissing
+from twin.transforms import matrix_to_quat
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
@@ -55,15 +58,6 @@ def rerun_module() -> Any:
             "recording a run needs the Rerun SDK: pip install 'twin[viz]' (setup.sh installs it)"
         ) from None
     return rerun
-
-
-def _quat_xyzw(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix -> quaternion (x, y, z, w)."""
-    w = math.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2.0
-    x = math.copysign(math.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2.0, R[2, 1] - R[1, 2])
-    y = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2.0, R[0, 2] - R[2, 0])
-    z = math.copysign(math.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2.0, R[1, 0] - R[0, 1])
-    return np.array([x, y, z, w])
 
 
 class RerunRecording:
@@ -122,7 +116,7 @@ class RerunRecording:
         """A primitive (twin.urdf_model.Shape kinds) as a rerun archetype at pose T (None: the identity)."""
         rr = self._rr
         centre = [0.0, 0.0, 0.0] if T is None else T[:3, 3].tolist()
-        quat = None if T is None else rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3]))
+        quat = None if T is None else rr.Quaternion(xyzw=matrix_to_quat(T[:3, :3]))
         if kind == "box":
             half = (0.5 * np.asarray(size[:3], dtype=float)).tolist()
             return rr.Boxes3D(half_sizes=[half], centers=[centre], quaternions=None if quat is None else [quat])
@@ -189,7 +183,7 @@ class RerunRecording:
         poses = np.asarray(self._link_poses)  # (m, links, 4, 4)
         for i, link in enumerate(self._links):
             T = poses[:, i]
-            quats = np.array([_quat_xyzw(R) for R in T[:, :3, :3]])
+            quats = np.array([matrix_to_quat(R) for R in T[:, :3, :3]])
             rec.send_columns(
                 f"world/robot/{link}",
                 indexes=[rr.TimeColumn("sim", duration=t)],
@@ -238,7 +232,8 @@ class RerunRecording:
         self._n_capture += 1
         rec.set_time("sim", duration=sim_time_s)
         rec.log(
-            "world/camera", rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=_quat_xyzw(T[:3, :3])))
+            "world/camera",
+            rr.Transform3D(translation=T[:3, 3], quaternion=rr.Quaternion(xyzw=matrix_to_quat(T[:3, :3]))),
         )
         intr = frame.intrinsics
         rec.log(
