@@ -139,3 +139,21 @@ def test_every_capture_has_its_image_depth_camera_and_what_perception_saw(record
         assert sum(b.num_rows for b in ents[entity]) == len(captures), entity
     first = captures[0]
     assert f"{len(summary.objects)} objects" in first  # the first look sees every cube (none is placed yet)
+
+
+def test_a_run_that_raises_keeps_what_it_recorded(tmp_path, monkeypatch):
+    import twin.tasks as tasks
+
+    class Breaks:
+        def run(self, cell):
+            cell.world.step(120)  # a quarter of a second of the cell, then the task fails
+            raise RuntimeError("the task broke")
+
+    monkeypatch.setattr(tasks, "make_task", lambda settings, context=None: Breaks())
+    path = tmp_path / "broken.rrd"
+    with pytest.raises(RuntimeError, match="broke"):
+        run_task(load_config("warehouse"), seed=0, rerun=str(path))
+    ents = _read(path)
+    times = _seconds(ents["/robot/joints/elbow_joint"])
+    assert times.max() == pytest.approx(0.25, abs=0.04)  # the observer's samples up to the failure
+    assert "/world/robot/forearm_link" in ents

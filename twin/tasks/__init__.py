@@ -87,7 +87,12 @@ def run_task(
                 cell.trace = recording.attach(world)
             if gui:
                 world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
-            outcomes = task.run(cell)
+            try:
+                outcomes = task.run(cell)
+            except BaseException:
+                if recording is not None:  # what was recorded up to the failure is what shows why
+                    recording.close()
+                raise
             sim_time = world.sim_time
         if recorder is not None:
             with stage("recording"):
