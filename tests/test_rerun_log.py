@@ -157,3 +157,30 @@ def test_a_run_that_raises_keeps_what_it_recorded(tmp_path, monkeypatch):
     times = _seconds(ents["/robot/joints/elbow_joint"])
     assert times.max() == pytest.approx(0.25, abs=0.04)  # the observer's samples up to the failure
     assert "/world/robot/forearm_link" in ents
+
+
+def test_a_run_can_be_watched_live_and_its_server_outlives_it():
+    """`--rerun-serve`: the address of the web viewer is printed, bound to 127.0.0.1; after the run the server still
+    answers (a user keeps looking), and the printed pid stops it (the viewer binary with it)."""
+    import os
+    import re
+    import signal
+    import urllib.request
+
+    pytest.importorskip("crocoddyl")  # a short warehouse run
+    r = subprocess.run(
+        [sys.executable, "-m", "twin", "run", "warehouse", "--planner", "croc", "--rerun-serve"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr[-500:]
+    m = re.search(r"live view: (http://127\.0\.0\.1:\d+/\S+) .*pid (\d+)", r.stderr)
+    assert m, r.stderr[-500:]
+    url, pid = m.group(1), int(m.group(2))
+    try:
+        with urllib.request.urlopen(url, timeout=10) as page:
+            assert page.status == 200 and b"rerun" in page.read().lower()
+    finally:
+        os.killpg(pid, signal.SIGTERM)

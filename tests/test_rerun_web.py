@@ -11,10 +11,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import socket
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -27,12 +24,6 @@ from twin.config import PROJECT_ROOT
 NODE_MODULES = PROJECT_ROOT / ".venv" / "node" / "node_modules"
 ARTIFACTS = PROJECT_ROOT / "out" / "test-artifacts"
 _WAIT_MS = 30_000  # the viewer's wasm, its shaders under SwiftShader and the recording: ~15 s here
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")
@@ -56,34 +47,11 @@ def test_the_web_viewer_shows_a_recording(browser, tmp_path):
 
     pytest.importorskip("crocoddyl")  # a short warehouse run
     run_task(load_config("warehouse"), seed=0, planner="croc", rerun=str(rrd))
-    web, grpc = _free_port(), _free_port()
-    rerun = Path(sys.executable).parent / "rerun"
-    server = subprocess.Popen(
-        [
-            str(rerun),
-            "--serve-web",
-            str(rrd),
-            "--bind",
-            "127.0.0.1",
-            "--web-viewer-port",
-            str(web),
-            "--port",
-            str(grpc),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    from twin.rerun_log import LiveView
+
+    server = LiveView.start(rrd)
     try:
-        deadline = time.monotonic() + 30
-        seen = ""
-        while "Hosting a web-viewer" not in seen and time.monotonic() < deadline:
-            line = server.stdout.readline() if server.stdout else ""
-            if not line and server.poll() is not None:
-                break
-            seen += line
-        assert "Hosting a web-viewer" in seen, seen
-        url = f"http://127.0.0.1:{web}/?url=rerun%2Bhttp://127.0.0.1:{grpc}/proxy"
+        url = server.web_url
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
         shot = ARTIFACTS / "rerun-web-viewer.png"
         env = dict(os.environ, NODE_PATH=str(NODE_MODULES))
@@ -99,8 +67,7 @@ def test_the_web_viewer_shows_a_recording(browser, tmp_path):
         assert done.returncode == 0, done.stderr
         assert json.loads(done.stdout.strip().splitlines()[-1])["title"] == "Rerun Viewer"
     finally:
-        server.terminate()
-        server.wait(timeout=10)
+        server.stop()
     from PIL import Image
 
     img = np.asarray(Image.open(shot).convert("RGB"))

@@ -211,6 +211,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a Rerun recording of the run (3-D cell over simulated time, stages, plans, verdicts; open it"
         " with `rerun OUT.rrd`; needs twin[viz])",
     )
+    p.add_argument(
+        "--rerun-serve",
+        action="store_true",
+        help="watch the run live in Rerun's web viewer, served on 127.0.0.1 (the address is printed; the server keeps"
+        " serving after the run until stopped; needs twin[viz])",
+    )
     p.add_argument("--json", dest="json_path", default=None, help="write the run summary here")
 
     p = sub.add_parser(
@@ -483,6 +489,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             gui=args.gui,
             record=args.record,
             rerun=args.rerun,
+            rerun_serve=args.rerun_serve,
             config_name=str(args.config),
             on_stage=lambda text: progress.update(bar, description=f"{settings.name} seed {settings.seed}: {text}"),
         )

@@ -27,8 +27,12 @@ Why the world's observer and the cell's trace: the recorder sees the world only 
 
 from __future__ import annotations
 
+import socket
+import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+from urllib.parse import quote
 
 import numpy as np
 
@@ -42,7 +46,7 @@ if TYPE_CHECKING:
     from twin.types import MotionRequest, MotionResult, ObjectOutcome
     from twin.world import World, WorldView
 
-__all__ = ["POSE_RATE_HZ", "RerunRecording", "rerun_module"]
+__all__ = ["POSE_RATE_HZ", "LiveView", "RerunRecording", "rerun_module"]
 
 POSE_RATE_HZ = 30.0  # body poses and joint states per simulated second (the physics runs at 480 Hz)
 _PATH_POINTS = 60  # points of a planned TCP path
@@ -60,22 +64,87 @@ def rerun_module() -> Any:
     return rerun
 
 
+@dataclass(frozen=True)
+class LiveView:
+    """Rerun's web viewer and gRPC server, bound to 127.0.0.1, serving a recording as it is made (`twin run
+    --rerun-serve`) or a recording file, in a process group of its own that keeps serving after the run until it is
+    stopped (`stop`, or `kill -- -PID`)."""
+
+    pid: int
+    web_url: str  # what to open in a browser
+    grpc_url: str  # where the recording is sent
+
+    @staticmethod
+    def start(rrd: Path | None = None, timeout_s: float = 30.0) -> LiveView:
+        """A server (for the recording file `rrd`, or for one sent to it), once it says it is hosting the viewer."""
+        import subprocess
+        import sys
+
+        web, grpc = _free_port(), _free_port()
+        rerun = Path(sys.executable).parent / "rerun"
+        args = [str(rerun), "--serve-web", *([str(rrd)] if rrd is not None else [])]
+        args += ["--bind", "127.0.0.1", "--web-viewer-port", str(web), "--port", str(grpc)]
+        try:
+            proc = subprocess.Popen(
+                args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
+            )
+        except OSError as e:
+            raise DependencyMissing(f"cannot start Rerun's viewer server ({rerun}): {e.strerror}") from None
+        deadline = time.monotonic() + timeout_s
+        seen = ""
+        while "Hosting a web-viewer" not in seen and time.monotonic() < deadline:
+            line = proc.stdout.readline() if proc.stdout else ""
+            if not line and proc.poll() is not None:
+                break
+            seen += line
+        if "Hosting a web-viewer" not in seen:
+            proc.kill()
+            raise DependencyMissing(
+                f"Rerun's viewer server did not start: {seen.strip().splitlines()[-1:] or 'no output'}"
+            )
+        grpc_url = f"rerun+http://127.0.0.1:{grpc}/proxy"
+        return LiveView(proc.pid, f"http://127.0.0.1:{web}/?url={quote(grpc_url, safe='')}", grpc_url)
+
+    def stop(self) -> None:
+        """Stop the server: its process group (`rerun` is a script that starts the viewer binary)."""
+        import os
+        import signal
+
+        os.killpg(self.pid, signal.SIGTERM)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 class RerunRecording:
     """`RerunRecording(path, scene=..., kin=...)`, `.attach(world)` before the run, `.motion(...)` per stage (the
     cell's trace), `.verdicts(outcomes)` and `.close()` after it."""
 
-    def __init__(self, path: str | Path, *, scene: PlanningScene, kin: UR5e, recording_id: str):
-        self.path = Path(path)
-        if self.path.suffix.lower() != ".rrd":
+    def __init__(
+        self, path: str | Path | None, *, scene: PlanningScene, kin: UR5e, recording_id: str, serve: bool = False
+    ):
+        if path is None and not serve:
+            raise ConfigError("a recording needs a file (--rerun OUT.rrd) or a live view (--rerun-serve)")
+        self.path = None if path is None else Path(path)
+        if self.path is not None and self.path.suffix.lower() != ".rrd":
             raise ConfigError(f"--rerun must name an .rrd file, got {str(self.path)!r}")
         rr = rerun_module()
         self._rr = rr
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise ConfigError(f"cannot write {self.path}: {e.strerror}") from None
+        if self.path is not None:
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise ConfigError(f"cannot write {self.path}: {e.strerror}") from None
         self.rec = rr.RecordingStream("twin", recording_id=recording_id)
-        self.rec.save(str(self.path))
+        sinks = [] if self.path is None else [rr.FileSink(str(self.path))]
+        self.live: LiveView | None = None
+        if serve:
+            self.live = LiveView.start()
+            sinks.append(rr.GrpcSink(self.live.grpc_url))
+        self.rec.set_sinks(*sinks)
         self.rec.send_blueprint(self._layout())
         from twin.collision.geometry import primitive_shapes
 
@@ -176,6 +245,7 @@ class RerunRecording:
         self._names = list(self._kin.joint_names)
 
     def _send_samples(self) -> None:
+        """Send the observer's samples kept since the last call, as columns (at every stage and at the end)."""
         rr, rec = self._rr, self.rec
         if not self._times:
             return
@@ -205,10 +275,14 @@ class RerunRecording:
                 indexes=[rr.TimeColumn("sim", duration=t)],
                 columns=rr.Scalars.columns(scalars=joints[:, j]),
             )
+        self._times, self._link_poses, self._joints = [], [], []
+        self._objects = {name: [] for name in self._objects}
 
     # ---- the cell's trace: what was planned and done --------------------------------------------------
     def motion(self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult) -> None:
-        """A stage planned at `sim_time_s`: its event line, and its planned TCP path (if it has a trajectory)."""
+        """A stage planned at `sim_time_s`: its event line, and its planned TCP path (if it has a trajectory); the
+        observer's samples so far go out first (a live view follows the run stage by stage)."""
+        self._send_samples()
         rr, rec = self._rr, self.rec
         self._n_motion += 1
         rec.set_time("sim", duration=sim_time_s)
@@ -330,8 +404,8 @@ class RerunRecording:
             rec.log("world/query/first_collision", rr.Points3D([p], radii=0.02, colors=[[255, 0, 0]], labels=[what]))
             rec.log("events", rr.TextLog(what, level="WARN"))
 
-    def close(self) -> Path:
-        """Send the observer's samples, flush and end the recording; its file."""
+    def close(self) -> Path | None:
+        """Send the observer's samples, flush and end the recording; its file (None: a live view only)."""
         self._send_samples()
         self.rec.flush()
         self.rec.disconnect()

@@ -45,18 +45,21 @@ def run_task(
     gui: bool = False,
     record: str | None = None,
     rerun: str | None = None,
+    rerun_serve: bool = False,
     on_stage: Callable[[str], None] | None = None,
     config_name: str = "",
 ) -> RunSummary:
     """Run the configured task once on scene `seed` (default: the config's); `planner` replaces the
     transfer planner; `record` writes a video (.mp4/.gif) from the overview camera, `rerun` a Rerun
-    recording (.rrd: `twin.rerun_log`). Bad config or planner names raise before anything is simulated."""
+    recording (.rrd: `twin.rerun_log`), `rerun_serve` serves it live in Rerun's web viewer on 127.0.0.1 (the
+    address is logged; the viewer keeps serving after the run). Bad config or planner names raise before anything
+    is simulated."""
     from twin.recording import Recorder
     from twin.tasks.cell import Cell, stage_planners
 
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record) if record else None
-    if rerun:
+    if rerun or rerun_serve:
         from twin.rerun_log import rerun_module
 
         rerun_module()  # a missing SDK fails here, before anything is built
@@ -74,7 +77,7 @@ def run_task(
             if recorder is not None:
                 recorder.attach(world)
             recording = None
-            if rerun:
+            if rerun or rerun_serve:
                 from twin.collision import PlanningScene
                 from twin.rerun_log import RerunRecording
 
@@ -83,7 +86,15 @@ def run_task(
                     scene=PlanningScene.from_settings(settings),  # every fixture, as the cell has them
                     kin=cell.kin,
                     recording_id=f"{config_name or settings.name}-seed{seed}",
+                    serve=rerun_serve,
                 )
+                if recording.live is not None:
+                    log.warning(
+                        "live view: %s (Rerun's server, pid %d, keeps serving after the run: kill -- -%d stops it)",
+                        recording.live.web_url,
+                        recording.live.pid,
+                        recording.live.pid,
+                    )
                 cell.trace = recording.attach(world)
             if gui:
                 world.observe(lambda w: time.sleep(1.0 / 60.0), every_s=1.0 / 60.0)  # watchable, about real time
