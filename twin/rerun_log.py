@@ -245,7 +245,8 @@ class RerunRecording:
         self._names = list(self._kin.joint_names)
 
     def _send_samples(self) -> None:
-        """Send the observer's samples kept since the last call, as columns (at every stage and at the end)."""
+        """Send the observer's samples kept since the last call, as columns (at the end; served live, at every
+        stage too)."""
         rr, rec = self._rr, self.rec
         if not self._times:
             return
@@ -280,9 +281,11 @@ class RerunRecording:
 
     # ---- the cell's trace: what was planned and done --------------------------------------------------
     def motion(self, sim_time_s: float, stage: str, planner: str, request: MotionRequest, result: MotionResult) -> None:
-        """A stage planned at `sim_time_s`: its event line, and its planned TCP path (if it has a trajectory); the
-        observer's samples so far go out first (a live view follows the run stage by stage)."""
-        self._send_samples()
+        """A stage planned at `sim_time_s`: its event line, and its planned TCP path (if it has a trajectory); served
+        live, the observer's samples so far go out first (the view follows the run stage by stage; a file gets them
+        at the end, in fewer, larger chunks: +15 % wall and 3.4 MB for a RoboCup run instead of +19 % and 5.7 MB)."""
+        if self.live is not None:
+            self._send_samples()
         rr, rec = self._rr, self.rec
         self._n_motion += 1
         rec.set_time("sim", duration=sim_time_s)
