@@ -29,10 +29,6 @@ def _read(path: Path) -> dict[str, list]:
     return out
 
 
-def _column(batches: list, name: str) -> list:
-    return [v for b in batches for v in b.column(name).to_pylist()]
-
-
 def _events(ents: dict[str, list]) -> tuple[list[str], np.ndarray]:
     """The event lines in the order they were logged (rerun's row ids are time-ordered; chunks are not) and
     their simulated times, s."""

@@ -149,6 +149,7 @@ class RerunRecording:
         from twin.collision.geometry import primitive_shapes
 
         self._scene, self._kin = scene, kin
+        self._names = list(kin.joint_names)
         self._n_motion = 0
         self._n_capture = 0
         self._times: list[float] = []  # the samples of the world's observer (sent as columns by `close`)
@@ -216,7 +217,6 @@ class RerunRecording:
     # ---- over time: the world's observer ---------------------------------------------------------------
     def attach(self, world: World) -> RerunRecording:
         world.observe(self._sample, every_s=1.0 / POSE_RATE_HZ)
-        self._names = list(self._kin.joint_names)
         self._sample(world.view())
         return self
 
@@ -242,7 +242,6 @@ class RerunRecording:
         self._times.append(float(t))
         self._link_poses.append(np.stack([poses[link] for link in self._links]))
         self._joints.append(np.append(np.asarray(q, dtype=float), self._scene.gripper_opening))
-        self._names = list(self._kin.joint_names)
 
     def _send_samples(self) -> None:
         """Send the observer's samples kept since the last call, as columns (at the end; served live, at every

@@ -18,7 +18,7 @@ from twin.errors import ConfigError
 __all__ = ["Replay", "differences", "replay_row"]
 
 # fields that are measurements of time (or of the machine), not results: a replay is not asked to repeat them
-_TIMING_WORDS = ("time", "wall", "timing", "environment", "solves_per_s")
+_TIMING_WORDS = ("time", "wall", "timing", "environment")
 
 
 @dataclass(frozen=True)
