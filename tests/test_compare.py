@@ -123,7 +123,7 @@ def test_the_sweep_writes_summary_tables(sweep):
 def test_the_sweep_writes_plots(sweep):
     pytest.importorskip("matplotlib", reason="plots need matplotlib (the `twin[plots]` extra)")
     _, result = sweep
-    for name in ("planning_time.png", "duration.png", "clearance.png", "success.png"):
+    for name in ("planning_time.png", "duration.png", "clearance.png", "success.png", "success_heatmap.png"):
         p = result.out_dir / name
         assert p.is_file() and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
         assert p in result.files
@@ -216,6 +216,9 @@ def test_task_scenarios_are_skipped_when_twin_tasks_is_missing(tmp_path, monkeyp
     [(rid, why)] = result.skipped
     assert rid.startswith("ruckig.movej|sorting|seed=2|") and why == "skipped: twin.tasks not available"
     assert "skipped: twin.tasks not available" in (result.out_dir / "summary.md").read_text()
+    assert result.summary.skipped_pairs == {("ruckig.movej", "sorting"): 1}  # what the heatmap hatches
+    page = (result.out_dir / "summary.html").read_text()  # written without plots too
+    assert "Who wins on what" in page and "skipped: twin.tasks not available" in page
 
 
 # ---- Ray ------------------------------------------------------------------------------------------

@@ -157,9 +157,9 @@ def test_the_box_plots_show_n_beside_each_median(tmp_path: Path) -> None:
     rows = [run("sure", i, success=True) for i in range(2)] + [run("shaky", i, success=i != 1) for i in range(4)]
     figs = comparison_figures(rows, planners=["sure", "shaky"])
     try:
-        ticks = [t.get_text() for t in figs["duration"].axes[0].get_xticklabels()]
-        assert ticks == ["sure\n(n=2)", "shaky\n(n=3)"]
-        assert "Wilson" in figs["success"].axes[0].get_ylabel()
+        ticks = [t.get_text() for t in figs["duration"].axes[0].get_yticklabels()]
+        assert ticks == ["sure  n=2", "shaky  n=3"]  # shortest median first
+        assert "Wilson" in figs["success"].axes[0].get_xlabel()
     finally:
         for fig in figs.values():
             plt.close(fig)

@@ -306,25 +306,38 @@ def test_plots_show_the_intervals(tmp_path):
     summary = summarize(rows, planners=["a", "b"])
     figs = comparison_figures(rows, planners=["a", "b"], summary=summary)
     try:
-        (bars,) = [c for c in figs["planning_time"].axes[0].containers if isinstance(c, ErrorbarContainer)]
-        segments = bars.lines[2][0].get_segments()
-        for seg, r in zip(segments, summary.overall, strict=True):
-            st = r.stats["planning_time_s"]
-            assert sorted(seg[:, 1]) == pytest.approx([st.ci_low, st.ci_high])  # the report's interval
-        success = [c for c in figs["success"].axes[0].containers if isinstance(c, BarContainer)]
-        assert len(success) == 2  # one set of bars per scenario
-        drawn = sorted(
-            tuple(np.round(sorted(s[:, 1]), 6)) for c in success for s in c.errorbar.lines[2][0].get_segments()
-        )
-        want = sorted(tuple(np.round([100 * r.success_ci[0], 100 * r.success_ci[1]], 6)) for r in summary.by_scenario)
-        assert drawn == want
+        axes = figs["planning_time"].axes
+        assert [ax.get_title() for ax in axes] == ["wall", "shelf"]  # a panel per scenario
+        for ax in axes:
+            (bars,) = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+            drawn = sorted(tuple(np.round(sorted(seg[:, 0]), 9)) for seg in bars.lines[2][0].get_segments())
+            want = []
+            for planner in ("a", "b"):
+                st = summary.row(planner, ax.get_title()).stats["planning_time_s"]  # type: ignore[union-attr]
+                want.append(tuple(np.round([st.ci_low, st.ci_high], 9)))
+            assert drawn == sorted(want)  # the report's interval of that scenario
+            # best first: the upper box has the lower median
+            labels = [t.get_text().split()[0] for t in ax.get_yticklabels()]
+            medians = [summary.row(p, ax.get_title()).stats["planning_time_s"].median for p in labels]  # type: ignore[union-attr]
+            assert medians == sorted(medians)
+            assert all(t.get_text().endswith("n=20") for t in ax.get_yticklabels())
+        for ax in figs["success"].axes:
+            (bars,) = [c for c in ax.containers if isinstance(c, BarContainer)]
+            got = sorted(tuple(np.round(sorted(s[:, 0]), 6)) for s in bars.errorbar.lines[2][0].get_segments())
+            want = sorted(
+                tuple(np.round([100 * r.success_ci[0], 100 * r.success_ci[1]], 6))
+                for r in summary.by_scenario
+                if r.scenario == ax.get_title()
+            )
+            assert got == want
     finally:
         for fig in figs.values():
             plt.close(fig)
 
     paths = write_plots(rows, tmp_path, planners=["a", "b"])  # summarises itself: the same intervals
-    assert [p.name for p in paths] == ["planning_time.png", "duration.png", "clearance.png", "success.png"]
-    assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)
+    names = [p.name for p in paths]
+    assert names == ["success_heatmap.png", "success.png", "tradeoff.png", "planning_time.png", "duration.png"]
+    assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)  # no clearance values: no file
 
 
 def test_the_comparison_names_its_reference_planner(tmp_path) -> None:

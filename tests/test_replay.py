@@ -126,6 +126,8 @@ def test_a_task_row_replays_to_the_same_row_with_the_runs_recording(tmp_path):
     )
     result = run_comparison(str(spec), out_dir=tmp_path / "out", workers=0, plots=False)
     (row,) = [json.loads(line) for line in result.results_path.read_text().splitlines()]
+    croc = row["task"]["metrics"]["croc"]  # the compared planner's planning time per motion it planned
+    assert row["timing"]["task_planning_time_s"] == pytest.approx(croc["planning_time_s"] / croc["motions"])
     replay = replay_row(result.results_path, row["run_id"], tmp_path / "task.rrd")
     assert replay.differences == ()
     chunks = list(rr.chunk.RrdReader(str(tmp_path / "task.rrd")).store().stream())

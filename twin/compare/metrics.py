@@ -115,6 +115,12 @@ TIMINGS: tuple[MetricDef, ...] = (
     MetricDef("solve_time_median_s", "s", "median wall time per step (receding horizon)"),
     MetricDef("solve_time_max_s", "s", "longest step (receding horizon)"),
     MetricDef("wall_time_s", "s", "wall time of the whole run in its worker"),
+    MetricDef(
+        "task_planning_time_s",
+        "s",
+        "task runs: the compared planner's planning wall time per motion it planned in the run (its mean; "
+        "comparable with a query's planning_time_s)",
+    ),
 )
 
 

@@ -16,30 +16,56 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from twin.compare.report import ALL
 from twin.errors import ConfigError, DependencyMissing
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from twin.compare.report import Summary, SweepPoint
+    from twin.compare.report import Stat, Summary, SweepPoint
 
-__all__ = ["BOX_PLOTS", "comparison_figures", "sweep_figures", "write_plots"]
+__all__ = ["BOX_PLOTS", "BoxPlot", "comparison_figures", "sweep_figures", "write_plots"]
 
 log = logging.getLogger("twin")
 
-# file stem, metric key, axis label, log scale
-BOX_PLOTS: tuple[tuple[str, str, str, bool], ...] = (
-    ("planning_time", "planning_time_s", "planning time (s)", True),
-    ("duration", "duration_s", "trajectory duration (s)", False),
-    ("clearance", "min_clearance_m", "minimum clearance to the environment (m)", False),
+
+@dataclass(frozen=True)
+class BoxPlot:
+    """A box-plot figure: a panel per scenario that has values of its metric (`keys`: run kind -> metric
+    key, so task scenarios show the task's own number), planners sorted best first."""
+
+    stem: str
+    keys: dict[str, str]
+    log_scale: bool = False
+    higher_is_better: bool = False
+
+
+BOX_PLOTS: tuple[BoxPlot, ...] = (
+    BoxPlot("planning_time", {"query": "planning_time_s", "task": "task_planning_time_s"}, log_scale=True),
+    BoxPlot("duration", {"query": "duration_s"}),
+    BoxPlot("clearance", {"query": "min_clearance_m"}, higher_is_better=True),
+    BoxPlot("cycle_time", {"task": "cycle_time_s"}),
 )
-_CI_OFFSET = 0.33  # the median's interval is drawn this far right of its box (boxes are 0.5 wide)
+_AXIS = {
+    "planning_time_s": "planning time per query (s)",
+    "task_planning_time_s": "planning time per motion in the task (s)",
+    "duration_s": "trajectory duration (s), successful plans",
+    "min_clearance_m": "minimum clearance to the cell (m), successful plans",
+    "cycle_time_s": "cycle time per placed object (s)",
+}
+_CI_OFFSET = 0.33  # the median's interval is drawn this far below its box (boxes are 0.5 high)
 _DODGE = 0.012  # sweep lines are shifted sideways by this share of the x range per planner, so equal ones show
 _MARKERS = "osD^vP*Xh<>p"
 _TIME_LABELS = {"cycle_time_s": "cycle time per placed object (s)", "duration_s": "trajectory duration (s)"}
+_SKIPPED = "not run (skipped)"
+_ROW_IN = 0.3  # inches per planner in a panel of horizontal boxes or bars
 
 
 def _pyplot() -> Any:
@@ -60,12 +86,280 @@ def _value(row: dict[str, Any], key: str) -> float | None:
     return None if v is None else float(v)
 
 
+def _panels(plt: Any, heights: Sequence[float], *, width: float = 7.0) -> tuple[Figure, list[Axes]]:
+    """A figure of len(heights) panels, two per row (one if there is one), each row as tall as its
+    tallest panel needs."""
+    n = len(heights)
+    cols = 1 if n == 1 else 2
+    rows = math.ceil(n / cols)
+    row_h = [max(heights[i * cols : (i + 1) * cols]) for i in range(rows)]
+    fig, axes = plt.subplots(
+        rows,
+        cols,
+        figsize=(width * cols, sum(row_h) + 0.4),
+        squeeze=False,
+        gridspec_kw={"height_ratios": row_h},
+    )
+    flat = [ax for line in axes for ax in line]
+    for ax in flat[n:]:
+        ax.set_axis_off()
+    return fig, flat[:n]
+
+
+def _scenarios(rows: Sequence[dict[str, Any]], summary: Summary) -> list[tuple[str, str]]:
+    """(scenario, kind of its runs) in the order the rows show them, skipped-only scenarios included."""
+    kinds = {r["scenario"]: str(r.get("kind") or "query") for r in rows}
+    names = list(dict.fromkeys([*(r["scenario"] for r in rows), *(s for _, s in summary.skipped_pairs)]))
+    return [(s, kinds.get(s, "query")) for s in names]
+
+
+def _box_panel(
+    ax: Axes, title: str, key: str, entries: list[tuple[str, list[float], Stat | None]], box: BoxPlot
+) -> None:
+    """Horizontal boxes, best median on top, `n` beside each name, the median's bootstrap interval under
+    its box; a planner that ran here without a value of `key` keeps its row (n=0)."""
+
+    def rank(e: tuple[str, list[float], Stat | None]) -> float:
+        med = float(np.median(e[1])) if e[1] else math.inf
+        return -med if box.higher_is_better and e[1] else med
+
+    entries = sorted(entries, key=rank)
+    data = [vals or [math.nan] for _, vals, _ in entries]
+    ys = list(range(1, len(entries) + 1))
+    ax.boxplot(data, positions=ys, orientation="horizontal", widths=0.5, showfliers=True)
+    ax.set_yticks(ys, [f"{p}  n={len(v)}" for p, v, _ in entries], fontsize="small")
+    ax.invert_yaxis()
+    x, y, lo, hi = [], [], [], []
+    for i, (_, _, st) in zip(ys, entries, strict=True):
+        if st is not None and st.median is not None and st.ci is not None:
+            x.append(st.median)
+            y.append(i + _CI_OFFSET)
+            lo.append(st.median - st.ci[0])
+            hi.append(st.ci[1] - st.median)
+    if x:
+        ax.errorbar(x, y, xerr=[lo, hi], fmt="D", ms=3, color="C3", capsize=2.5, lw=1.1)
+    values = [v for _, vals, _ in entries for v in vals]
+    if box.log_scale and values and all(v > 0 for v in values):
+        ax.set_xscale("log")
+    else:
+        ax.set_xlim(left=min(0.0, *values) if values else 0.0)
+    for i, (_, vals, _) in zip(ys, entries, strict=True):
+        if not vals:
+            ax.text(
+                0.01, i, "no value", transform=ax.get_yaxis_transform(), va="center", fontsize="x-small", color="0.4"
+            )
+    ax.set_xlabel(_AXIS.get(key, key))
+    ax.set_title(title, fontsize="medium")
+    ax.grid(axis="x", alpha=0.3)
+
+
+def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: list[str]) -> dict[str, Figure]:
+    figs: dict[str, Figure] = {}
+    scenarios = _scenarios(rows, summary)
+    for box in BOX_PLOTS:
+        panels = []
+        for scenario, kind in scenarios:
+            key = box.keys.get(kind)
+            if key is None:
+                continue
+            here = [r for r in rows if r["scenario"] == scenario]
+            entries = []
+            for p in order:
+                mine = [r for r in here if r["planner"] == p]
+                if mine:
+                    row = summary.row(p, scenario)
+                    vals = [v for r in mine if (v := _value(r, key)) is not None]
+                    entries.append((p, vals, row.stats.get(key) if row is not None else None))
+            if any(vals for _, vals, _ in entries):
+                panels.append((scenario, key, entries))
+        if not panels:
+            continue  # no empty plot files
+        fig, axes = _panels(plt, [_ROW_IN * len(e) + 1.3 for _, _, e in panels])
+        for ax, (scenario, key, entries) in zip(axes, panels, strict=True):
+            _box_panel(ax, scenario, key, entries, box)
+        fig.suptitle(
+            "best first; box: quartiles, whiskers 1.5 IQR; red: the median with its 95 % bootstrap CI; "
+            "n: runs with a value",
+            fontsize="small",
+        )
+        fig.tight_layout()
+        figs[box.stem] = fig
+    return figs
+
+
+def _success_order(summary: Summary, order: list[str]) -> list[str]:
+    """Planners by overall success rate, best first (config order among equals; no runs last)."""
+    rate = {r.planner: r.success_rate for r in summary.overall}
+    return sorted(order, key=lambda p: -(rate.get(p) if rate.get(p) is not None else -1.0))  # type: ignore[operator]
+
+
+def _heatmap(plt: Any, summary: Summary, order: list[str], scenarios: list[str]) -> Figure:
+    """Success per planner (rows, best overall first) and scenario (columns, then all of them): the rate
+    as colour and 'rate\nk/n' in the cell; a skipped pair hatched grey and labelled, never a 0 %."""
+    from matplotlib.patches import Rectangle
+
+    planners = _success_order(summary, order)
+    cols = [*scenarios, ALL] if len(scenarios) > 1 else list(scenarios)
+    grid = np.full((len(planners), len(cols)), np.nan)
+    fig, ax = plt.subplots(figsize=(3.2 + 1.45 * len(cols), 0.42 * len(planners) + 1.6))
+    cmap = plt.get_cmap("RdYlGn").with_extremes(bad="white")
+    for i, p in enumerate(planners):
+        for j, s in enumerate(cols):
+            row = summary.row(p, s)
+            if row is not None and row.runs:
+                grid[i, j] = row.success_rate
+    im = ax.imshow(grid, cmap=cmap, vmin=0.0, vmax=1.0, aspect="auto")
+    for i, p in enumerate(planners):
+        for j, s in enumerate(cols):
+            row = summary.row(p, s)
+            skipped = summary.skipped_pairs.get((p, s), 0) if s != ALL else 0
+            if row is not None and row.runs:
+                rate = row.success_rate or 0.0
+                text = f"{100 * rate:.0f}%\n{row.successes}/{row.runs}"
+                if skipped:
+                    text += f" (+{skipped} skipped)"
+                color = "white" if rate < 0.15 or rate > 0.85 else "black"
+                ax.text(j, i, text, ha="center", va="center", fontsize="x-small", color=color)
+            elif skipped:
+                ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="0.93", edgecolor="0.6", hatch="///", lw=0))
+                ax.text(j, i, "skipped", ha="center", va="center", fontsize="x-small", color="0.25")
+            else:
+                ax.text(j, i, "-", ha="center", va="center", fontsize="x-small", color="0.5")
+    ax.set_xticks(range(len(cols)), ["all scenarios" if s == ALL else s for s in cols], rotation=20, ha="right")
+    ax.set_yticks(range(len(planners)), planners, fontsize="small")
+    ax.set_title("success rate (successes/runs); hatched: not run here")
+    fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="success rate")
+    fig.tight_layout()
+    return fig
+
+
+def _success_bars(plt: Any, summary: Summary, order: list[str], scenarios: list[str]) -> Figure:
+    """Per scenario, horizontal bars of the success rate with its 95 % Wilson interval, best first, k/n at
+    each bar (a 0 % has its label at 0); skipped pairs last, hatched across the axis and labelled."""
+    heights = []
+    for s in scenarios:
+        k = sum(1 for p in order if summary.row(p, s) is not None or summary.skipped_pairs.get((p, s)))
+        heights.append(_ROW_IN * k + 1.2)
+    fig, axes = _panels(plt, heights, width=6.5)
+    for ax, s in zip(axes, scenarios, strict=True):
+        ran = [r for p in order if (r := summary.row(p, s)) is not None and r.runs]
+        ran.sort(key=lambda r: -(r.success_rate or 0.0))
+        skipped = [p for p in order if summary.row(p, s) is None and summary.skipped_pairs.get((p, s))]
+        ys = list(range(len(ran)))
+        rates = [100.0 * (r.success_rate or 0.0) for r in ran]
+        lo = [100.0 * ((r.success_rate or 0.0) - r.success_ci[0]) if r.success_ci else 0.0 for r in ran]
+        hi = [100.0 * (r.success_ci[1] - (r.success_rate or 0.0)) if r.success_ci else 0.0 for r in ran]
+        ax.barh(
+            ys,
+            rates,
+            height=0.6,
+            xerr=[lo, hi],
+            color="C0",
+            capsize=2.0,
+            error_kw={"elinewidth": 0.9, "ecolor": "0.25"},
+        )
+        for y, r, rate, up in zip(ys, ran, rates, hi, strict=True):
+            ax.text(rate + up + 1.5, y, f"{r.successes}/{r.runs}", va="center", fontsize="x-small")
+        sy = [len(ran) + i for i in range(len(skipped))]
+        if skipped:
+            ax.barh(sy, [100.0] * len(skipped), height=0.6, color="0.95", edgecolor="0.6", hatch="///", lw=0.5)
+            for y in sy:
+                ax.text(50, y, _SKIPPED, ha="center", va="center", fontsize="x-small", color="0.25")
+        ax.set_yticks(ys + sy, [r.planner for r in ran] + skipped, fontsize="small")
+        ax.invert_yaxis()
+        ax.set_xlim(0, 118)
+        ax.set_xticks(range(0, 101, 20))
+        ax.set_xlabel("success rate (%), 95 % Wilson CI")
+        ax.set_title(s, fontsize="medium")
+        ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def _pareto(points: list[tuple[str, float, float]]) -> set[str]:
+    """The planners no other beats on both (at least as successful and fast, better in one); one that never
+    succeeds is no trade-off, however fast."""
+    front = set()
+    for name, t, rate in points:
+        if rate > 0 and not any(
+            (t2 <= t and r2 >= rate) and (t2 < t or r2 > rate) for n2, t2, r2 in points if n2 != name
+        ):
+            front.add(name)
+    return front
+
+
+def _tradeoff(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: list[str]) -> Figure | None:
+    """Per scenario, success rate against median planning time (the choice a user makes): a point per
+    planner with both intervals; the Pareto front (nobody both faster and more successful) filled and
+    joined."""
+    panels = []
+    for scenario, kind in _scenarios(rows, summary):
+        key = BOX_PLOTS[0].keys.get(kind)
+        pts = []
+        for p in order:
+            row = summary.row(p, scenario)
+            st = row.stats.get(key) if row is not None and key is not None else None
+            if row is not None and row.runs and st is not None and st.median:
+                pts.append((row, st))
+        if pts and key is not None:
+            panels.append((scenario, key, pts))
+    if not panels:
+        return None
+    fig, axes = _panels(plt, [4.6] * len(panels), width=6.8)
+    style = {p: (f"C{i % 10}", _MARKERS[(i // 10) % len(_MARKERS)]) for i, p in enumerate(order)}
+    for ax, (scenario, key, pts) in zip(axes, panels, strict=True):
+        front = _pareto([(r.planner, st.median or 0.0, r.success_rate or 0.0) for r, st in pts])
+        on = sorted(((st.median or 0.0, 100 * (r.success_rate or 0.0)) for r, st in pts if r.planner in front))
+        if len(on) > 1:
+            ax.step([t for t, _ in on], [y for _, y in on], where="post", color="0.3", lw=1, ls="--")
+        for r, st in pts:
+            rate = 100 * (r.success_rate or 0.0)
+            med = st.median or 0.0
+            xerr = [[med - st.ci[0]], [st.ci[1] - med]] if st.ci else None
+            yerr = [[rate - 100 * r.success_ci[0]], [100 * r.success_ci[1] - rate]] if r.success_ci else None
+            color, marker = style[r.planner]
+            best = r.planner in front
+            ax.errorbar(
+                [med],
+                [rate],
+                xerr=xerr,
+                yerr=yerr,
+                fmt=marker,
+                ms=9 if best else 6,
+                color=color,
+                mec="black" if best else color,
+                mew=1.4 if best else 0.8,
+                elinewidth=0.6,
+                capsize=1.5,
+                alpha=0.9,
+            )
+            if best:
+                ax.annotate(r.planner, (med, rate), xytext=(6, -12), textcoords="offset points", fontsize=7)
+        ax.set_xscale("log")
+        ax.set_ylim(0, 108)
+        ax.set_yticks(range(0, 101, 20))
+        ax.set_xlabel("median " + _AXIS.get(key, key) + ", 95 % CI")
+        ax.set_ylabel("success rate (%), 95 % Wilson CI")
+        ax.set_title(f"{scenario}: named and outlined = nobody both faster and more successful", fontsize="small")
+        ax.grid(alpha=0.3)
+    from matplotlib.lines import Line2D
+
+    shown = list(dict.fromkeys(r.planner for _, _, pts in panels for r, _ in pts))
+    labels = {p: Line2D([], [], ls="", marker=style[p][1], color=style[p][0], ms=6) for p in shown}
+    ncol = min(len(labels), 5)
+    fig.legend(list(labels.values()), list(labels), loc="lower center", ncol=ncol, frameon=False, fontsize="small")
+    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / ncol), 1, 1))
+    return fig
+
+
 def comparison_figures(
     rows: Iterable[dict[str, Any]], *, planners: Sequence[str] | None = None, summary: Summary | None = None
 ) -> dict[str, Figure]:
-    """The figures write_plots saves, by file stem (BOX_PLOTS' stems and 'success'); the caller closes
-    them. `summary` (of the same rows) gives the intervals; without it they are summarised here."""
-    from twin.compare.report import ALL, summarize
+    """The figures write_plots saves, by file stem: 'success_heatmap', 'success' (per scenario bars),
+    'tradeoff' (success against planning time) and BOX_PLOTS' stems, each only where it has values; the
+    caller closes them. `summary` (of the same rows) gives the intervals and the skipped pairs; without it
+    they are summarised here (and nothing is known to be skipped)."""
+    from twin.compare.report import summarize
 
     plt = _pyplot()
     rows = [r for r in rows if r.get("status") != "skipped"]
@@ -73,80 +367,16 @@ def comparison_figures(
     order += sorted({r["planner"] for r in rows} - set(order))
     if summary is None:
         summary = summarize(rows, planners=order)
+    order += [p for p, _ in summary.skipped_pairs if p not in order]
+    scenarios = [s for s, _ in _scenarios(rows, summary)]
     figs: dict[str, Figure] = {}
-    width = max(6.0, 1.2 * len(order) + 2.0)
-    for stem, key, label, log_scale in BOX_PLOTS:
-        data = [[v for r in rows if r["planner"] == p and (v := _value(r, key)) is not None] for p in order]
-        fig, ax = plt.subplots(figsize=(width, 4.5))
-        if any(data):
-            ax.boxplot([d or [float("nan")] for d in data], showfliers=True)
-            ticks = [f"{p}\n(n={len(d)})" for p, d in zip(order, data, strict=True)]  # n beside each median
-            ax.set_xticks(range(1, len(order) + 1), ticks, rotation=20, ha="right")
-            if log_scale and all(v > 0 for d in data for v in d):
-                ax.set_yscale("log")
-            x, med, lo, hi = [], [], [], []
-            for i, p in enumerate(order, start=1):
-                row = summary.row(p, ALL)
-                st = row.stats[key] if row is not None else None
-                if st is not None and st.median is not None and st.ci is not None:
-                    x.append(i + _CI_OFFSET)
-                    med.append(st.median)
-                    lo.append(st.median - st.ci[0])
-                    hi.append(st.ci[1] - st.median)
-            if x:
-                ax.errorbar(
-                    x,
-                    med,
-                    yerr=[lo, hi],
-                    fmt="D",
-                    ms=3.5,
-                    color="C3",
-                    capsize=3,
-                    lw=1.2,
-                    label="median, 95 % bootstrap CI",
-                )
-                ax.legend(fontsize="small", loc="best", frameon=False)
-        else:
-            ax.text(0.5, 0.5, "no values", ha="center", va="center", transform=ax.transAxes)
-        ax.set_ylabel(label)
-        ax.set_title(f"{label.split(' (')[0]} per planner")
-        ax.grid(axis="y", alpha=0.3)
-        fig.tight_layout()
-        figs[stem] = fig
-
-    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
-    fig, ax = plt.subplots(figsize=(width, 4.5))
-    n = max(1, len(scenarios))
-    bar = 0.8 / n
-    for j, s in enumerate(scenarios):
-        rates, err_lo, err_hi = [], [], []
-        for p in order:
-            row = summary.row(p, s)
-            rate = row.success_rate if row is not None else None
-            ci = row.success_ci if row is not None else None
-            # no runs (a skipped pair): no bar, which a 0 % bar would misreport as a planner that failed
-            rates.append(100.0 * rate if rate is not None else math.nan)
-            err_lo.append(100.0 * (rate - ci[0]) if rate is not None and ci is not None else math.nan)
-            err_hi.append(100.0 * (ci[1] - rate) if rate is not None and ci is not None else math.nan)
-        ax.bar(
-            [i - 0.4 + bar * (j + 0.5) for i in range(len(order))],
-            rates,
-            width=bar,
-            label=s,
-            yerr=[err_lo, err_hi],
-            capsize=2.0,
-            error_kw={"elinewidth": 0.9, "ecolor": "0.25"},
-        )
-    ax.set_xticks(range(len(order)), order, rotation=20, ha="right")
-    ax.set_ylim(0, 119)  # room above 100 % for the legend
-    ax.set_yticks(range(0, 101, 20))
-    ax.set_ylabel("success rate (%), 95 % Wilson CI")
-    ax.set_title("success rate per planner and scenario")
     if scenarios:
-        ax.legend(fontsize="small", loc="upper center", ncol=min(len(scenarios), 4), frameon=False)
-    ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
-    figs["success"] = fig
+        figs["success_heatmap"] = _heatmap(plt, summary, order, scenarios)
+        figs["success"] = _success_bars(plt, summary, order, scenarios)
+    trade = _tradeoff(plt, rows, summary, order)
+    if trade is not None:
+        figs["tradeoff"] = trade
+    figs.update(_box_figures(plt, rows, summary, order))
     return figs
 
 
@@ -205,6 +435,7 @@ def sweep_figures(summary: Summary) -> dict[str, Figure]:
             bottom.set_xlabel(key)
             ticks = list(xs.values())
             bottom.set_xticks(ticks, list(xs) if not numeric else [f"{v:g}" for v in ticks])
+            bottom.set_ylim(bottom=0.0)  # a time is read as a ratio: from zero, so noise does not look like an effect
             for ax in (top, bottom):
                 ax.grid(alpha=0.3)
         handles, labels = axes[0][0].get_legend_handles_labels()

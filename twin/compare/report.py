@@ -53,6 +53,7 @@ from twin.compare.stats import (
     CONFIDENCE,
     INTERVALS,
     MIN_DISCORDANT,
+    SIGNIFICANCE,
     bootstrap_ci,
     is_tie,
     sign_test,
@@ -65,6 +66,8 @@ from twin.errors import ConfigError
 if TYPE_CHECKING:
     from rich.table import Table
 
+    from twin.compare.verdicts import Verdict
+
 __all__ = [
     "ALL",
     "BOOTSTRAP_RESAMPLES",
@@ -72,6 +75,7 @@ __all__ = [
     "INTERVALS",
     "MIN_DISCORDANT",
     "PAIRED_KEYS",
+    "SUCCESS",
     "SWEEP_TIME_KEYS",
     "PairedComparison",
     "Stat",
@@ -79,8 +83,11 @@ __all__ = [
     "SummaryRow",
     "SweepPoint",
     "bootstrap_ci",
+    "by_problem",
     "is_tie",
+    "paired_comparison",
     "summarize",
+    "summary_markdown",
     "summary_table",
     "sweep_points",
     "sweep_tables",
@@ -238,6 +245,9 @@ class Summary:
     paired: list[PairedComparison] = field(default_factory=list)
     reference: str | None = None
     sweeps: list[SweepPoint] = field(default_factory=list)
+    # (planner, scenario) -> runs skipped there (a pair that could not run: not a failure, not a 0 %)
+    skipped_pairs: dict[tuple[str, str], int] = field(default_factory=dict)
+    verdicts: list[Verdict] = field(default_factory=list)  # who leads on what (`twin.compare.verdicts`)
 
     def sweep_axes(self) -> list[tuple[str, str]]:
         """(scenario, key) of every swept key, in the order the rows first show them."""
@@ -325,6 +335,38 @@ def _problem(row: dict[str, Any]) -> tuple[Any, ...]:
     return (row["scenario"], row.get("case"), row.get("seed"))
 
 
+def by_problem(rows: Iterable[dict[str, Any]]) -> dict[str, dict[tuple[Any, ...], dict[str, Any]]]:
+    """planner -> problem (scenario, case, seed) -> its row: what a paired comparison pairs."""
+    problems: dict[str, dict[tuple[Any, ...], dict[str, Any]]] = {}
+    for r in rows:
+        problems.setdefault(r["planner"], {})[_problem(r)] = r
+    return problems
+
+
+def paired_comparison(
+    planner: str,
+    reference: str,
+    scenario: str,
+    metric: str,
+    mine: dict[tuple[Any, ...], dict[str, Any]],
+    ref: dict[tuple[Any, ...], dict[str, Any]],
+) -> PairedComparison | None:
+    """`planner` against `reference` on `metric` ("success" or a metric key) over the problems of
+    `scenario` (ALL: every one) that both ran (`by_problem`'s rows of each), None when no problem has a
+    value for both."""
+    keys = [k for k in mine if k in ref and (scenario == ALL or k[0] == scenario)]
+    if metric == SUCCESS:
+        if not keys:
+            return None
+        return _paired_success(
+            planner, reference, scenario, [(bool(mine[k].get("success")), bool(ref[k].get("success"))) for k in keys]
+        )
+    pairs = [
+        (a, b) for k in keys if (a := _value(mine[k], metric)) is not None and (b := _value(ref[k], metric)) is not None
+    ]
+    return _paired_metric(planner, reference, scenario, metric, pairs) if pairs else None
+
+
 def _paired_metric(
     planner: str, reference: str, scenario: str, metric: str, pairs: list[tuple[float, float]]
 ) -> PairedComparison:
@@ -348,33 +390,18 @@ def _paired(
     rows: list[dict[str, Any]], order: list[str], scenarios: list[str], reference: str
 ) -> list[PairedComparison]:
     """Every planner but the reference against it: overall, then per scenario; success, then PAIRED_KEYS."""
-    problems: dict[str, dict[tuple[Any, ...], dict[str, Any]]] = {}
-    for r in rows:
-        problems.setdefault(r["planner"], {})[_problem(r)] = r
+    problems = by_problem(rows)
     ref = problems.get(reference, {})
     out: list[PairedComparison] = []
     for p in order:
         mine = problems.get(p, {})
         if p == reference or not mine:
             continue
-        common = [k for k in mine if k in ref]
         for s in [ALL, *scenarios]:
-            keys = [k for k in common if s == ALL or k[0] == s]
-            if not keys:
-                continue
-            out.append(
-                _paired_success(
-                    p, reference, s, [(bool(mine[k].get("success")), bool(ref[k].get("success"))) for k in keys]
-                )
-            )
-            for m in PAIRED_KEYS:
-                pairs = [
-                    (a, b)
-                    for k in keys
-                    if (a := _value(mine[k], m)) is not None and (b := _value(ref[k], m)) is not None
-                ]
-                if pairs:
-                    out.append(_paired_metric(p, reference, s, m, pairs))
+            for m in (SUCCESS, *PAIRED_KEYS):
+                c = paired_comparison(p, reference, s, m, mine, ref)
+                if c is not None:
+                    out.append(c)
     return out
 
 
@@ -428,10 +455,16 @@ def summarize(
     planners: Sequence[str] | None = None,
     skipped: Sequence[tuple[str, str]] = (),
     reference: str | None = None,
+    skipped_pairs: dict[tuple[str, str], int] | None = None,
 ) -> Summary:
     """Group result rows by planner (in `planners` order, then any others) and by planner x scenario, with
-    bootstrap intervals and failure counts, and compare every planner with `reference` on the problems
-    both ran (default: the first planner in that order that has runs)."""
+    bootstrap intervals and failure counts, compare every planner with `reference` on the problems both
+    ran (default: the first planner in that order that has runs), and name who leads on what
+    (`twin.compare.verdicts`). `skipped` are the (run id, reason) of runs that could not run and
+    `skipped_pairs` their count per (planner, scenario); rows with status "skipped" count there too."""
+    rows = list(rows)
+    pairs = Counter(dict(skipped_pairs or {}))
+    pairs.update((r["planner"], r["scenario"]) for r in rows if r.get("status") == "skipped")
     rows = [r for r in rows if r.get("status") != "skipped"]
     order = list(planners or [])
     order += sorted({r["planner"] for r in rows} - set(order))
@@ -454,7 +487,13 @@ def summarize(
         hint = f" Did you mean {close[0]!r}?" if close else ""
         raise ConfigError(f"reference planner {reference!r} is not compared here.{hint} Planners: {', '.join(order)}")
     paired = _paired(rows, order, scenarios, reference) if reference is not None else []
-    return Summary(overall, by_scenario, list(skipped), paired, reference, sweep_points(rows, planners=order))
+    summary = Summary(
+        overall, by_scenario, list(skipped), paired, reference, sweep_points(rows, planners=order), dict(pairs)
+    )
+    from twin.compare.verdicts import verdicts
+
+    summary.verdicts.extend(verdicts(summary, rows))
+    return summary
 
 
 def _fmt(v: float | None, unit: str = "") -> str:
@@ -625,7 +664,7 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
                         _csv_float(c.p_value),
                     ]
                 )
-        md_path.write_text(_markdown(summary), encoding="utf-8")
+        md_path.write_text(summary_markdown(summary), encoding="utf-8")
         if summary.sweeps:
             _write_sweep_csv(summary, out / "sweep.csv")
     except OSError as e:
@@ -636,11 +675,14 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
 _REPLAYS_LISTED = 3  # failed rows per planner whose replay command summary.md lists
 
 
-def _markdown(summary: Summary) -> str:
+def summary_markdown(summary: Summary) -> str:
+    """summary.md's text (also the body of summary.html)."""
     defs = {d.key: d for d in _DEFS}
     keys = summary.metric_keys()
     planners = [r.planner for r in summary.overall]
-    lines = ["# Planner comparison", "", INTERVALS, "", "## Success", ""]
+    lines = ["# Planner comparison", "", INTERVALS]
+    lines += _verdicts_markdown(summary)
+    lines += ["", "## Success", ""]
     lines += ["| planner | runs | success (runs) [95% CI] | errors |", "|---|---:|---:|---:|"]
     lines += [f"| {r.planner} | {r.runs} | {_rate(r)} | {r.errors} |" for r in summary.overall]
     reasons = [k for k in FAILURES if any(k in r.failures for r in summary.overall)]
@@ -719,6 +761,32 @@ def _markdown(summary: Summary) -> str:
     lines += ["", "## Metric definitions", ""]
     lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in _DEFS if d.key in keys]
     return "\n".join(lines) + "\n"
+
+
+def _verdicts_markdown(summary: Summary) -> list[str]:
+    if not summary.verdicts:
+        return []
+    lines = ["", "## Who wins on what", ""]
+    lines += [
+        "Per scenario, the leader on success and on time, and the next planner behind it, tested on the "
+        f"problems both ran (success: exact sign test; times: Wilcoxon signed-rank; a lead is real below p = "
+        f"{SIGNIFICANCE}). Medians name their n: a duration has a value only where the plan succeeded.",
+    ]
+    for scenario in dict.fromkeys(v.scenario for v in summary.verdicts):
+        lines += ["", f"### {'all scenarios' if scenario == ALL else scenario}", ""]
+        lines += [f"- {v.text}" for v in summary.verdicts if v.scenario == scenario]
+    better: dict[str, list[str]] = {}
+    for c in summary.paired:
+        if c.p_value is not None and c.p_value < SIGNIFICANCE and c.wins != c.losses:
+            side = "better" if c.wins > c.losses else "worse"
+            where = "all scenarios" if c.scenario == ALL else c.scenario
+            better.setdefault(side, []).append(f"`{c.planner}` on {c.metric} in {where} (p = {_p(c.p_value)})")
+    if summary.reference is not None and summary.paired:
+        lines += ["", f"Against the reference `{summary.reference}` (paired, below):", ""]
+        for side in ("better", "worse"):
+            found = better.get(side)
+            lines.append(f"- significantly {side}: " + ("; ".join(found) if found else "none"))
+    return lines
 
 
 def _sweep_markdown(summary: Summary) -> list[str]:

@@ -25,6 +25,7 @@ import logging
 import multiprocessing
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -690,15 +691,27 @@ def run_comparison(
     rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
     from twin.compare.report import summarize, write_summary
 
-    summary = summarize(rows, planners=[p.id for p in spec.planners], skipped=skipped, reference=spec.reference)
+    skipped_ids = {rid for rid, _ in skipped}
+    skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
+    summary = summarize(
+        rows,
+        planners=[p.id for p in spec.planners],
+        skipped=skipped,
+        reference=spec.reference,
+        skipped_pairs=dict(skipped_pairs),
+    )
     files = [results, *write_summary(summary, out)]
+    pictures: list[Path] = []
     if plots:
         try:
             from twin.compare.plots import write_plots
 
-            files += write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
+            pictures = write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
         except DependencyMissing as e:
             log.warning("no plots: %s", e)
+    from twin.compare.html_report import write_html
+
+    files += [write_html(summary, out, plots=pictures, title=spec.name or "planner comparison"), *pictures]
     return CompareResult(
         out_dir=out,
         rows=rows,

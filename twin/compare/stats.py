@@ -36,6 +36,7 @@ __all__ = [
     "CONFIDENCE",
     "INTERVALS",
     "MIN_DISCORDANT",
+    "SIGNIFICANCE",
     "PairedTest",
     "bootstrap_ci",
     "is_tie",
@@ -46,6 +47,7 @@ __all__ = [
 ]
 
 CONFIDENCE = 0.95  # of every interval
+SIGNIFICANCE = 0.05  # a paired test's p below this calls a difference real (report's verdicts)
 BOOTSTRAP_RESAMPLES = 2000
 MIN_DISCORDANT = 6  # fewer non-tied pairs give no p: with 5, the smallest exact two-sided p is 2/2^5 > 0.05
 TIE_ABS, TIE_REL = 1e-9, 1e-6  # see is_tie

@@ -408,6 +408,8 @@ def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> N
     # the judge's limit ratios over the compared (transfer) planner's motions
     transfer = summary.metrics.get(block.name, {}) if isinstance(summary.metrics, dict) else {}
     row["metrics"].update({k: transfer.get(k) for k in limit_metrics({})})
+    if transfer.get("motions"):
+        row["timing"]["task_planning_time_s"] = float(transfer["planning_time_s"]) / int(transfer["motions"])
     row["timing"]["wall_time_s"] = float(summary.wall_time_s)
     row["task"] = summary.to_json()  # per-object outcomes and the run's planner metrics
 
