@@ -205,6 +205,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--record", default=None, metavar="PATH", help="write a video of the run (.mp4 or .gif) from an overview camera"
     )
     p.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="with --record: the video plays X times faster than the run (default 1: real time)",
+    )
+    p.add_argument(
         "--rerun",
         default=None,
         metavar="OUT.rrd",
@@ -488,6 +495,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             settings,
             gui=args.gui,
             record=args.record,
+            record_speed=args.speed,
             rerun=args.rerun,
             rerun_serve=args.rerun_serve,
             config_name=str(args.config),

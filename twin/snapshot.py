@@ -1,44 +1,107 @@
-"""Scene snapshots for people: the configured camera's view and an overview, side by side in one PNG."""
+"""Scene snapshots for people: what the camera sees where perception uses it (a wrist camera at the
+capture pose, a fixed one where it is mounted) and an overview framed on the cell with every object and
+fixture named, side by side in one PNG with a title over each panel."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from twin.camera import OVERVIEW_EYE, OVERVIEW_TARGET, Intrinsics, look_at, true_camera_pose
+from twin.annotate import banner, cell_points, draw_circle_on_table, draw_label, framed_overview
+from twin.camera import Intrinsics, true_camera_pose
 from twin.config import Settings
 from twin.errors import ConfigError
 
-__all__ = ["render_views", "save_snapshot"]
+__all__ = ["SceneViews", "render_views", "save_snapshot"]
+
+_OVERVIEW_SCALE = 1.5  # the overview is rendered this much larger than the camera image
+_LABEL_LIFT_M = 0.03  # names are written this far above an object's centre
 
 
-def render_views(settings: Settings, *, settle_s: float = 0.5) -> dict[str, np.ndarray]:
-    """RGB images (H, W, 3) of the scene of `settings` (seed included): 'camera' and 'overview'."""
+@dataclass(frozen=True)
+class SceneViews:
+    """The two panels of a snapshot (RGB, H x W x 3) and what each shows."""
+
+    camera: np.ndarray
+    camera_title: str
+    overview: np.ndarray
+    overview_title: str
+    camera_pose: np.ndarray  # (4, 4) where each view was rendered from (base frame, OpenCV camera)
+    overview_pose: np.ndarray
+    overview_intrinsics: Intrinsics
+    points: np.ndarray  # (N, 3) what the overview frames: bodies and robot links (`annotate.cell_points`)
+
+
+def _overview_intrinsics(settings: Settings) -> Intrinsics:
+    w, h = (int(round(_OVERVIEW_SCALE * v)) for v in (settings.camera.width, settings.camera.height))
+    f = w / 2.0 / np.tan(np.radians(30))  # 60 degrees across
+    return Intrinsics(w, h, f, f)
+
+
+def render_views(settings: Settings, *, settle_s: float = 0.5) -> SceneViews:
+    """Render the scene of `settings` (its seed): the camera from the pose perception uses it at (a wrist
+    camera with the arm at `camera.capture_pose`, as the task's capture stage puts it; the mount error
+    of the seed included) and the labelled overview."""
+    from twin.tasks import task_landmarks
     from twin.world import World
 
     cam = settings.camera
     intr = Intrinsics.from_settings(cam)
     with World(settings, seed=settings.seed, gui=False) as world:
+        if cam.mount == "wrist":
+            world.reset_joints(cam.capture_pose)
         world.step(int(round(settle_s * settings.world.physics_hz)))
         T_cam = true_camera_pose(cam, world.seed, world.link_matrix("tool0"))
-        views = {"camera": world.render(T_cam, intr, near_m=cam.near_m, far_m=cam.far_m).rgb}
-        wide = Intrinsics(
-            cam.width, cam.height, cam.width / 2.0 / np.tan(np.radians(30)), cam.width / 2.0 / np.tan(np.radians(30))
-        )
-        views["overview"] = world.render(look_at(OVERVIEW_EYE, OVERVIEW_TARGET), wide, near_m=0.05, far_m=6.0).rgb
-    return views
+        image = world.render(T_cam, intr, near_m=cam.near_m, far_m=cam.far_m).rgb
+        where = "wrist, arm at the capture pose" if cam.mount == "wrist" else "fixed mount"
+        camera_title = f"camera ({where}): what perception sees"
+        wide = _overview_intrinsics(settings)
+        objects = world.objects()
+        named = [(o.name, o.position + [0.0, 0.0, _LABEL_LIFT_M]) for o in objects]
+        named += [(f.name, np.asarray(f.position, dtype=float)) for f in settings.world.fixtures if f.name != "table"]
+        points = cell_points(world)
+        T_over = framed_overview(points, wide)
+        overview = np.ascontiguousarray(world.render(T_over, wide, near_m=0.05, far_m=8.0).rgb)
+    for name, p in named:
+        draw_label(overview, T_over, wide, p, name)
+    for mark in task_landmarks(settings):
+        draw_circle_on_table(overview, T_over, wide, mark, color=(255, 230, 120))
+    return SceneViews(
+        camera=image,
+        camera_title=camera_title,
+        overview=overview,
+        overview_title=f"overview: {settings.name}, seed {world.seed}, {len(objects)} objects",
+        camera_pose=T_cam,
+        overview_pose=T_over,
+        overview_intrinsics=wide,
+        points=points,
+    )
+
+
+def _panel(image: np.ndarray, title: str, height: int) -> np.ndarray:
+    import cv2
+
+    if image.shape[0] != height:
+        width = int(round(image.shape[1] * height / image.shape[0]))
+        image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+    return banner(image, title)
 
 
 def save_snapshot(settings: Settings, path: str | Path) -> Path:
-    """Render `render_views` and write them side by side to `path` (PNG); returns the path written."""
+    """Render `render_views` and write them side by side, titled, to `path` (PNG); returns the path."""
     import cv2
 
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise ConfigError(f"--snapshot must name a .png file, got {str(out)!r}")
     views = render_views(settings)
-    image = np.concatenate([views["camera"], views["overview"]], axis=1)
+    height = views.overview.shape[0]
+    image = np.concatenate(
+        [_panel(views.camera, views.camera_title, height), _panel(views.overview, views.overview_title, height)],
+        axis=1,
+    )
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -24,6 +24,7 @@ __all__ = [
     "BoxBounds",
     "Goal",
     "JointGoal",
+    "Landmark",
     "Limits",
     "MotionRequest",
     "MotionResult",
@@ -299,6 +300,17 @@ class BoxBounds:
     def extended_y(self, margin_m: float) -> BoxBounds:
         """The box grown by `margin_m` in +y and -y (the warehouse system's trick to force going over)."""
         return BoxBounds(self.x_min, self.x_max, self.y_min - margin_m, self.y_max + margin_m, self.z_min, self.z_max)
+
+
+@dataclass(frozen=True)
+class Landmark:
+    """A place a task puts things that no body marks (a drop zone on the table): a task plugin's optional
+    `landmarks()` lists them, and pictures of a run (`twin scene --snapshot`, `--record`) draw each as a
+    circle of `radius_m` on the table at `position` (base frame), labelled `name`."""
+
+    name: str
+    position: tuple[float, float, float]
+    radius_m: float
 
 
 @dataclass(frozen=True)

@@ -973,6 +973,10 @@ class WorldView:
         """Body ids of the scene objects, in config order."""
         return self._world.object_ids()
 
+    def link_indices(self) -> dict[str, int]:
+        """Robot link name -> PyBullet link index."""
+        return self._world.link_indices()
+
     def objects(self) -> list[ObjectState]:
         """Ground truth of every object, in config order."""
         return self._world.objects()

@@ -17,13 +17,13 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from twin.timing import collect_timings, stage
-from twin.types import RunSummary
+from twin.types import Landmark, RunSummary
 
 if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
     from twin.config import Settings
     from twin.registry import PluginContext
 
-__all__ = ["make_task", "run_task"]
+__all__ = ["make_task", "run_task", "task_landmarks"]
 
 log = logging.getLogger("twin")
 
@@ -37,6 +37,26 @@ def make_task(settings: Settings, context: PluginContext | None = None) -> Any:
     return context.registry.task(settings.task.kind, settings.task.params, context)
 
 
+def task_landmarks(settings: Settings) -> list[Landmark]:
+    """The places the configured task puts things that no body marks (its plugin's optional
+    `landmarks()`: the warehouse's drop zones), for pictures of the cell; none for a task that has none."""
+    return _landmarks_of(make_task(settings))
+
+
+def _landmarks_of(task: Any) -> list[Landmark]:
+    fn = getattr(task, "landmarks", None)
+    return list(fn()) if callable(fn) else []
+
+
+def _to_both(first: Callable[[str], None], second: Callable[[str], None] | None) -> Callable[[str], None]:
+    def both(text: str) -> None:
+        first(text)
+        if second is not None:
+            second(text)
+
+    return both
+
+
 def run_task(
     settings: Settings,
     *,
@@ -44,13 +64,15 @@ def run_task(
     planner: str | None = None,
     gui: bool = False,
     record: str | None = None,
+    record_speed: float = 1.0,
     rerun: str | None = None,
     rerun_serve: bool = False,
     on_stage: Callable[[str], None] | None = None,
     config_name: str = "",
 ) -> RunSummary:
     """Run the configured task once on scene `seed` (default: the config's); `planner` replaces the
-    transfer planner; `record` writes a video (.mp4/.gif) from the overview camera, `rerun` a Rerun
+    transfer planner; `record` writes a video (.mp4/.gif) from the overview camera, played `record_speed`
+    times faster than the run (`twin.recording.Recorder`), `rerun` a Rerun
     recording (.rrd: `twin.rerun_log`), `rerun_serve` serves it live in Rerun's web viewer on 127.0.0.1 (the
     address is logged; the viewer keeps serving after the run). Bad config or planner names raise before anything
     is simulated."""
@@ -58,7 +80,7 @@ def run_task(
     from twin.tasks.cell import Cell, stage_planners
 
     seed = settings.seed if seed is None else int(seed)
-    recorder = Recorder(record) if record else None
+    recorder = Recorder(record, speed=record_speed) if record else None
     if rerun or rerun_serve:
         from twin.rerun_log import rerun_module
 
@@ -68,12 +90,15 @@ def run_task(
         with stage("setup"):  # planners built, task, the world and its bodies
             planners = stage_planners(settings, planner)
             task = make_task(settings)
+            if recorder is not None:
+                recorder.landmarks = tuple(_landmarks_of(task))
             with stage("imports"):  # pybullet prints a banner on import: only once the input is known good
                 from twin.world import World
 
             world = World(settings, seed=seed, gui=gui)
         with world:
-            cell = Cell(settings, world, planner_override=planner, on_stage=on_stage, planners=planners)
+            shown = on_stage if recorder is None else _to_both(recorder.stage, on_stage)
+            cell = Cell(settings, world, planner_override=planner, on_stage=shown, planners=planners)
             if recorder is not None:
                 recorder.attach(world)
             recording = None

@@ -21,7 +21,7 @@ from twin.tasks.cell import Cell, GraspCheck, StageFailed, clear_failure, note_f
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import WarehouseReferee
 from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
-from twin.types import ObjectOutcome
+from twin.types import Landmark, ObjectOutcome
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
@@ -239,3 +239,8 @@ class WarehouseTask:
 
     def run(self, cell: Cell) -> list[ObjectOutcome]:
         return run_warehouse(cell)
+
+    def landmarks(self) -> list[Landmark]:
+        """The drop zone of each colour, as large as a placed cube may be off it."""
+        task = self.context.settings.task.warehouse
+        return [Landmark(f"{c} drop", (p[0], p[1], p[2]), task.drop_radius_m) for c, p in task.drop_zones.items()]
