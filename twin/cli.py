@@ -511,8 +511,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         data["command_wall_time_s"] = total
         data["environment"] = environment()  # where it ran: twin's commit, Python, backends, machine
         _write_json(args.json_path, data)
-    table = Table(title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}")
-    for col in ("object", "class", "colour", "target", "placed", "cycle s", "pose err mm", "error"):
+    table = Table(
+        title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}",
+        caption="perception err: how far (xy) perception's first estimate of the object was from where it lay",
+    )
+    for col in ("object", "class", "colour", "target", "placed", "cycle s", "perception err mm", "error"):
         table.add_column(col)
     for o in summary.objects:
         table.add_row(

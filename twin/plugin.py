@@ -43,6 +43,7 @@ _LAZY: dict[str, str] = {
     # requests, results, trajectories
     "Pose": "twin.types",
     "JointGoal": "twin.types",
+    "Landmark": "twin.types",
     "PoseGoal": "twin.types",
     "Goal": "twin.types",
     "Limits": "twin.types",
@@ -143,6 +144,7 @@ __all__ = [
     "InvalidRequestError",
     "JointGoal",
     "Kind",
+    "Landmark",
     "Limits",
     "MotionRequest",
     "MotionResult",
@@ -249,6 +251,7 @@ if TYPE_CHECKING:
         BoxBounds,
         Goal,
         JointGoal,
+        Landmark,
         Limits,
         MotionRequest,
         MotionResult,

@@ -181,8 +181,10 @@ def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: 
             "best first; box: quartiles, whiskers 1.5 IQR; red: the median with its 95 % bootstrap CI; "
             "n: runs with a value",
             fontsize="small",
+            y=1 - 0.08 / fig.get_figheight(),
+            va="top",
         )
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))  # room for the title, in inches
         figs[box.stem] = fig
     return figs
 
@@ -348,7 +350,8 @@ def _tradeoff(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: lis
     labels = {p: Line2D([], [], ls="", marker=style[p][1], color=style[p][0], ms=6) for p in shown}
     ncol = min(len(labels), 5)
     fig.legend(list(labels.values()), list(labels), loc="lower center", ncol=ncol, frameon=False, fontsize="small")
-    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / ncol), 1, 1))
+    legend_in = 0.25 + 0.2 * math.ceil(len(labels) / ncol)  # the legend's height, in inches
+    fig.tight_layout(rect=(0, legend_in / fig.get_figheight(), 1, 1))
     return fig
 
 
