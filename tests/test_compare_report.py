@@ -91,8 +91,9 @@ def test_who_wins_names_the_leader_and_tests_it_on_the_same_problems() -> None:
     assert success.test is not None and (success.test.wins, success.test.losses) == (6, 0)
     assert success.significant  # 6 of 6 discordant problems one way: sign test p = 2/64 < 0.05
     assert "`fast` leads with 100% (12/12); next `slow`: 50% (6/12)" in success.text and "a real lead" in success.text
-    timing = found[("wall", "planning_time_s")]
-    assert timing.leaders == ("fast",) and timing.test is not None and timing.test.wins == 12 and timing.significant
+    timing = found[("wall", "planning_time_s")]  # only 'fast' has the top success rate: no one to test it against
+    assert timing.leaders == ("fast",) and timing.runner_up is None and timing.test is None
+    assert "no other planner has its success rate" in timing.text
     shelf = found[("shelf", "success")]
     assert shelf.leaders == ("fast",) and shelf.test is not None and shelf.test.n == 3
     assert not shelf.significant and f"fewer than {MIN_DISCORDANT}" in shelf.text  # 1 differing problem
@@ -142,3 +143,17 @@ def test_task_rows_show_their_planning_time_and_no_plot_is_empty(tmp_path: Path)
     found = {(v.scenario, v.metric): v for v in summary.verdicts}
     assert found[("sorting", "task_planning_time_s")].leaders == ("a",)
     assert ("sorting", "cycle_time_s") in found
+
+
+def test_a_time_lead_is_among_the_most_successful_and_names_a_faster_planner_that_fails() -> None:
+    rows = []
+    for i in range(8):
+        rows.append(row("quick", i, success=False, planning_time_s=0.001))  # fails at once, every time
+        rows.append(row("solid", i, planning_time_s=0.02 + 0.001 * i))
+        rows.append(row("solid2", i, planning_time_s=0.05 + 0.001 * i))
+    summary = summarize(rows, planners=["quick", "solid", "solid2"])
+    (v,) = [v for v in summary.verdicts if v.metric == "planning_time_s"]
+    assert v.leaders == ("solid",) and v.runner_up == "solid2"
+    assert v.test is not None and (v.test.wins, v.test.n) == (8, 8) and v.significant  # Wilcoxon, 8 of 8 lower
+    assert "among the 2 planners at the top success rate, 100%" in v.text
+    assert "fastest of all: `quick` 1 ms (n=8) at 0% (0/8) success" in v.text

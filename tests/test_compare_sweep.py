@@ -324,6 +324,7 @@ def test_the_plots_draw_success_and_time_against_each_swept_key(tmp_path):
         assert min(ys) == pytest.approx(100 * wilson_ci(1, 4)[0])  # type: ignore[index]
         assert max(ys) == pytest.approx(100.0)
         assert [ln.get_label() for ln in bottom.get_lines()] == ["robust", "fragile"]
+        assert bottom.get_ylim()[0] == 0.0  # a time axis from zero: a 0.1 s spread does not fill the plot
     finally:
         for fig in figs.values():
             plt.close(fig)

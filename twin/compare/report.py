@@ -768,25 +768,34 @@ def _verdicts_markdown(summary: Summary) -> list[str]:
         return []
     lines = ["", "## Who wins on what", ""]
     lines += [
-        "Per scenario, the leader on success and on time, and the next planner behind it, tested on the "
-        f"problems both ran (success: exact sign test; times: Wilcoxon signed-rank; a lead is real below p = "
-        f"{SIGNIFICANCE}). Medians name their n: a duration has a value only where the plan succeeded.",
+        "Per scenario, the leader on success and, among the planners with the top success rate, on time (a "
+        "planner that fails fast is no choice for speed; the fastest of all is named when it is another), and "
+        "the next planner behind it, tested on the problems both ran (success: exact sign test; times: Wilcoxon "
+        f"signed-rank; a lead is real below p = {SIGNIFICANCE}). Medians name their n: a duration has a value only "
+        "where the plan succeeded.",
     ]
     for scenario in dict.fromkeys(v.scenario for v in summary.verdicts):
         lines += ["", f"### {'all scenarios' if scenario == ALL else scenario}", ""]
         lines += [f"- {v.text}" for v in summary.verdicts if v.scenario == scenario]
-    better: dict[str, list[str]] = {}
+    if summary.reference is not None and summary.paired:
+        lines += ["", f"Against the reference `{summary.reference}`, on the same problems (paired, below):", ""]
+        lines += _against_reference(summary)
+    return lines
+
+
+def _against_reference(summary: Summary) -> list[str]:
+    """One line per (side, metric, scenario): the planners significantly better or worse than the reference."""
+    from twin.compare.verdicts import p_text
+
+    groups: dict[tuple[str, str, str], list[str]] = {}
     for c in summary.paired:
         if c.p_value is not None and c.p_value < SIGNIFICANCE and c.wins != c.losses:
             side = "better" if c.wins > c.losses else "worse"
             where = "all scenarios" if c.scenario == ALL else c.scenario
-            better.setdefault(side, []).append(f"`{c.planner}` on {c.metric} in {where} (p = {_p(c.p_value)})")
-    if summary.reference is not None and summary.paired:
-        lines += ["", f"Against the reference `{summary.reference}` (paired, below):", ""]
-        for side in ("better", "worse"):
-            found = better.get(side)
-            lines.append(f"- significantly {side}: " + ("; ".join(found) if found else "none"))
-    return lines
+            groups.setdefault((side, c.metric, where), []).append(f"`{c.planner}` ({p_text(c.p_value)})")
+    if not groups:
+        return ["- no planner is significantly better or worse on any metric"]
+    return [f"- {side} on {metric}, {where}: " + ", ".join(names) for (side, metric, where), names in groups.items()]
 
 
 def _sweep_markdown(summary: Summary) -> list[str]:

@@ -12,7 +12,7 @@ a planner that solved only the easy problems can show the shortest median durati
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from twin.compare.metrics import METRICS, TIMINGS
@@ -27,7 +27,7 @@ from twin.compare.report import (
 )
 from twin.compare.stats import MIN_DISCORDANT, SIGNIFICANCE, is_tie
 
-__all__ = ["VERDICT_METRICS", "Verdict", "verdicts"]
+__all__ = ["VERDICT_METRICS", "Verdict", "p_text", "verdicts"]
 
 # per kind of run: the metrics a lead is named on after success (lower is better for each)
 VERDICT_METRICS = {
@@ -42,6 +42,7 @@ _LABELS = {
     "cycle_time_s": "cycle time per placed object (median)",
 }
 _UNITS = {d.key: d.unit for d in METRICS + TIMINGS}
+_LISTED = 5  # leaders named in a verdict; more are counted
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,7 @@ class Verdict:
     runner_up: str | None
     runner_up_value: str | None
     test: PairedComparison | None
+    pool: str = ""  # whom a time lead is among, when not every planner (`_fastest`), in words
 
     @property
     def significant(self) -> bool:
@@ -67,38 +69,49 @@ class Verdict:
     @property
     def text(self) -> str:
         """One sentence in Markdown: who leads, by how much, and whether the paired test backs it."""
-        who = ", ".join(f"`{p}`" for p in self.leaders)
+        names = [f"`{p}`" for p in self.leaders]
+        if len(names) > _LISTED:
+            names = [*names[: _LISTED - 1], f"{len(names) - _LISTED + 1} more"]
+        who = ", ".join(names)
         lead = f"{who} share the lead at" if len(self.leaders) > 1 else f"{who} leads with"
-        head = f"**{_LABELS.get(self.metric, self.metric)}**: {lead} {self.value}"
+        pool = f" ({self.pool})" if self.pool else ""
+        head = f"**{_LABELS.get(self.metric, self.metric)}**{pool}: {lead} {self.value}"
         if self.runner_up is None:
-            return head + "; every planner here has the same."
+            return head + (
+                "; no other planner has its success rate." if self.pool else "; every planner here has the same."
+            )
         head += f"; next `{self.runner_up}`: {self.runner_up_value}"
         t = self.test
         if t is None:
             return head + "; they share no problem to compare on."
         if self.metric == SUCCESS:
             pairs = (
-                f"on the {t.n} problems both ran, {t.wins} solved by `{t.planner}` only, "
+                f"on the {_problems(t.n)} both ran, {t.wins} solved by `{t.planner}` only, "
                 f"{t.losses} by `{t.reference}` only"
             )
             test = "exact sign test"
         else:
             pairs = (
-                f"on the {t.n} problems both have a value for, `{t.planner}` lower on {t.wins}, tied on {t.ties}, "
+                f"on the {_problems(t.n)} both have a value for, `{t.planner}` lower on {t.wins}, tied on {t.ties}, "
                 f"higher on {t.losses}"
             )
             test = "Wilcoxon signed-rank"
         if t.p_value is None:
             why = f"too few differing problems to test (fewer than {MIN_DISCORDANT})"
         elif t.p_value < SIGNIFICANCE:
-            why = f"a real lead ({test} p = {_p(t.p_value)})"
+            why = f"a real lead ({test} {p_text(t.p_value)})"
         else:
-            why = f"not a significant lead ({test} p = {_p(t.p_value)})"
+            why = f"not a significant lead ({test} {p_text(t.p_value)})"
         return f"{head}; {pairs}: {why}."
 
 
-def _p(p: float) -> str:
-    return "<0.001" if p < 1e-3 else f"{p:.3f}"
+def p_text(p: float) -> str:
+    """'p = 0.031', or 'p < 0.001'."""
+    return "p < 0.001" if p < 1e-3 else f"p = {p:.3f}"
+
+
+def _problems(n: int) -> str:
+    return "1 problem" if n == 1 else f"{n} problems"
 
 
 def _rate(r: SummaryRow) -> str:
@@ -124,14 +137,28 @@ def _success(summary: Summary, scenario: str, problems: dict[str, Any]) -> Verdi
 
 
 def _fastest(summary: Summary, scenario: str, key: str, problems: dict[str, Any]) -> Verdict | None:
-    rows = [r for r in _rows(summary, scenario) if r.stats[key].n]
-    if len(rows) < 2:
+    """The lead on a time among the planners with the top success rate: a planner that fails fast is not
+    the one to choose for speed (it is named beside the lead when it is the fastest of all)."""
+    timed = [r for r in _rows(summary, scenario) if r.runs and r.stats[key].n]
+    if len(timed) < 2:
         return None
-    ranked = sorted(rows, key=lambda r: r.stats[key].median or 0.0)
-    best = ranked[0].stats[key].median or 0.0
-    leaders = [r for r in ranked if is_tie(r.stats[key].median or 0.0, best)]
-    behind = [r for r in ranked if r not in leaders]
-    return _verdict(scenario, key, leaders, behind, lambda r: _time(r, key), problems)
+    top = max(r.success_rate or 0.0 for r in _rows(summary, scenario) if r.runs)
+    pool = sorted((r for r in timed if (r.success_rate or 0.0) == top), key=lambda r: r.stats[key].median or 0.0)
+    if not pool:
+        return None
+    best = pool[0].stats[key].median or 0.0
+    leaders = [r for r in pool if is_tie(r.stats[key].median or 0.0, best)]
+    behind = [r for r in pool if r not in leaders]
+    verdict = _verdict(scenario, key, leaders, behind, lambda r: _time(r, key), problems)
+    if len(pool) == len(timed):
+        return verdict
+    words = f"among the {len(pool)} planners at the top success rate, {100 * top:.0f}%"
+    if len(pool) == 1:
+        words = f"among the planners at the top success rate, {100 * top:.0f}%"
+    fastest = min(timed, key=lambda r: r.stats[key].median or 0.0)
+    if fastest not in pool:
+        words += f"; fastest of all: `{fastest.planner}` {_time(fastest, key)} at {_rate(fastest)} success"
+    return replace(verdict, pool=words)
 
 
 def _verdict(
