@@ -795,7 +795,9 @@ def _against_reference(summary: Summary) -> list[str]:
             groups.setdefault((side, c.metric, where), []).append(f"`{c.planner}` ({p_text(c.p_value)})")
     if not groups:
         return ["- no planner is significantly better or worse on any metric"]
-    return [f"- {side} on {metric}, {where}: " + ", ".join(names) for (side, metric, where), names in groups.items()]
+    order = {m: i for i, m in enumerate((SUCCESS, *PAIRED_KEYS))}
+    keys = sorted(groups, key=lambda k: (k[0] != "better", order.get(k[1], len(order)), k[2] != "all scenarios"))
+    return [f"- {side} on {metric}, {where}: " + ", ".join(groups[side, metric, where]) for side, metric, where in keys]
 
 
 def _sweep_markdown(summary: Summary) -> list[str]:
