@@ -1,4 +1,5 @@
-"""UR5e kinematics: forward kinematics, every analytic IK branch, Jacobian, manipulability.
+"""Kinematics of a Universal Robots arm (`robot.model`, default the UR5e; `twin.ur_models` has their DH
+parameters): forward kinematics, every analytic IK branch, Jacobian, manipulability.
 
 Frames: `base` is the robot base (DH frame 0, z up, at the world origin); `flange` is tool0 (DH frame 6);
 `tcp` is the point between the gripper's fingertips, `tcp_offset_m` along the flange z axis. IK uses the
@@ -9,13 +10,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import overload
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 import ur_analytic_ik
 
 from twin.errors import InvalidRequestError
 from twin.timing import stage
+from twin.ur_models import UR_MODELS, ur_model
+
+if TYPE_CHECKING:
+    from twin.config import Settings
+    from twin.urdf_model import RobotModel
 
 __all__ = [
     "DH_A",
@@ -26,6 +32,7 @@ __all__ = [
     "TCP_OFFSET_M",
     "DHParameters",
     "UR5e",
+    "URArm",
     "dh_frames",
     "jacobian_one",
     "jacobians",
@@ -40,9 +47,9 @@ JOINT_NAMES = (
     "wrist_2_joint",
     "wrist_3_joint",
 )
-DH_D = np.array([0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996])
-DH_A = np.array([0.0, -0.425, -0.3922, 0.0, 0.0, 0.0])
-DH_ALPHA = np.array([math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0])
+DH_D = np.array(UR_MODELS["ur5e"].d, dtype=float)  # the default arm's (UR5e) DH parameters
+DH_A = np.array(UR_MODELS["ur5e"].a, dtype=float)
+DH_ALPHA = np.array(UR_MODELS["ur5e"].alpha, dtype=float)
 _TWO_PI = 2.0 * math.pi
 JOINT_LIMITS = np.array([[-_TWO_PI, _TWO_PI]] * 6)
 JOINT_LIMITS[2] = [-math.pi, math.pi]
@@ -62,16 +69,22 @@ def wrap_to_pi(a: np.ndarray | float) -> np.ndarray | float:
 _CA, _SA = np.cos(DH_ALPHA), np.sin(DH_ALPHA)
 
 
-def dh_frames(qs: np.ndarray) -> np.ndarray:
-    """(n, 7, 4, 4) DH frames 0..6 (6 = flange) in the base frame for (n, 6) configurations (compiled loop,
-    `twin.kinematics_kernel`, loaded on first use)."""
+def dh_frames(qs: np.ndarray, dh: DHParameters | None = None) -> np.ndarray:
+    """(n, 7, 4, 4) DH frames 0..6 (6 = flange) in the base frame for (n, 6) configurations of the arm with
+    DH parameters `dh` (default the UR5e's; compiled loop, `twin.kinematics_kernel`, loaded on first use)."""
+    if dh is None:
+        return _frames(qs, DH_D, DH_A, _CA, _SA)
+    return _frames(qs, dh.d, dh.a, np.cos(dh.alpha), np.sin(dh.alpha))
+
+
+def _frames(qs: np.ndarray, d: np.ndarray, a: np.ndarray, ca: np.ndarray, sa: np.ndarray) -> np.ndarray:
     from twin.kinematics_kernel import dh_frames_into
 
     qs = np.atleast_2d(np.asarray(qs, dtype=float))
     if not (qs.flags.c_contiguous and qs.flags.writeable):
         qs = np.array(qs, order="C")  # one compiled specialisation: writeable C float64
     F = np.empty((qs.shape[0], 7, 4, 4))
-    dh_frames_into(qs, DH_D, DH_A, _CA, _SA, F)
+    dh_frames_into(qs, d, a, ca, sa, F)
     return F
 
 
@@ -89,17 +102,29 @@ def jacobians(frames: np.ndarray, tool: np.ndarray) -> np.ndarray:
     return J
 
 
-_A = [float(x) for x in DH_A]
-_D = [float(x) for x in DH_D]
-_CA1 = [round(math.cos(a), 15) for a in DH_ALPHA]
-_SA1 = [round(math.sin(a), 15) for a in DH_ALPHA]
+def _dh_lists(d: np.ndarray, a: np.ndarray, alpha: np.ndarray) -> tuple[list[float], ...]:
+    return (
+        [float(x) for x in a],
+        [float(x) for x in d],
+        [round(math.cos(x), 15) for x in alpha],
+        [round(math.sin(x), 15) for x in alpha],
+    )
 
 
-def jacobian_one(q: np.ndarray, tool: np.ndarray) -> np.ndarray:
-    """(6, 6) geometric Jacobian at one configuration `q` (6,), for the point `tool` (4, 4) in the flange.
+_UR5E_LISTS = _dh_lists(DH_D, DH_A, DH_ALPHA)
+
+
+def jacobian_one(q: np.ndarray, tool: np.ndarray, dh: DHParameters | None = None) -> np.ndarray:
+    """(6, 6) geometric Jacobian at one configuration `q` (6,), for the point `tool` (4, 4) in the flange,
+    of the arm with DH parameters `dh` (default the UR5e's).
 
     Plain float arithmetic: for one configuration this is ~6x faster than numpy's small-array overhead.
     """
+    return _jacobian(q, tool, _UR5E_LISTS if dh is None else _dh_lists(dh.d, dh.a, dh.alpha))
+
+
+def _jacobian(q: np.ndarray, tool: np.ndarray, lists: tuple[list[float], ...]) -> np.ndarray:
+    _A, _D, _CA1, _SA1 = lists
     cos, sin = math.cos, math.sin
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     ox = oy = oz = 0.0
@@ -147,20 +172,64 @@ def _tool(frame: str, tcp_offset_m: float) -> np.ndarray:
     return T
 
 
-class UR5e:
-    """Analytic kinematics of the UR5e with our gripper.
+class URArm:
+    """Analytic kinematics of a Universal Robots arm (`model`: a `twin.ur_models` name, default the UR5e)
+    with our gripper.
 
     `q`: (6,) joint angles in rad, order shoulder_pan .. wrist_3. Poses are (4, 4) homogeneous
     transforms of the named frame in the base frame, metres.
     """
 
-    def __init__(self, *, tcp_offset_m: float = TCP_OFFSET_M, joint_limits: np.ndarray | None = None):
+    def __init__(
+        self, *, model: str = "ur5e", tcp_offset_m: float = TCP_OFFSET_M, joint_limits: np.ndarray | None = None
+    ):
+        arm = ur_model(model)
+        self.model = arm.name
+        self._dh = DHParameters(
+            np.array(arm.d, dtype=float), np.array(arm.a, dtype=float), np.array(arm.alpha, dtype=float)
+        )
+        self._lists = _dh_lists(self._dh.d, self._dh.a, self._dh.alpha)
+        self._ca, self._sa = np.cos(self._dh.alpha), np.sin(self._dh.alpha)
+        self._ik_module = getattr(ur_analytic_ik, arm.name)
         self.tcp_offset_m = float(tcp_offset_m)
         self.joint_limits = np.array(JOINT_LIMITS if joint_limits is None else joint_limits, dtype=float)
         self._tool = {f: _tool(f, self.tcp_offset_m) for f in _FRAMES}
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
         with stage("imports"):  # load (or, the first time on a machine, compile) the DH kernel now, not in a
-            dh_frames(np.zeros((1, 6)))  # planner's time limit
+            self.dh_frames(np.zeros((1, 6)))  # planner's time limit
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> URArm:
+        """The arm of a config: `robot.model`."""
+        return cls(model=settings.robot.model)
+
+    def urdf_mismatch(self, model: RobotModel, *, samples: int = 16, tol: float = 1e-6) -> str | None:
+        """Where a robot URDF's arm differs from this arm's DH kinematics, in words; None when it matches.
+
+        Checked on `samples` seeded configurations: each arm joint's axis must lie on the DH axis it stands
+        for (z of DH frame i-1: the same line, the same direction) and tool0 must be the DH flange, within
+        `tol` (m, rad). The URDF's root must be the DH base frame."""
+        if "tool0" not in model.link_index:
+            return "it has no tool0 link (the flange)"
+        qs = np.random.default_rng(0).uniform(-math.pi, math.pi, (samples, 6))
+        poses = model.link_pose_array(qs)
+        dh = self.dh_frames(qs)
+        joints = {j.name: j for j in model.joint_order}
+        for i, name in enumerate(model.arm_joints):
+            j = joints[name]
+            frame = poses[:, model.link_index[j.parent]] @ j.origin  # the joint frame, before it turns
+            axis = np.einsum("nij,j->ni", frame[:, :3, :3], j.axis)
+            z, o = dh[:, i, :3, 2], dh[:, i, :3, 3]
+            tilt = float(np.abs(axis - z).max())
+            off = float(np.linalg.norm(np.cross(frame[:, :3, 3] - o, z), axis=1).max())
+            if tilt > tol or off > tol:
+                return f"joint {name}: its axis is {off * 1e3:.3g} mm off and {tilt:.3g} rad turned from DH axis {i}"
+        flange = poses[:, model.link_index["tool0"]]
+        err_p = float(np.abs(flange[:, :3, 3] - dh[:, 6, :3, 3]).max())
+        err_r = float(np.abs(flange[:, :3, :3] - dh[:, 6, :3, :3]).max())
+        if err_p > tol or err_r > tol:
+            return f"tool0 is {err_p * 1e3:.3g} mm and {err_r:.3g} (rotation entries) from the DH flange"
+        return None
 
     # ---- forward kinematics -------------------------------------------------------------------
     def fk(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
@@ -168,7 +237,7 @@ class UR5e:
         q = np.asarray(q, dtype=float)
         if q.shape != (6,):
             raise InvalidRequestError(f"q must have shape (6,), got {q.shape}")
-        return ur_analytic_ik.ur5e.forward_kinematics(*q) @ self._tool_for(frame)
+        return self._ik_module.forward_kinematics(*q) @ self._tool_for(frame)
 
     def fk_batch(self, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(n, 4, 4) poses for (n, 6) configurations (vectorised DH)."""
@@ -182,12 +251,12 @@ class UR5e:
 
     def dh_frames(self, qs: np.ndarray) -> np.ndarray:
         """(n, 7, 4, 4) DH frames 0..6 in the base frame for (n, 6) configurations."""
-        return dh_frames(qs)
+        return _frames(qs, self._dh.d, self._dh.a, self._ca, self._sa)
 
     @property
     def dh(self) -> DHParameters:
         """The DH parameters (copies), for plugins that build their own symbolic kinematics (NMPC)."""
-        return DHParameters(DH_D.copy(), DH_A.copy(), DH_ALPHA.copy())
+        return DHParameters(self._dh.d.copy(), self._dh.a.copy(), self._dh.alpha.copy())
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -203,7 +272,7 @@ class UR5e:
 
     def jacobian_batch(self, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(n, 6, 6) geometric Jacobians for (n, 6) configurations (rows vx, vy, vz, wx, wy, wz)."""
-        return jacobians(dh_frames(qs), self._tool_for(frame))
+        return jacobians(self.dh_frames(qs), self._tool_for(frame))
 
     # ---- inverse kinematics -------------------------------------------------------------------
     def ik(self, T: np.ndarray, frame: str = "tcp", *, tol: float = 1e-6, all_wraps: bool = True) -> np.ndarray:
@@ -218,12 +287,12 @@ class UR5e:
             raise InvalidRequestError(f"T must be a (4, 4) homogeneous transform, got shape {T.shape}")
         T_flange = T @ self._tool_inv.get(frame, self._tool_for(frame))
         branches: list[np.ndarray] = []
-        for s in ur_analytic_ik.ur5e.inverse_kinematics(T_flange):
+        for s in self._ik_module.inverse_kinematics(T_flange):
             s = np.asarray(s, dtype=float)
             if not np.all(np.isfinite(s)):
                 continue
             s = wrap_to_pi(s)
-            F = ur_analytic_ik.ur5e.forward_kinematics(*s)
+            F = self._ik_module.forward_kinematics(*s)
             if np.abs(F[:3, 3] - T_flange[:3, 3]).max() > tol or np.abs(F[:3, :3] - T_flange[:3, :3]).max() > tol:
                 continue
             # branches can coincide at singular poses: keep one of each
@@ -251,7 +320,7 @@ class UR5e:
     # ---- differential kinematics --------------------------------------------------------------
     def jacobian(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """(6, 6) geometric Jacobian in the base frame: rows vx, vy, vz, wx, wy, wz."""
-        return jacobian_one(np.asarray(q, dtype=float), self._tool_for(frame))
+        return _jacobian(np.asarray(q, dtype=float), self._tool_for(frame), self._lists)
 
     def manipulability(self, q: np.ndarray, frame: str = "tcp") -> float:
         """Yoshikawa's measure sqrt(det(J J^T)); zero at a singularity."""
@@ -261,3 +330,6 @@ class UR5e:
     def condition_number(self, q: np.ndarray, frame: str = "tcp") -> float:
         """cond(J); the seed's defensive IK penalises values above 500."""
         return float(np.linalg.cond(self.jacobian(q, frame)))
+
+
+UR5e = URArm  # the name plugins know (`twin.plugin.UR5e`, `PluginContext.kinematics`): any arm of the family

@@ -217,14 +217,23 @@ def cannot_reach(name: str, kind: str, kinds: frozenset[str]) -> str:
 
 
 def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) -> Limits:
+    """The config's joint limits, each joint's speed no faster than the arm's datasheet allows
+    (`twin.ur_models`: the UR10e's base and shoulder turn at most 120 deg/s)."""
+    from twin.ur_models import ur_model
+
     r = settings.robot
-    return Limits.uniform(r.max_joint_vel, r.max_joint_acc, r.max_joint_jerk, tcp_speed)
+    vel = np.minimum(float(r.max_joint_vel), ur_model(r.model).speed_limits())
+    return Limits(vel, np.full(6, float(r.max_joint_acc)), np.full(6, float(r.max_joint_jerk)), tcp_speed)
 
 
 def make_context(settings: Settings, registry: Registry | None = None, kinematics: UR5e | None = None) -> PluginContext:
     from twin.kinematics import UR5e
 
-    return PluginContext(settings=settings, kinematics=kinematics or UR5e(), registry=registry or default_registry())
+    return PluginContext(
+        settings=settings,
+        kinematics=kinematics or UR5e.from_settings(settings),
+        registry=registry or default_registry(),
+    )
 
 
 def make_planner(block: PlannerBlock | str, context: PluginContext) -> CheckedPlanner:

@@ -101,6 +101,7 @@ class DefensiveIK:
         self._tool = {f: self.kin.tool_transform(f) for f in ("tcp", "flange")}
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
         self._dh = self.kin.dh
+        self._analytic = getattr(ur_analytic_ik, self.kin.model)  # the closed form of this arm
         self._lo = self.kin.joint_limits[:, 0] - 1e-12
         self._hi = self.kin.joint_limits[:, 1] + 1e-12
 
@@ -115,7 +116,7 @@ class DefensiveIK:
         """
         T_fl = T @ self._tool_inv[frame]
         try:
-            raw = ur_analytic_ik.ur5e.inverse_kinematics(T_fl)
+            raw = self._analytic.inverse_kinematics(T_fl)
         except Exception as e:  # noqa: BLE001 -- a broken pose must not escape as an exception
             return np.zeros((0, 6)), f"analytic IK failed on this pose: {e}"
         S = np.array(raw, dtype=float).reshape(-1, 6)
@@ -126,7 +127,7 @@ class DefensiveIK:
 
     def accurate(self, q: np.ndarray, T: np.ndarray, frame: str = "tcp") -> bool:
         """Whether FK(q) reproduces `T` within tol (position norm, rotation Frobenius norm)."""
-        F = ur_analytic_ik.ur5e.forward_kinematics(*q) @ self._tool[frame]
+        F = self._analytic.forward_kinematics(*q) @ self._tool[frame]
         E = F[:3] - T[:3]
         tol = self.params.tol
         return bool(math.sqrt((E[:, 3] ** 2).sum()) <= tol and math.sqrt((E[:, :3] ** 2).sum()) <= tol)

@@ -121,7 +121,7 @@ def _box_only_scene(settings: Settings, ts: TransferScene, cache: dict[str, Plan
 def transfer_scenes(n: int = 50, seed: int = 0, *, settings: Settings | None = None) -> list[TransferScene]:
     """`n` seeded transfer scenes over the obstacle wall (deterministic for a given seed)."""
     settings = settings or load_config("warehouse")
-    kin = UR5e()
+    kin = UR5e.from_settings(settings)
     limits = limits_from_settings(settings)
     home = np.array(settings.robot.home)
     rng = np.random.default_rng(seed)

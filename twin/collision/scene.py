@@ -267,6 +267,13 @@ class PlanningScene:
             reference_configs=[settings.robot.home],
             sphere_filter=settings.collision.sphere_filter,
         )
+        from twin.kinematics import URArm
+
+        wrong = URArm.from_settings(settings).urdf_mismatch(scene.model)
+        if wrong is not None:  # the planners plan with the DH kinematics: the collision model must be that arm
+            raise ConfigError(
+                f"robot.urdf {settings.robot.urdf} is not the arm of robot.model {settings.robot.model}: {wrong}"
+            )
         if unknown_fixtures == "box":
             scene.add_unknown_fixtures(settings)
         return scene

@@ -141,7 +141,7 @@ def cell_for(
         s = load_config(config, overrides)
         check_robot(ps, s, source=problems)
         s = settings_for(ps, s)
-        cell = _CELLS[key] = _Cell(settings=s, scene=planning_scene(ps, s), kin=UR5e())
+        cell = _CELLS[key] = _Cell(settings=s, scene=planning_scene(ps, s), kin=UR5e.from_settings(s))
     if cell is None:
         from twin.collision import PlanningScene
         from twin.config import load_config
@@ -155,7 +155,7 @@ def cell_for(
         # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
         # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
         scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
-        cell = _CELLS[key] = _Cell(settings=s, scene=scene, kin=UR5e())
+        cell = _CELLS[key] = _Cell(settings=s, scene=scene, kin=UR5e.from_settings(s))
     return cell
 
 

@@ -141,7 +141,7 @@ def capture_frame(
     t1 = time.perf_counter()
     q = world.joint_positions()
     if cam.mount == "wrist":
-        T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
+        T_nominal = UR5e.from_settings(settings).fk(q, "flange") @ wrist_camera_offset(settings)
         T_render = true_camera_pose(cam, world.seed, world.link_matrix("tool0"))
     else:
         T_nominal = camera_pose(cam)
@@ -154,7 +154,7 @@ def capture_frame(
         world.step(late)
         q = world.joint_positions()
         if cam.mount == "wrist":
-            T_nominal = UR5e().fk(q, "flange") @ wrist_camera_offset(settings)
+            T_nominal = UR5e.from_settings(settings).fk(q, "flange") @ wrist_camera_offset(settings)
         t1 += time.perf_counter() - t3
     with stage("perception.noise") as noise:
         # the burst the depth filter averages: the last frames of the settling pause, one render (the scene

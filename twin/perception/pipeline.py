@@ -27,7 +27,7 @@ def make_detector(settings: Settings, *, name: str | None = None, params: dict[s
 
     block = settings.perception.detector
     reg = default_registry()
-    ctx = PluginContext(settings=settings, kinematics=UR5e(), registry=reg)
+    ctx = PluginContext(settings=settings, kinematics=UR5e.from_settings(settings), registry=reg)
     return reg.detector(name or block.name, block.params if params is None and name is None else params, ctx)
 
 
@@ -55,7 +55,7 @@ def camera_extrinsics(
         return T_base_camera_aruco
     if q_aruco is None:
         raise ConfigError("a wrist camera calibrated by ArUco needs the joint angles of the calibration view")
-    kin = UR5e()
+    kin = UR5e.from_settings(settings)
     T_tool0_camera = np.linalg.inv(kin.fk(q_aruco, "flange")) @ T_base_camera_aruco
     log.debug(
         "hand-eye from ArUco differs from the configured offset by %.4f m",
