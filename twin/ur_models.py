@@ -54,65 +54,38 @@ class URModel:
         return np.array(self.max_speed, dtype=float)
 
 
-def _speeds(base_shoulder: float, elbow: float, wrists: float) -> tuple[float, float, float, float, float, float]:
-    b, e, w = base_shoulder * _DEG, elbow * _DEG, wrists * _DEG
-    return (b, b, e, w, w, w)
+# name, DH d1 d4 d5 d6, a2 a3 (m); largest speed of the base and shoulder, the elbow, the wrists (deg/s);
+# joint torques (N m), as the datasheets and ur_analytic_ik's dh_parameters.hh list them
+_TABLE = (
+    ("ur3", (0.1519, 0.11235, 0.08535, 0.0819), (-0.24365, -0.21325), (180, 180, 360), (56, 56, 28, 12, 12, 12)),
+    ("ur3e", (0.15185, 0.13105, 0.08535, 0.0921), (-0.24355, -0.2132), (180, 180, 360), (56, 56, 28, 12, 12, 12)),
+    ("ur5", (0.089159, 0.10915, 0.09465, 0.0823), (-0.425, -0.39225), (180, 180, 180), (150, 150, 150, 28, 28, 28)),
+    ("ur5e", (0.1625, 0.1333, 0.0997, 0.0996), (-0.425, -0.3922), (180, 180, 180), (150, 150, 150, 28, 28, 28)),
+    ("ur10", (0.1273, 0.163941, 0.1157, 0.0922), (-0.612, -0.5723), (120, 180, 180), (330, 330, 150, 56, 56, 56)),
+    ("ur10e", (0.1807, 0.17415, 0.11985, 0.11655), (-0.6127, -0.57155), (120, 180, 180), (330, 330, 150, 56, 56, 56)),
+    ("ur16e", (0.1807, 0.17415, 0.11985, 0.11655), (-0.4784, -0.36), (120, 180, 180), (330, 330, 150, 56, 56, 56)),
+)
 
 
-UR_MODELS: dict[str, URModel] = {
-    m.name: m
-    for m in (
-        URModel(
-            "ur3",
-            d=(0.1519, 0, 0, 0.11235, 0.08535, 0.0819),
-            a=(0, -0.24365, -0.21325, 0, 0, 0),
-            max_speed=_speeds(180, 180, 360),
-            torques=(56.0, 56.0, 28.0, 12.0, 12.0, 12.0),
-        ),
-        URModel(
-            "ur3e",
-            d=(0.15185, 0, 0, 0.13105, 0.08535, 0.0921),
-            a=(0, -0.24355, -0.2132, 0, 0, 0),
-            max_speed=_speeds(180, 180, 360),
-            torques=(56.0, 56.0, 28.0, 12.0, 12.0, 12.0),
-        ),
-        URModel(
-            "ur5",
-            d=(0.089159, 0, 0, 0.10915, 0.09465, 0.0823),
-            a=(0, -0.425, -0.39225, 0, 0, 0),
-            max_speed=_speeds(180, 180, 180),
-            torques=(150.0, 150.0, 150.0, 28.0, 28.0, 28.0),
-        ),
-        URModel(
-            "ur5e",
-            d=(0.1625, 0, 0, 0.1333, 0.0997, 0.0996),
-            a=(0, -0.425, -0.3922, 0, 0, 0),
-            max_speed=_speeds(180, 180, 180),
-            torques=(150.0, 150.0, 150.0, 28.0, 28.0, 28.0),
-        ),
-        URModel(
-            "ur10",
-            d=(0.1273, 0, 0, 0.163941, 0.1157, 0.0922),
-            a=(0, -0.612, -0.5723, 0, 0, 0),
-            max_speed=_speeds(120, 180, 180),
-            torques=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
-        ),
-        URModel(
-            "ur10e",
-            d=(0.1807, 0, 0, 0.17415, 0.11985, 0.11655),
-            a=(0, -0.6127, -0.57155, 0, 0, 0),
-            max_speed=_speeds(120, 180, 180),
-            torques=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
-        ),
-        URModel(
-            "ur16e",
-            d=(0.1807, 0, 0, 0.17415, 0.11985, 0.11655),
-            a=(0, -0.4784, -0.36, 0, 0, 0),
-            max_speed=_speeds(120, 180, 180),
-            torques=(330.0, 330.0, 150.0, 56.0, 56.0, 56.0),
-        ),
+def _model(
+    name: str,
+    d: tuple[float, float, float, float],
+    a: tuple[float, float],
+    speeds: tuple[int, int, int],
+    torques: tuple[int, ...],
+) -> URModel:
+    b, e, w = (v * _DEG for v in speeds)
+    t = tuple(float(x) for x in torques)
+    return URModel(
+        name,
+        d=(d[0], 0.0, 0.0, d[1], d[2], d[3]),
+        a=(0.0, a[0], a[1], 0.0, 0.0, 0.0),
+        max_speed=(b, b, e, w, w, w),
+        torques=(t[0], t[1], t[2], t[3], t[4], t[5]),
     )
-}
+
+
+UR_MODELS: dict[str, URModel] = {row[0]: _model(*row) for row in _TABLE}
 
 
 def ur_model(name: str) -> URModel:

@@ -93,9 +93,10 @@ def _cylinder_inertia(mass: float, radius: float, length: float, axis: str) -> t
     return tuple(f"{v:.4f}" for v in values)  # type: ignore[return-value]
 
 
-def _link(
-    name: str, mass: float, com: str, inertia: tuple[str, str, str], shapes: list[tuple[str, str, float, float, str]]
-) -> str:
+Shape = tuple[str, str, float, float, str]  # a cylinder: origin xyz, rpy, radius, length, material
+
+
+def _link(name: str, mass: float, com: str, inertia: tuple[str, str, str], shapes: list[Shape]) -> str:
     """A link: inertial at `com`, a visual and a collision cylinder per shape (xyz, rpy, radius, length, material)."""
     origin = f'<origin xyz="{com}"/>'
     head = (
@@ -175,100 +176,40 @@ def arm_urdf(model: str) -> str:
     # the base and the shoulder housing stack up to d1 (a short-based UR5 keeps them above the table)
     base_r, base_h = 0.075 * s, min(0.09 * s, d1 - 0.02)
     sh_lo, sh_hi = max(d1 - 0.09 * s, 0.025), d1 + 0.035 * s
-    out.append(
-        _link(
-            "base_link",
-            m[0],
-            f"0 0 {_n(base_h / 2)}",
-            inertia("base_link", m[0], base_r, base_h, "z"),
-            [(f"0 0 {_n(base_h / 2)}", "", base_r, base_h, "ur_grey")],
-        )
-    )
-    out.append(
-        "\n" + _joint("shoulder_pan_joint", "base_link", "shoulder_link", f"0 0 {_exact(d1)}", "0 0 0", two_pi, e[0])
-    )
-    sh_r, sh_h = 0.06 * s, sh_hi - sh_lo
-    out.append(
-        _link(
-            "shoulder_link",
-            m[1],
-            "0 0 0",
-            inertia("shoulder_link", m[1], sh_r, sh_h, "z"),
-            [(f"0 0 {_n((sh_lo + sh_hi) / 2 - d1)}", "", sh_r, sh_h, "ur_blue")],
-        )
-    )
-    out.append(
-        "\n"
-        + _joint("shoulder_lift_joint", "shoulder_link", "upper_arm_link", "0 0 0", f"{_HALF_PI} 0 0", two_pi, e[1])
-    )
-    tube_r = 0.054 * s
-    out.append(
-        _link(
-            "upper_arm_link",
-            m[2],
-            f"{_n(a2 / 2)} 0 {_n(up)}",
-            inertia("upper_arm_link", m[2], tube_r, abs(a2), "x"),
-            [
-                (f"0 0 {_n(0.10 * s)}", "0 0 0", 0.06 * s, 0.12 * s, "ur_grey"),
-                (f"{_n(a2 / 2)} 0 {_n(up)}", f"0 {_HALF_PI} 0", tube_r, abs(a2), "ur_grey"),
-            ],
-        )
-    )
-    out.append("\n" + _joint("elbow_joint", "upper_arm_link", "forearm_link", f"{_exact(a2)} 0 0", "0 0 0", pi, e[2]))
-    fore_r, fore_len = 0.04 * s, size.forearm_tube_m or abs(a3)
-    out.append(
-        _link(
-            "forearm_link",
-            m[3],
-            f"{_n(-fore_len / 2)} 0 {_n(fore)}",
-            inertia("forearm_link", m[3], fore_r, fore_len, "x"),
-            [
-                (f"0 0 {_n(0.085 * s)}", "", 0.052 * s, 0.14 * s, "ur_blue"),
-                (f"{_n(-fore_len / 2)} 0 {_n(fore)}", f"0 {_HALF_PI} 0", fore_r, fore_len, "ur_grey"),
-            ],
-        )
-    )
-    out.append(
-        "\n"
-        + _joint("wrist_1_joint", "forearm_link", "wrist_1_link", f"{_exact(a3)} 0 {_exact(d4)}", "0 0 0", two_pi, e[3])
-    )
-    w_r = 0.045 * s
-    out.append(
-        _link(
-            "wrist_1_link",
-            m[4],
-            "0 0 0",
-            inertia("wrist_1_link", m[4], w_r, 0.13 * s, "z"),
-            [(f"0 0 {_n(-0.02 * s)}", "", w_r, 0.13 * s, "ur_grey")],
-        )
-    )
-    out.append(
-        "\n"
-        + _joint("wrist_2_joint", "wrist_1_link", "wrist_2_link", f"0 {_exact(-d5)} 0", f"{_HALF_PI} 0 0", two_pi, e[4])
-    )
-    out.append(
-        _link(
-            "wrist_2_link",
-            m[5],
-            "0 0 0",
-            inertia("wrist_2_link", m[5], w_r, 0.11 * s, "z"),
-            [(f"0 0 {_n(-0.005 * s)}", "", w_r, 0.11 * s, "ur_blue")],
-        )
-    )
-    out.append(
-        "\n"
-        + _joint("wrist_3_joint", "wrist_2_link", "wrist_3_link", f"0 {_exact(d6)} 0", f"-{_HALF_PI} 0 0", two_pi, e[5])
-    )
-    w3_r, w3_h = 0.0375 * s, 0.048 * s
-    out.append(
-        _link(
-            "wrist_3_link",
-            m[6],
-            f"0 0 {_n(-0.02 * s)}",
-            inertia("wrist_3_link", m[6], w3_r, w3_h, "z"),
-            [(f"0 0 {_n(-0.024 * s)}", "", w3_r, w3_h, "ur_grey")],
-        )
-    )
+    tube_r, fore_r, w_r = 0.054 * s, 0.04 * s, 0.045 * s
+    fore_len = size.forearm_tube_m or abs(a3)
+    half = f"0 {_HALF_PI} 0"
+    # per link: (its joint: name, origin xyz, rpy, lower limit) or None, (mass, centre of mass, inertia
+    # cylinder: radius, length, axis), its cylinders: (xyz, rpy, radius, length, material)
+    chain: list[tuple[tuple[str, str, str, float] | None, str, tuple[str, float, float, str], list[Shape]]] = [
+        (None, "base_link", (f"0 0 {_n(base_h / 2)}", base_r, base_h, "z"),
+         [(f"0 0 {_n(base_h / 2)}", "", base_r, base_h, "ur_grey")]),
+        (("shoulder_pan_joint", f"0 0 {_exact(d1)}", "0 0 0", two_pi), "shoulder_link",
+         ("0 0 0", 0.06 * s, sh_hi - sh_lo, "z"),
+         [(f"0 0 {_n((sh_lo + sh_hi) / 2 - d1)}", "", 0.06 * s, sh_hi - sh_lo, "ur_blue")]),
+        (("shoulder_lift_joint", "0 0 0", f"{_HALF_PI} 0 0", two_pi), "upper_arm_link",
+         (f"{_n(a2 / 2)} 0 {_n(up)}", tube_r, abs(a2), "x"),
+         [(f"0 0 {_n(0.10 * s)}", "0 0 0", 0.06 * s, 0.12 * s, "ur_grey"),
+          (f"{_n(a2 / 2)} 0 {_n(up)}", half, tube_r, abs(a2), "ur_grey")]),
+        (("elbow_joint", f"{_exact(a2)} 0 0", "0 0 0", pi), "forearm_link",
+         (f"{_n(-fore_len / 2)} 0 {_n(fore)}", fore_r, fore_len, "x"),
+         [(f"0 0 {_n(0.085 * s)}", "", 0.052 * s, 0.14 * s, "ur_blue"),
+          (f"{_n(-fore_len / 2)} 0 {_n(fore)}", half, fore_r, fore_len, "ur_grey")]),
+        (("wrist_1_joint", f"{_exact(a3)} 0 {_exact(d4)}", "0 0 0", two_pi), "wrist_1_link",
+         ("0 0 0", w_r, 0.13 * s, "z"), [(f"0 0 {_n(-0.02 * s)}", "", w_r, 0.13 * s, "ur_grey")]),
+        (("wrist_2_joint", f"0 {_exact(-d5)} 0", f"{_HALF_PI} 0 0", two_pi), "wrist_2_link",
+         ("0 0 0", w_r, 0.11 * s, "z"), [(f"0 0 {_n(-0.005 * s)}", "", w_r, 0.11 * s, "ur_blue")]),
+        (("wrist_3_joint", f"0 {_exact(d6)} 0", f"-{_HALF_PI} 0 0", two_pi), "wrist_3_link",
+         (f"0 0 {_n(-0.02 * s)}", 0.0375 * s, 0.048 * s, "z"),
+         [(f"0 0 {_n(-0.024 * s)}", "", 0.0375 * s, 0.048 * s, "ur_grey")]),
+    ]  # fmt: skip
+    parent = ""
+    for k, (joint, link, (com, r, h, axis), shapes) in enumerate(chain):
+        if joint is not None:
+            name, xyz, rpy, lower = joint
+            out.append("\n" + _joint(name, parent, link, xyz, rpy, lower, e[k - 1]))
+        out.append(_link(link, m[k], com, inertia(link, m[k], r, h, axis), shapes))
+        parent = link
     out.append(
         "\n"
         '  <joint name="flange_joint" type="fixed">\n'
