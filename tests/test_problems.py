@@ -146,7 +146,8 @@ def _doc(path: Path) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        (lambda d: d.update(version=2), "version 2 is not supported"),
+        (lambda d: d.update(version=3), "version 3 is not supported; this twin reads versions 1, 2"),
+        (lambda d: d["problems"][0].update(world={"objects": []}), "problems.0.world: a problem's own world needs"),
         (lambda d: d.update(format="other"), "not a problem set"),
         (lambda d: d["problems"][0].pop("start"), "problems.0.start"),
         (lambda d: d["problems"][1].update(start=[0.0] * 5), "has 5 values; the robot has 6 joints"),

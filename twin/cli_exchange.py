@@ -53,9 +53,24 @@ def add_parsers(sub: Any) -> None:
         metavar="KEY=VALUE",
         help="another random-query setting, e.g. --set region_z=[0.05,0.3] (see RandomQueries)",
     )
-    m = psub.add_parser("import-moveit", help="a MoveIt PlanningScene YAML + MotionPlanRequest YAMLs as a problem set")
-    m.add_argument("scene", help="YAML of a moveit_msgs/PlanningScene")
-    m.add_argument("requests", nargs="+", help="YAML files of moveit_msgs/MotionPlanRequest")
+    m = psub.add_parser(
+        "import-moveit",
+        help="a MoveIt PlanningScene YAML + MotionPlanRequest YAMLs, or a directory of MotionBenchMaker "
+        "sceneNNNN.yaml/requestNNNN.yaml pairs, as a problem set",
+    )
+    m.add_argument(
+        "scene",
+        help="YAML of a moveit_msgs/PlanningScene, or a directory of MotionBenchMaker pairs (each problem in its "
+        "own scene: a version-2 problem set)",
+    )
+    m.add_argument("requests", nargs="*", help="YAML files of moveit_msgs/MotionPlanRequest (not with a directory)")
+    m.add_argument(
+        "--robot",
+        default=None,
+        choices=("ur5",),
+        help="the MoveIt files' robot: MotionBenchMaker's UR5 (robot.model ur5, its Robotiq joints ignored, "
+        "base_link 0.9144 m above its world frame)",
+    )
     m.add_argument("--out", required=True, metavar="FILE.json", help="problem-set file to write")
     m.add_argument("--config", default="robocup", help="twin config of the robot (default robocup)")
     m.add_argument("--name", default=None, help="set name (default: the scene's name)")
@@ -111,23 +126,36 @@ def _cmd_problems(args: argparse.Namespace) -> int:
             time_limit_s=args.time_limit,
         )
     else:
-        from twin.problems import problem_set_from_moveit
+        from twin.errors import ConfigError
+        from twin.problems import problem_set_from_moveit, problem_set_from_moveit_dir
 
-        ps = problem_set_from_moveit(
-            args.scene,
-            args.requests,
-            config=args.config,
-            name=args.name,
-            time_limit_s=args.time_limit,
-            frames=args.frames,
-            ignore_joints=tuple(args.ignore_joints),
-        )
+        options: dict[str, Any] = {
+            "config": args.config,
+            "name": args.name,
+            "time_limit_s": args.time_limit,
+            "frames": args.frames,
+            "ignore_joints": tuple(args.ignore_joints),
+            "robot": args.robot,
+        }
+        if Path(args.scene).is_dir():
+            if args.requests:
+                raise ConfigError(f"{args.scene} is a directory of scene/request pairs: give no request files with it")
+            ps = problem_set_from_moveit_dir(args.scene, **options)
+        elif not args.requests:
+            raise ConfigError("give the MotionPlanRequest YAML files after the scene (or a directory of pairs)")
+        else:
+            ps = problem_set_from_moveit(args.scene, args.requests, **options)
     path = save_problem_set(ps, args.out)
-    n_prims = sum(len(o.primitives) for o in ps.world.objects)
-    print(
-        f"{path}: {len(ps.problems)} problems, {len(ps.world.objects)} objects ({n_prims} primitives) "
-        f"in frame {ps.world.frame}"
-    )
+    own = [p.world for p in ps.problems if p.world is not None]
+    if own:
+        mean = sum(len(w.objects) for w in own) / len(own)
+        print(f"{path}: {len(ps.problems)} problems, {len(own)} in their own scenes ({mean:.3g} objects on average)")
+    else:
+        n_prims = sum(len(o.primitives) for o in ps.world.objects)
+        print(
+            f"{path}: {len(ps.problems)} problems, {len(ps.world.objects)} objects ({n_prims} primitives) "
+            f"in frame {ps.world.frame}"
+        )
     return EXIT_OK
 
 

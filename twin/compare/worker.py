@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
     from twin.kinematics import UR5e
+    from twin.problems import ProblemSet
     from twin.types import MotionRequest
     from twin.world import World
 
@@ -71,11 +72,15 @@ class _Cell:
     scene: PlanningScene
     kin: UR5e
     world: World | None = None
+    key: tuple[Any, ...] = ()  # its key in _CELLS
 
 
-_CELLS: dict[tuple[str, tuple[str, ...], str, str | None], _Cell] = {}
+_CellKey = tuple[str, tuple[str, ...], str, str | None, int | None]
+_CELLS: dict[_CellKey, _Cell] = {}
+_OWN_WORLD_CELLS = 2  # cells of problems with their own world kept at once (each may hold a PyBullet world)
+_SETS: dict[str, ProblemSet] = {}  # problem sets read in this process, by path
 _QUERIES: dict[tuple[Any, ...], dict[str, Any]] = {}  # random queries drawn in this process (`_drawn_query`)
-_STRAIGHT_FREE: dict[tuple[int, str], bool | None] = {}  # (cell, query) -> its straight motion is free
+_STRAIGHT_FREE: dict[tuple[Any, str], bool | None] = {}  # (cell key, query) -> its straight motion is free
 
 
 # the native thread pools a worker process sizes from the environment when it first loads them: OpenMP
@@ -124,24 +129,55 @@ def quiet_imports() -> None:
         os.close(devnull)
 
 
+def _problem_set(path: str) -> ProblemSet:
+    ps = _SETS.get(path)
+    if ps is None:
+        from twin.problems import load_problem_set
+
+        ps = _SETS[path] = load_problem_set(path)
+    return ps
+
+
+def _keep(key: _CellKey, cell: _Cell) -> _Cell:
+    """Remember a cell; of the cells of problems with their own world only the latest few stay (a set
+    of 700 worlds would otherwise hold 700 scenes and PyBullet worlds)."""
+    cell.key = key
+    if key[4] is not None:
+        own = [k for k in _CELLS if k[4] is not None]
+        for old in own[: max(0, len(own) - _OWN_WORLD_CELLS + 1)]:
+            gone = _CELLS.pop(old)
+            if gone.world is not None:
+                gone.world.close()
+    _CELLS[key] = cell
+    return cell
+
+
 def cell_for(
-    config: str, overrides: tuple[str, ...], unknown_fixtures: UnknownFixtures, problems: str | None = None
+    config: str,
+    overrides: tuple[str, ...],
+    unknown_fixtures: UnknownFixtures,
+    problems: str | None = None,
+    problem_index: int | None = None,
 ) -> _Cell:
     """The static cell of a scene config (built on first use in this process, then reused); with
-    `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`)."""
-    key = (config, overrides, unknown_fixtures, problems)
+    `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`): the
+    world of problem `problem_index` when it has its own (format version 2), else the set's."""
+    own = None
+    if problems is not None and problem_index is not None and _problem_set(problems).problems[problem_index].world:
+        own = problem_index
+    key: _CellKey = (config, overrides, unknown_fixtures, problems, own)
     cell = _CELLS.get(key)
     if cell is None and problems is not None:
         from twin.config import load_config
         from twin.kinematics import UR5e
-        from twin.problems import load_problem_set
         from twin.problems.world import check_robot, planning_scene, settings_for
 
-        ps = load_problem_set(problems)
+        ps = _problem_set(problems)
         s = load_config(config, overrides)
         check_robot(ps, s, source=problems)
-        s = settings_for(ps, s)
-        cell = _CELLS[key] = _Cell(settings=s, scene=planning_scene(ps, s), kin=UR5e.from_settings(s))
+        world = ps.world_of(own) if own is not None else None
+        s = settings_for(ps, s, world=world)
+        cell = _keep(key, _Cell(settings=s, scene=planning_scene(ps, s, world=world), kin=UR5e.from_settings(s)))
     if cell is None:
         from twin.collision import PlanningScene
         from twin.config import load_config
@@ -155,7 +191,7 @@ def cell_for(
         # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
         # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
         scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
-        cell = _CELLS[key] = _Cell(settings=s, scene=scene, kin=UR5e.from_settings(s))
+        cell = _keep(key, _Cell(settings=s, scene=scene, kin=UR5e.from_settings(s)))
     return cell
 
 
@@ -339,11 +375,11 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
     from twin.config import PlannerBlock
     from twin.planning import limit_ratios, make_context, make_planner, plan_with
 
-    cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems)
+    cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems, task.query_index)
     settings = cell.settings.model_copy(update={"seed": task.seed})
     query = dict(task.query) if task.query is not None else dict(_drawn_query(task, cell))
     row["query"] = query
-    key = (id(cell), json.dumps(query, sort_keys=True))
+    key = (cell.key, json.dumps(query, sort_keys=True))
     if key not in _STRAIGHT_FREE:  # the same for every planner of the query
         _STRAIGHT_FREE[key] = straight_free(
             query, scene=cell.scene, kin=cell.kin, resolution_rad=settings.collision.check_resolution_rad

@@ -34,6 +34,7 @@ __all__ = [
     "load_problem_set",
     "problem_set_from_dict",
     "problem_set_from_moveit",
+    "problem_set_from_moveit_dir",
     "save_problem_set",
 ]
 
@@ -44,8 +45,8 @@ def __getattr__(name: str) -> Any:
         from twin.problems.export import export_problem_set
 
         return export_problem_set
-    if name == "problem_set_from_moveit":
-        from twin.problems.moveit import problem_set_from_moveit
+    if name in ("problem_set_from_moveit", "problem_set_from_moveit_dir"):
+        from twin.problems import moveit
 
-        return problem_set_from_moveit
+        return getattr(moveit, name)
     raise AttributeError(f"module 'twin.problems' has no attribute {name!r}")

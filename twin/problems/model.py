@@ -1,6 +1,6 @@
 """The problem-set file: motion problems another tool can plan exactly as twin does.
 
-A problem set is one JSON document (`twin-problem-set`, version 1; JSON Schema shipped as
+A problem set is one JSON document (`twin-problem-set`, version 1 or 2; JSON Schema shipped as
 `twin/data/schemas/problem-set.schema.json`, generated from these models):
 
 * `robot`: the URDF (as the scene config names it) and the arm's joint names, in the order every joint
@@ -11,7 +11,9 @@ A problem set is one JSON document (`twin-problem-set`, version 1; JSON Schema s
   MoveIt's `CollisionObject` groups them (box: full extents; cylinder: radius and length along its z;
   sphere: radius), and the held object, if any (a box in the TCP frame);
 * `problems`: start, goal (joint angles; a TCP or flange pose reached exactly, or within a tolerance;
-  or a position, the orientation free), time limit and the seed the planner is given.
+  or a position, the orientation free), time limit and the seed the planner is given; from version 2, a
+  problem may carry its own `world` (MotionBenchMaker stores a scene per request), which replaces the
+  set's for that problem. A set none of whose problems has one is written as version 1.
 
 Why primitives and not a reference to a twin scene config: a file that needs twin to be read is no
 exchange format. Poses are {position [x, y, z] m, orientation [x, y, z, w]} (MoveIt's and PyBullet's
@@ -26,7 +28,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_serializer, model_validator
 
 from twin.config.loader import format_validation
 from twin.errors import ConfigError
@@ -35,6 +37,7 @@ from twin.transforms import matrix_to_quat, quat_to_matrix
 __all__ = [
     "FORMAT",
     "VERSION",
+    "VERSIONS",
     "BoxShape",
     "CollisionObject",
     "CylinderShape",
@@ -54,7 +57,8 @@ __all__ = [
 ]
 
 FORMAT: Literal["twin-problem-set"] = "twin-problem-set"
-VERSION: Literal[1] = 1
+VERSION: Literal[2] = 2  # the newest version this twin reads and writes
+VERSIONS = (1, 2)  # 2: a problem may carry its own world
 
 Vec3 = tuple[float, float, float]
 Q6 = tuple[float, float, float, float, float, float]
@@ -218,6 +222,18 @@ class Problem(_Model):
     goal: Goal
     time_limit_s: float = Field(1.0, gt=0, allow_inf_nan=False)
     seed: int = Field(0, ge=0)
+    world: WorldSpec | None = Field(
+        None, description="version 2: this problem's own collision world, replacing the set's (None: the set's)"
+    )
+
+    @model_serializer(mode="wrap")
+    def _without_own_world(self, handler: Any) -> Any:
+        """A problem without its own world is written as version 1 wrote it (no `world` key), so its file,
+        and the run ids hashed from it, stay what they were."""
+        data = handler(self)
+        if isinstance(data, dict) and data.get("world") is None:
+            data.pop("world", None)
+        return data
 
     @model_validator(mode="after")
     def _finite_values(self) -> Problem:
@@ -229,7 +245,7 @@ class Problem(_Model):
 
 class ProblemSet(_Model):
     format: Literal["twin-problem-set"] = FORMAT
-    version: Literal[1] = VERSION
+    version: Literal[1, 2] = 1
     name: str = "problems"
     description: str = ""
     source: dict[str, Any] = Field(default_factory=dict, description="where the problems came from (free form)")
@@ -249,15 +265,22 @@ class ProblemSet(_Model):
                 raise ValueError(f"problems.{i}.start has {len(p.start)} values; the robot has {n} joints")
             if isinstance(p.goal, JointGoalSpec) and len(p.goal.joints) != n:
                 raise ValueError(f"problems.{i}.goal.joints has {len(p.goal.joints)} values; the robot has {n} joints")
+            if p.world is not None and self.version < 2:
+                raise ValueError(f"problems.{i}.world: a problem's own world needs version 2")
         return self
+
+    def world_of(self, index: int) -> WorldSpec:
+        """The collision world problem `index` is planned in: its own, else the set's."""
+        own = self.problems[index].world
+        return own if own is not None else self.world
 
 
 def json_schema() -> dict[str, Any]:
     """The JSON Schema of a problem-set file (what `twin/data/schemas/problem-set.schema.json` holds)."""
     schema = ProblemSet.model_json_schema()
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["$id"] = "https://github.com/twin-robotics/twin/schemas/problem-set-1.schema.json"
-    schema["title"] = "twin problem set, version 1"
+    schema["$id"] = "https://github.com/twin-robotics/twin/schemas/problem-set-2.schema.json"
+    schema["title"] = "twin problem set, versions 1 and 2"
     return schema
 
 
@@ -268,8 +291,11 @@ def problem_set_from_dict(data: Any, *, source: str = "<dict>") -> ProblemSet:
     fmt, ver = data.get("format"), data.get("version")
     if fmt != FORMAT:
         raise ConfigError(f"{source}: not a problem set (format {fmt!r}; expected {FORMAT!r})")
-    if ver != VERSION:
-        raise ConfigError(f"{source}: problem-set version {ver!r} is not supported; this twin reads version {VERSION}")
+    if ver not in VERSIONS:
+        raise ConfigError(
+            f"{source}: problem-set version {ver!r} is not supported; this twin reads versions "
+            + ", ".join(str(v) for v in VERSIONS)
+        )
     try:
         return ProblemSet.model_validate(data)
     except ValidationError as err:

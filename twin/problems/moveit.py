@@ -59,7 +59,9 @@ from __future__ import annotations
 import fnmatch
 import logging
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -80,11 +82,12 @@ from twin.problems.model import (
     WorldSpec,
 )
 from twin.problems.world import robot_spec
+from twin.transforms import pose_from_xyz_rpy
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
 
-__all__ = ["problem_set_from_moveit"]
+__all__ = ["MOVEIT_ROBOTS", "MoveItRobot", "problem_set_from_moveit", "problem_set_from_moveit_dir"]
 
 log = logging.getLogger("twin")
 
@@ -281,7 +284,7 @@ def _frame_name(at: _At) -> str:
 class _Frames:
     """Each frame the scene may name, as its (4, 4) pose in twin's base frame (see the module docstring)."""
 
-    def __init__(self, scene: _At, convention: FrameConvention):
+    def __init__(self, scene: _At, convention: FrameConvention, world_base_link: np.ndarray | None = None):
         edges: dict[str, list[tuple[str, np.ndarray, _At]]] = {}
 
         def connect(a: str, b: str, T_ab: np.ndarray, at: _At) -> None:
@@ -299,8 +302,8 @@ class _Frames:
                     raise t.error(f"transforms frame {parent!r} to itself by a non-identity")
                 continue
             connect(parent, child, T, t)
-        if "world" not in edges:  # a fixed arm: MoveIt's virtual joint world -> base_link is the identity
-            connect("world", "base_link", np.eye(4), scene)
+        if "world" not in edges:  # a fixed arm: MoveIt's virtual joint world -> base_link (identity unless told)
+            connect("world", "base_link", np.eye(4) if world_base_link is None else world_base_link, scene)
         self.known: dict[str, np.ndarray] = {"base": np.eye(4)}
         todo = ["base"]
         while todo:  # breadth first from twin's base frame; a second route to a frame must agree
@@ -621,6 +624,24 @@ def _config_ref(config: str | Path) -> tuple[str, Path]:
     return (path.name if shipped is not None and shipped.resolve() == path else str(path)), path
 
 
+@dataclass(frozen=True)
+class MoveItRobot:
+    """How a family of MoveIt files names and places the arm: config overrides that make twin's cell that
+    arm (`robot.model=ur5`), the joints of its gripper to ignore, and where its `base_link` stands in the
+    scenes' `world` frame (x, y, z, roll, pitch, yaw; None: at the origin)."""
+
+    overrides: tuple[str, ...] = ()
+    ignore_joints: tuple[str, ...] = ()
+    base_link_in_world: tuple[float, float, float, float, float, float] | None = None
+
+
+# MotionBenchMaker's robots (its URDFs: the scenes' `world` is the URDF root `offset_link`, and its
+# `offset_joint` places `base_link`; ur5_spherized.urdf in vamp-planner's resources/ur5)
+MOVEIT_ROBOTS: dict[str, MoveItRobot] = {
+    "ur5": MoveItRobot(("robot.model=ur5",), ("robotiq_85_*",), (0.0, 0.0, 0.9144, 0.0, 0.0, 1.57)),
+}
+
+
 def problem_set_from_moveit(
     scene: Source,
     requests: Sequence[Source],
@@ -631,6 +652,7 @@ def problem_set_from_moveit(
     seed: int = 0,
     frames: FrameConvention = "ur_description",
     ignore_joints: Iterable[str] = (),
+    robot: str | None = None,
 ) -> ProblemSet:
     """The problems of MoveIt motion plan requests in a MoveIt planning scene, for the robot of the twin
     `config` (a path or a shipped config's name; `twin compare` plans the set in that config's cell).
@@ -640,55 +662,19 @@ def problem_set_from_moveit(
     else its file stem). `time_limit_s`: every problem's (default: each request's allowed_planning_time,
     1 s when 0). `seed`: every problem's. `frames`: what `base_link` means in the files (module docstring):
     ROS's ur_description (default) or twin's URDF. `ignore_joints`: names or glob patterns of joints the
-    files may name besides the arm's (e.g. "robotiq_85_*", a gripper of another robot model).
+    files may name besides the arm's (e.g. "robotiq_85_*", a gripper of another robot model). `robot`: a
+    `MOVEIT_ROBOTS` name (MotionBenchMaker's "ur5"): its arm, gripper joints and base placement.
 
     Raises ConfigError (one line: file, key path, what is accepted) for anything it cannot read exactly.
     """
-    from twin.collision import PlanningScene
-    from twin.config import load_config
-
-    if frames not in ("ur_description", "twin"):
-        raise ConfigError(f"frames must be 'ur_description' or 'twin', got {frames!r}")
-    if time_limit_s is not None and not (math.isfinite(time_limit_s) and time_limit_s > 0):
-        raise ConfigError(f"time_limit_s must be a positive number of seconds, got {time_limit_s}")
-    if seed < 0:
-        raise ConfigError(f"seed must be >= 0, got {seed}")
+    _check_options(frames, time_limit_s, seed)
     if isinstance(requests, (str, Path, Mapping)):
         raise ConfigError("requests must be a list of MotionPlanRequest files or mappings")
     if not requests:
         raise ConfigError("no motion plan requests given (at least one MotionPlanRequest YAML is needed)")
-    config_ref, config_path = _config_ref(config)
-    settings = load_config(config_path)
-    cell = PlanningScene.from_settings(settings)  # the robot's collision model: what RobotSpec states
-    robot = _Robot(settings.robot.urdf, cell, ignore_joints)
-
+    reader = _Reader(config, frames, ignore_joints, robot)
     scene_at = _read(scene, "scene")
-    scene_at.mapping()
-    frame_tree = _Frames(scene_at, frames)
-    world = _world(scene_at, frame_tree, robot.model.root)
-    default_start = robot.state(scene_at["robot_state"])
-    set_name = name or scene_at["name"].text().strip() or (Path(scene).stem if not isinstance(scene, Mapping) else "")
-    set_name = set_name or "moveit"
-
-    problems = []
-    for i, src in enumerate(requests):
-        request = _read(src, f"request {i}")
-        request.mapping(known=_REQUEST_KEYS)
-        _reject_path_constraints(request)
-        start = robot.vector({**default_start, **robot.state(request["start_state"])}, request["start_state"], "start")
-        allowed = request["allowed_planning_time"].number(0.0)
-        if allowed < 0:
-            raise request["allowed_planning_time"].error(f"must be >= 0 s, got {allowed}")
-        limit = time_limit_s or allowed or 1.0
-        problems.append(
-            Problem(
-                id=f"{set_name}#{i}",
-                start=start,
-                goal=_goal(request, robot, frame_tree, start),
-                time_limit_s=limit,
-                seed=seed,
-            )
-        )
+    world, problems, set_name = reader.problems(scene, scene_at, requests, name, time_limit_s, seed)
     scene_ref = str(scene) if not isinstance(scene, Mapping) else "<scene>"
     return ProblemSet(
         name=set_name,
@@ -697,7 +683,7 @@ def problem_set_from_moveit(
             f"({len(world.objects)} objects; frames as in {frames})"
         ),
         source={
-            "config": config_ref,
+            **reader.source(),
             "moveit": {
                 "scene": scene_ref,
                 "requests": [
@@ -707,7 +693,137 @@ def problem_set_from_moveit(
                 "robot_model_name": scene_at["robot_model_name"].text(),
             },
         },
-        robot=robot_spec(cell, settings),
+        robot=reader.robot_spec,
         world=world,
         problems=problems,
     )
+
+
+def problem_set_from_moveit_dir(
+    directory: str | Path,
+    *,
+    config: str | Path = "robocup",
+    name: str | None = None,
+    time_limit_s: float | None = None,
+    seed: int = 0,
+    frames: FrameConvention = "ur_description",
+    ignore_joints: Iterable[str] = (),
+    robot: str | None = None,
+) -> ProblemSet:
+    """A directory of MotionBenchMaker pairs (`sceneNNNN.yaml` with `requestNNNN.yaml`, a scene per
+    request) as one problem set of version 2: problem `<name>#NNNN` in its own scene's world. The options
+    are `problem_set_from_moveit`'s; `name` defaults to the directory's name. A scene without its request
+    (or the other way round) is a one-line error naming it."""
+    _check_options(frames, time_limit_s, seed)
+    root = Path(directory)
+    if not root.is_dir():
+        raise ConfigError(f"{root} is not a directory of MotionBenchMaker scene/request pairs")
+    scenes = {m.group(1): p for p in root.glob("scene*.yaml") if (m := re.fullmatch(r"scene(\d+)\.yaml", p.name))}
+    requests = {m.group(1): p for p in root.glob("request*.yaml") if (m := re.fullmatch(r"request(\d+)\.yaml", p.name))}
+    if not scenes:
+        raise ConfigError(
+            f"{root}: no sceneNNNN.yaml files (MotionBenchMaker's layout: sceneNNNN.yaml + requestNNNN.yaml)"
+        )
+    lonely = sorted(set(scenes) ^ set(requests))
+    if lonely:
+        k = lonely[0]
+        have, missing = (
+            (f"scene{k}.yaml", f"request{k}.yaml") if k in scenes else (f"request{k}.yaml", f"scene{k}.yaml")
+        )
+        raise ConfigError(f"{root}: {have} has no {missing}")
+    set_name = name or root.name
+    reader = _Reader(config, frames, ignore_joints, robot)
+    problems: list[Problem] = []
+    n_objects = 0
+    for k in sorted(scenes, key=int):
+        scene_at = _read(scenes[k], "scene")
+        world, found, _ = reader.problems(scenes[k], scene_at, [requests[k]], set_name, time_limit_s, seed)
+        n_objects += len(world.objects)
+        problems += [p.model_copy(update={"id": f"{set_name}#{k}", "world": world}) for p in found]
+    return ProblemSet(
+        version=2,
+        name=set_name,
+        description=(
+            f"{len(problems)} MotionBenchMaker problems from {root}, each in its own scene "
+            f"({n_objects / len(problems):.1f} objects on average; frames as in {frames})"
+        ),
+        source={**reader.source(), "moveit": {"directory": str(root), "frames": frames, "robot": robot}},
+        robot=reader.robot_spec,
+        problems=problems,
+    )
+
+
+def _check_options(frames: str, time_limit_s: float | None, seed: int) -> None:
+    if frames not in ("ur_description", "twin"):
+        raise ConfigError(f"frames must be 'ur_description' or 'twin', got {frames!r}")
+    if time_limit_s is not None and not (math.isfinite(time_limit_s) and time_limit_s > 0):
+        raise ConfigError(f"time_limit_s must be a positive number of seconds, got {time_limit_s}")
+    if seed < 0:
+        raise ConfigError(f"seed must be >= 0, got {seed}")
+
+
+class _Reader:
+    """The robot cell MoveIt files are read for (the config, a `MOVEIT_ROBOTS` preset), and their requests
+    as problems in it."""
+
+    def __init__(self, config: str | Path, frames: FrameConvention, ignore_joints: Iterable[str], robot: str | None):
+        from twin.collision import PlanningScene
+        from twin.config import load_config
+
+        preset = MOVEIT_ROBOTS.get(robot) if robot is not None else MoveItRobot()
+        if preset is None:
+            raise ConfigError(f"unknown MoveIt robot {robot!r}; known: {', '.join(MOVEIT_ROBOTS)}")
+        self.frames, self.preset = frames, preset
+        self.config_ref, config_path = _config_ref(config)
+        settings = load_config(config_path, list(preset.overrides))
+        cell = PlanningScene.from_settings(settings)  # the robot's collision model: what RobotSpec states
+        self.robot = _Robot(settings.robot.urdf, cell, (*ignore_joints, *preset.ignore_joints))
+        self.robot_spec = robot_spec(cell, settings)
+        pose = preset.base_link_in_world
+        self.world_base_link = None if pose is None else pose_from_xyz_rpy(pose[:3], pose[3:])
+
+    def source(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"config": self.config_ref}
+        if self.preset.overrides:
+            out["overrides"] = list(self.preset.overrides)
+        return out
+
+    def problems(
+        self,
+        scene: Source,
+        scene_at: _At,
+        requests: Sequence[Source],
+        name: str | None,
+        time_limit_s: float | None,
+        seed: int,
+    ) -> tuple[WorldSpec, list[Problem], str]:
+        """(the scene's world, its requests as problems `<name>#<i>`, the set's name)."""
+        scene_at.mapping()
+        frame_tree = _Frames(scene_at, self.frames, self.world_base_link)
+        world = _world(scene_at, frame_tree, self.robot.model.root)
+        default_start = self.robot.state(scene_at["robot_state"])
+        set_name = (
+            name or scene_at["name"].text().strip() or (Path(scene).stem if not isinstance(scene, Mapping) else "")
+        )
+        set_name = set_name or "moveit"
+        problems = []
+        for i, src in enumerate(requests):
+            request = _read(src, f"request {i}")
+            request.mapping(known=_REQUEST_KEYS)
+            _reject_path_constraints(request)
+            start = self.robot.vector(
+                {**default_start, **self.robot.state(request["start_state"])}, request["start_state"], "start"
+            )
+            allowed = request["allowed_planning_time"].number(0.0)
+            if allowed < 0:
+                raise request["allowed_planning_time"].error(f"must be >= 0 s, got {allowed}")
+            problems.append(
+                Problem(
+                    id=f"{set_name}#{i}",
+                    start=start,
+                    goal=_goal(request, self.robot, frame_tree, start),
+                    time_limit_s=time_limit_s or allowed or 1.0,
+                    seed=seed,
+                )
+            )
+        return world, problems, set_name

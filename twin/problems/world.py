@@ -147,24 +147,26 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
         raise ConfigError(f"{source}: robot.joint_names {ps.robot.joint_names} are not the arm joints {joints}")
 
 
-def settings_for(ps: ProblemSet, base: Settings) -> Settings:
-    """`base` (robot, limits, collision settings) with the problem set's objects as its only fixtures and
-    no loose objects: the cell every problem of the set is planned and executed in. Perceived boxes are
-    fixtures marked `known: false` (in the physics; added to the planning scene as boxes)."""
+def settings_for(ps: ProblemSet, base: Settings, *, world: WorldSpec | None = None) -> Settings:
+    """`base` (robot, limits, collision settings) with the objects of `world` (default: the set's; a
+    problem's own: `ps.world_of(i)`) as its only fixtures and no loose objects: the cell a problem is
+    planned and executed in. Perceived boxes are fixtures marked `known: false` (in the physics; added to
+    the planning scene as boxes)."""
     from twin.config.schema import FixtureSettings
 
-    perceived = set(ps.world.perceived_boxes)
+    spec = ps.world if world is None else world
+    perceived = set(spec.perceived_boxes)
     fixtures = [
-        FixtureSettings(name=o.name, urdf=str(object_urdf(o)), known=o.name not in perceived) for o in ps.world.objects
+        FixtureSettings(name=o.name, urdf=str(object_urdf(o)), known=o.name not in perceived) for o in spec.objects
     ]
     objects = base.world.objects.model_copy(update={"items": []})
-    world = base.world.model_copy(update={"fixtures": fixtures, "objects": objects})
-    return base.model_copy(update={"world": world})
+    cell = base.world.model_copy(update={"fixtures": fixtures, "objects": objects})
+    return base.model_copy(update={"world": cell})
 
 
-def planning_scene(ps: ProblemSet, settings: Settings) -> PlanningScene:
-    """The planning scene of a problem set in the cell `settings_for` made: its fixtures, the held box
-    (attached to the TCP) and the gripper opening the set states."""
+def planning_scene(ps: ProblemSet, settings: Settings, *, world: WorldSpec | None = None) -> PlanningScene:
+    """The planning scene of a problem set in the cell `settings_for` made: its fixtures, the held box of
+    `world` (default the set's; attached to the TCP) and the gripper opening the set states."""
     from twin.collision import PlanningScene
 
     scene = PlanningScene.from_settings(settings)  # the known fixtures, the perceived ones as boxes
@@ -172,7 +174,7 @@ def planning_scene(ps: ProblemSet, settings: Settings) -> PlanningScene:
         ps.robot.gripper_opening_m, scene.gripper_opening, abs_tol=1e-9
     ):
         scene.set_gripper_opening(ps.robot.gripper_opening_m)
-    held = ps.world.held_object
+    held = (ps.world if world is None else world).held_object
     if held is not None:
         scene.attach_box(held.name, held.size, held.pose_in_tcp.matrix())
     return scene
