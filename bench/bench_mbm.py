@@ -1,0 +1,171 @@
+"""The field's own benchmark on the twin: MotionBenchMaker's UR5 suite (7 scenes x 100 problems), planned by
+twin's planners through twin's judge, beside the numbers VAMP publishes for it (issue 30). A plain script: it
+prints a table and asserts nothing.
+
+    python bench/bench_mbm.py [--planners ompl.rrtconnect,ompl.bitstar] [--time-limit 10] [--workers N]
+                              [--scenes box,cage] [--out out/bench-mbm]
+
+The problems come from vamp-planner 0.6.4's source distribution on the package index (pip downloads it into
+twin's cache, `$TWIN_CACHE/mbm`, once; nothing of it is committed): `resources/ur5/problems.tar.bz2`, MBM's
+`<scene>_ur5/sceneNNNN.yaml` + `requestNNNN.yaml`. Each directory is imported as `twin problems import-moveit
+DIR --robot ur5` does (a world per problem) and planned by `twin compare` for `robot.model: ur5` (twin's
+primitive UR5 with its 2F-85-like gripper) without execution: every plan is re-checked by the judge every
+0.01 rad / 1 cm of tool travel against the problem's scene and must end on the joint goal.
+
+Per scene: the problems, those valid in twin's model (start and goal collision-free), and per planner the
+problems solved, the median and 95th percentile of planning time and the median joint path length.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tarfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from twin.compare import compare_spec_from_dict, run_comparison
+from twin.problems import problem_set_from_moveit_dir, save_problem_set
+from twin.resources import cache_dir
+
+SDIST = "vamp-planner==0.6.4"
+SCENES = (
+    "table_pick",
+    "table_under_pick",
+    "box",
+    "bookshelf_small",
+    "bookshelf_tall",
+    "bookshelf_thin",
+    "cage",
+)
+# VAMP's README (0.6.4): UR5, its vectorised RRT-Connect, AMD Ryzen 9 7950X; and what its 0.6.4 sphere model
+# says is valid (VAMP's own C++ check compiled from the sdist, issue 30's note)
+VAMP = {
+    "valid_published": 608,
+    "valid_0.6.4_model": 689,
+    "planning_median_us": 39.0,
+    "total_median_us": 111.5,
+    "total_p95_us": 837.0,
+}
+INVALID = {"start_in_collision", "goal_in_collision"}
+
+
+def fetch(cache: Path) -> Path:
+    """The unpacked UR5 problems (`<cache>/ur5_problems/problems`), downloaded and unpacked on first use."""
+    problems = cache / "ur5_problems" / "problems"
+    if problems.is_dir():
+        return problems
+    sdists = sorted(cache.glob("vamp_planner-*.tar.gz"))
+    if not sdists:
+        cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--no-binary", "vamp-planner", SDIST]
+        print(f"fetching {SDIST} (source distribution, ~65 MB) into {cache}", flush=True)
+        subprocess.run([*cmd, "-d", str(cache)], check=True)
+        sdists = sorted(cache.glob("vamp_planner-*.tar.gz"))
+    with tarfile.open(sdists[-1]) as sd:
+        member = next(m for m in sd.getmembers() if m.name.endswith("resources/ur5/problems.tar.bz2"))
+        inner = sd.extractfile(member)
+        assert inner is not None
+        with tarfile.open(fileobj=inner, mode="r:bz2") as tb:
+            tb.extractall(cache / "ur5_problems", filter="data")
+    return problems
+
+
+def _row_stats(rows: list[dict[str, Any]]) -> tuple[int, int, str]:
+    """(valid, solved, 'median p95 path') of one planner's rows of one scene."""
+    valid = [r for r in rows if r.get("failure") not in INVALID]
+    solved = [r for r in valid if r.get("success")]
+    t = np.array([r["timing"]["planning_time_s"] for r in solved], dtype=float)
+    path = [r["metrics"]["joint_path_length_rad"] for r in solved if r["metrics"].get("joint_path_length_rad")]
+    if not solved:
+        return len(valid), 0, f"{'-':>9} {'-':>9} {'-':>7}"
+    return (
+        len(valid),
+        len(solved),
+        f"{1e3 * np.median(t):9.1f} {1e3 * np.percentile(t, 95):9.1f} {np.median(path) if path else float('nan'):7.2f}",
+    )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--planners", default="ompl.rrtconnect", help="comma-separated planner names")
+    ap.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per problem, s")
+    ap.add_argument("--workers", type=int, default=None, help="parallel runs (default: all CPUs)")
+    ap.add_argument("--scenes", default=",".join(SCENES), help="comma-separated MBM scenes")
+    ap.add_argument("--out", default="out/bench-mbm", help="folder for the problem sets and the comparison")
+    args = ap.parse_args()
+    out = Path(args.out)
+    (out / "sets").mkdir(parents=True, exist_ok=True)
+    problems = fetch(cache_dir("mbm"))
+    scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    scenarios = []
+    t0 = time.perf_counter()
+    for scene in scenes:
+        ps = problem_set_from_moveit_dir(
+            problems / f"{scene}_ur5", robot="ur5", name=scene, time_limit_s=args.time_limit
+        )
+        path = save_problem_set(ps, out / "sets" / f"{scene}.json")
+        scenarios.append({"name": scene, "scene": "robocup", "overrides": ["robot.model=ur5"], "problems": str(path)})
+    import_s = time.perf_counter() - t0
+    planners = [p.strip() for p in args.planners.split(",") if p.strip()]
+    spec = {
+        "name": "mbm-ur5",
+        "time_limit_s": args.time_limit,
+        "execute": False,
+        "planners": planners,
+        "scenarios": scenarios,
+    }
+    t1 = time.perf_counter()
+    result = run_comparison(compare_spec_from_dict(spec), out_dir=out / "compare", workers=args.workers, plots=False)
+    plan_s = time.perf_counter() - t1
+
+    print(f"\nMotionBenchMaker UR5 on twin ({os.cpu_count()} CPUs here), time limit {args.time_limit:g} s")
+    print(f"imported {len(scenes)} scenes in {import_s:.1f} s; planned {len(result.rows)} runs in {plan_s:.0f} s\n")
+    head = f"{'scene':<18} {'problems':>8} {'valid':>5}  {'planner':<22} {'solved':>7} "
+    head += f"{'med ms':>9} {'p95 ms':>9} {'path':>7}"
+    print(head)
+    print("-" * len(head))
+    totals: dict[str, list[int]] = {}
+    valid_total = n_total = 0
+    for scene in scenes:
+        mine = [r for r in result.rows if r["scenario"] == scene]
+        n = len({r["case"] for r in mine})
+        first = True
+        for planner in planners:
+            rows = [r for r in mine if r["planner"] == planner]
+            valid, solved, stats = _row_stats(rows)
+            if first:
+                valid_total += valid
+                n_total += n
+            lead = f"{scene:<18} {n:>8} {valid:>5}" if first else " " * 33
+            print(f"{lead}  {planner:<22} {solved:>3}/{valid:<3} {stats}")
+            t = totals.setdefault(planner, [0, 0])
+            t[0] += solved
+            t[1] += valid
+            first = False
+    print("-" * len(head))
+    for planner, (solved, valid) in totals.items():
+        rows = [r for r in result.rows if r["planner"] == planner]
+        _, _, stats = _row_stats(rows)
+        print(f"{'all':<18} {n_total:>8} {valid_total:>5}  {planner:<22} {solved:>3}/{valid:<3} {stats}")
+    print(
+        f"\nVAMP (README, vectorised RRT-Connect, Ryzen 9 7950X): valid {VAMP['valid_published']}/700 (its 0.6.4 "
+        f"sphere model: {VAMP['valid_0.6.4_model']}), solved all valid; "
+        f"planning median {VAMP['planning_median_us']:g} us, with simplification median "
+        f"{VAMP['total_median_us']:g} us, p95 {VAMP['total_p95_us']:g} us"
+    )
+    for planner in totals:
+        rows = [r for r in result.rows if r["planner"] == planner and r.get("success")]
+        if rows:
+            med = float(np.median([r["timing"]["planning_time_s"] for r in rows]))
+            ratio = med / (VAMP["total_median_us"] * 1e-6)
+            print(f"{planner}: median planning {1e3 * med:.1f} ms = {ratio:.0f}x VAMP's total median")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
