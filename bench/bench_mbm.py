@@ -5,10 +5,9 @@ prints a table and asserts nothing.
     python bench/bench_mbm.py [--planners ompl.rrtconnect,ompl.bitstar] [--time-limit 10] [--workers N]
                               [--scenes box,cage] [--out out/bench-mbm]
 
-The problems come from vamp-planner 0.6.4's source distribution on the package index (pip downloads it into
-twin's cache, `$TWIN_CACHE/mbm`, once; nothing of it is committed): `resources/ur5/problems.tar.bz2`, MBM's
-`<scene>_ur5/sceneNNNN.yaml` + `requestNNNN.yaml`. Each directory is imported as `twin problems import-moveit
-DIR --robot ur5` does (a world per problem) and planned by `twin compare` for `robot.model: ur5` (twin's
+The problems are `twin.problems.mbm`'s (vamp-planner 0.6.4's source distribution, fetched by pip into twin's
+cache once, each scene imported as `twin problems import-moveit DIR --robot ur5` does: a world per problem),
+planned by `twin compare` for `robot.model: ur5` (twin's
 primitive UR5 with its 2F-85-like gripper) without execution: every plan is re-checked by the judge every
 0.01 rad / 1 cm of tool travel against the problem's scene and must end on the joint goal.
 
@@ -20,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
-import tarfile
 import time
 from pathlib import Path
 from typing import Any
@@ -30,19 +27,8 @@ from typing import Any
 import numpy as np
 
 from twin.compare import compare_spec_from_dict, run_comparison
-from twin.problems import problem_set_from_moveit_dir, save_problem_set
-from twin.resources import cache_dir
+from twin.problems.mbm import SCENES, mbm_problem_set
 
-SDIST = "vamp-planner==0.6.4"
-SCENES = (
-    "table_pick",
-    "table_under_pick",
-    "box",
-    "bookshelf_small",
-    "bookshelf_tall",
-    "bookshelf_thin",
-    "cage",
-)
 # VAMP's README (0.6.4): UR5, its vectorised RRT-Connect, AMD Ryzen 9 7950X; and what its 0.6.4 sphere model
 # says is valid (VAMP's own C++ check compiled from the sdist, issue 30's note)
 VAMP = {
@@ -53,26 +39,6 @@ VAMP = {
     "total_p95_us": 837.0,
 }
 INVALID = {"start_in_collision", "goal_in_collision"}
-
-
-def fetch(cache: Path) -> Path:
-    """The unpacked UR5 problems (`<cache>/ur5_problems/problems`), downloaded and unpacked on first use."""
-    problems = cache / "ur5_problems" / "problems"
-    if problems.is_dir():
-        return problems
-    sdists = sorted(cache.glob("vamp_planner-*.tar.gz"))
-    if not sdists:
-        cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--no-binary", "vamp-planner", SDIST]
-        print(f"fetching {SDIST} (source distribution, ~65 MB) into {cache}", flush=True)
-        subprocess.run([*cmd, "-d", str(cache)], check=True)
-        sdists = sorted(cache.glob("vamp_planner-*.tar.gz"))
-    with tarfile.open(sdists[-1]) as sd:
-        member = next(m for m in sd.getmembers() if m.name.endswith("resources/ur5/problems.tar.bz2"))
-        inner = sd.extractfile(member)
-        assert inner is not None
-        with tarfile.open(fileobj=inner, mode="r:bz2") as tb:
-            tb.extractall(cache / "ur5_problems", filter="data")
-    return problems
 
 
 def _row_stats(rows: list[dict[str, Any]]) -> tuple[int, int, str]:
@@ -96,20 +62,21 @@ def main() -> int:
     ap.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per problem, s")
     ap.add_argument("--workers", type=int, default=None, help="parallel runs (default: all CPUs)")
     ap.add_argument("--scenes", default=",".join(SCENES), help="comma-separated MBM scenes")
-    ap.add_argument("--out", default="out/bench-mbm", help="folder for the problem sets and the comparison")
+    ap.add_argument("--out", default="out/bench-mbm", help="folder for the comparison")
     args = ap.parse_args()
     out = Path(args.out)
-    (out / "sets").mkdir(parents=True, exist_ok=True)
-    problems = fetch(cache_dir("mbm"))
     scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
-    scenarios = []
     t0 = time.perf_counter()
-    for scene in scenes:
-        ps = problem_set_from_moveit_dir(
-            problems / f"{scene}_ur5", robot="ur5", name=scene, time_limit_s=args.time_limit
-        )
-        path = save_problem_set(ps, out / "sets" / f"{scene}.json")
-        scenarios.append({"name": scene, "scene": "robocup", "overrides": ["robot.model=ur5"], "problems": str(path)})
+    scenarios = [
+        {
+            "name": scene,
+            "scene": "robocup",
+            "overrides": ["robot.model=ur5"],
+            "problems": str(mbm_problem_set(f"ur5/{scene}")),  # fetched and imported on first use
+            "time_limit_s": args.time_limit,
+        }
+        for scene in scenes
+    ]
     import_s = time.perf_counter() - t0
     planners = [p.strip() for p in args.planners.split(",") if p.strip()]
     spec = {
@@ -120,7 +87,7 @@ def main() -> int:
         "scenarios": scenarios,
     }
     t1 = time.perf_counter()
-    result = run_comparison(compare_spec_from_dict(spec), out_dir=out / "compare", workers=args.workers, plots=False)
+    result = run_comparison(compare_spec_from_dict(spec), out_dir=out, workers=args.workers, plots=False)
     plan_s = time.perf_counter() - t1
 
     print(f"\nMotionBenchMaker UR5 on twin ({os.cpu_count()} CPUs here), time limit {args.time_limit:g} s")

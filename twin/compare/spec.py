@@ -770,9 +770,15 @@ def _resolve_configs(spec: CompareSpec, base: Path, source: str) -> CompareSpec:
 
 
 def _problem_set(ref: str, base: Path, where: str) -> tuple[ProblemSet, str]:
-    """Load a scenario's problem set (a path relative to the comparison file); ConfigError naming it."""
-    path = Path(ref) if Path(ref).is_absolute() else base / ref
+    """Load a scenario's problem set (a path relative to the comparison file, or `mbm:ur5/<scene>`:
+    MotionBenchMaker's, `twin.problems.mbm`); ConfigError naming it."""
     try:
+        if ref.startswith("mbm:"):
+            from twin.problems.mbm import mbm_problem_set
+
+            path = mbm_problem_set(ref.removeprefix("mbm:"))
+        else:
+            path = Path(ref) if Path(ref).is_absolute() else base / ref
         return load_problem_set(path), str(path.resolve())
     except ConfigError as e:
         raise ConfigError(f"{where}: {e}") from None
