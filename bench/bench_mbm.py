@@ -3,12 +3,13 @@ twin's planners through twin's judge, beside the numbers VAMP publishes for it (
 prints a table and asserts nothing.
 
     python bench/bench_mbm.py [--planners ompl.rrtconnect,ompl.bitstar] [--time-limit 10] [--workers N]
-                              [--scenes box,cage] [--out out/bench-mbm]
+                              [--scenes box,cage] [--out out/bench-mbm] [--robot-urdf twin|spherized]
 
 The problems are `twin.problems.mbm`'s (vamp-planner 0.6.4's source distribution, fetched by pip into twin's
 cache once, each scene imported as `twin problems import-moveit DIR --robot ur5` does: a world per problem),
 planned by `twin compare` for `robot.model: ur5` (twin's
-primitive UR5 with its 2F-85-like gripper) without execution: every plan is re-checked by the judge every
+primitive UR5 with its 2F-85-like gripper, or with `--robot-urdf spherized` MBM's own spheres-only model of the
+UR5 and its Robotiq gripper, the one VAMP checks) without execution: every plan is re-checked by the judge every
 0.01 rad / 1 cm of tool travel against the problem's scene and must end on the joint goal.
 
 Per scene: the problems, those valid in twin's model (start and goal collision-free), and per planner the
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from twin.compare import compare_spec_from_dict, run_comparison
-from twin.problems.mbm import SCENES, mbm_problem_set
+from twin.problems.mbm import SCENES, mbm_problem_set, mbm_spherized_urdf
 
 # VAMP's README (0.6.4): UR5, its vectorised RRT-Connect, AMD Ryzen 9 7950X; and what its 0.6.4 sphere model
 # says is valid (VAMP's own C++ check compiled from the sdist, issue 30's note)
@@ -63,15 +64,24 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=None, help="parallel runs (default: all CPUs)")
     ap.add_argument("--scenes", default=",".join(SCENES), help="comma-separated MBM scenes")
     ap.add_argument("--out", default="out/bench-mbm", help="folder for the comparison")
+    ap.add_argument(
+        "--robot-urdf",
+        choices=("twin", "spherized"),
+        default="twin",
+        help="collision model: twin's primitive UR5 (default) or MBM's ur5_spherized.urdf (VAMP's)",
+    )
     args = ap.parse_args()
     out = Path(args.out)
     scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
     t0 = time.perf_counter()
+    overrides = ["robot.model=ur5"]
+    if args.robot_urdf == "spherized":
+        overrides.append(f"robot.urdf={mbm_spherized_urdf()}")
     scenarios = [
         {
             "name": scene,
             "scene": "robocup",
-            "overrides": ["robot.model=ur5"],
+            "overrides": overrides,
             "problems": str(mbm_problem_set(f"ur5/{scene}")),  # fetched and imported on first use
             "time_limit_s": args.time_limit,
         }
@@ -90,7 +100,8 @@ def main() -> int:
     result = run_comparison(compare_spec_from_dict(spec), out_dir=out, workers=args.workers, plots=False)
     plan_s = time.perf_counter() - t1
 
-    print(f"\nMotionBenchMaker UR5 on twin ({os.cpu_count()} CPUs here), time limit {args.time_limit:g} s")
+    model = "MBM's ur5_spherized.urdf" if args.robot_urdf == "spherized" else "twin's urdf/ur5.urdf"
+    print(f"\nMotionBenchMaker UR5 on twin ({os.cpu_count()} CPUs here), {model}, time limit {args.time_limit:g} s")
     print(f"imported {len(scenes)} scenes in {import_s:.1f} s; planned {len(result.rows)} runs in {plan_s:.0f} s\n")
     head = f"{'scene':<18} {'problems':>8} {'valid':>5}  {'planner':<22} {'solved':>7} "
     head += f"{'med ms':>9} {'p95 ms':>9} {'path':>7}"

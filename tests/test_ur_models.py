@@ -102,10 +102,14 @@ def test_twin_ships_a_urdf_per_arm_that_matches_its_dh() -> None:
     for name in UR_MODELS:
         text = (root / f"{name}.urdf").read_text()
         assert text == arm_urdf(name), f"urdf/{name}.urdf is stale: python -m twin.ur_urdf"  # ur5e: the hand-written
-        assert URArm(model=name).urdf_mismatch(RobotModel.from_string(text)) is None
+        model = RobotModel.from_string(text)
+        assert np.array_equal(URArm(model=name).urdf_base(model), np.eye(4))  # rooted at the arm's base
+        assert URArm(model=name).urdf_mismatch(model) is None
         assert load_config("robocup", [f"robot.model={name}"]).robot.urdf == f"urdf/{name}.urdf"
-    # a URDF of another arm is refused where the planners would use it, in one line naming the joint
-    with pytest.raises(ConfigError, match=r"not the arm of robot.model ur5: joint shoulder_lift_joint: .* mm off"):
+    # a URDF of another arm is refused where the planners would use it, in one line naming the joint (its base
+    # placed as well as it goes: the UR5e's shoulder, 73.3 mm higher, puts its root below the UR5's base)
+    wrong = r"not the arm of robot.model ur5: joint wrist_1_joint: .* root placed 73.3 mm"
+    with pytest.raises(ConfigError, match=wrong):
         PlanningScene.from_settings(load_config("robocup", ["robot.model=ur5", "robot.urdf=urdf/ur5e.urdf"]))
 
 
@@ -147,3 +151,28 @@ def test_the_mpc_planners_refuse_an_arm_their_sphere_models_do_not_cover() -> No
     settings = load_config("robocup", ["robot.model=ur10e"])
     with pytest.raises(ConfigError, match=r"sphere model of the arm is the UR5e's; robot\.model ur10e"):
         make_planner("nmpc", context=make_context(settings))
+
+
+def test_a_urdf_rooted_above_the_arm_is_placed_on_the_base_in_plan_and_physics(tmp_path) -> None:
+    """twin's UR5e under a world link (0.5 m below its base, a quarter turn): the planning scene and the physics
+    both put the arm's base at the origin, so their links agree with the DH kinematics."""
+    from pathlib import Path
+
+    from twin.collision import PlanningScene
+    from twin.world import World
+
+    text = (Path(__file__).resolve().parent.parent / "urdf" / "ur5e.urdf").read_text()
+    mount = (
+        '<link name="mount"/><joint name="mount_joint" type="fixed"><parent link="mount"/><child link="base_link"/>'
+        '<origin xyz="0.1 0 0.5" rpy="0 0 1.5707963267948966"/></joint>'
+    )
+    urdf = tmp_path / "ur5e_mounted.urdf"
+    urdf.write_text(text.replace("</robot>", mount + "</robot>"))
+    settings = load_config("robocup", [f"robot.urdf={urdf}"])
+    arm = URArm(model="ur5e")
+    q = np.array([0.4, -1.2, 1.3, -1.7, -1.5, 0.3])
+    scene = PlanningScene.from_settings(settings)
+    assert np.allclose(scene.link_poses(q)["tcp"], arm.fk(q), atol=1e-9)
+    with World(settings, seed=0, renderer="tiny") as world:
+        world.reset_joints(q)
+        assert np.allclose(world.link_matrix("tcp"), arm.fk(q), atol=1e-5)

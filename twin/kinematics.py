@@ -163,6 +163,31 @@ class DHParameters:
     alpha: np.ndarray
 
 
+def _axes_frame(p1: np.ndarray, a1: np.ndarray, p2: np.ndarray, a2: np.ndarray) -> np.ndarray:
+    """(4, 4) frame of two joint axes (point, unit direction): x along the first, y the second's direction
+    square to it, origin the point of the first axis nearest the second (identity rotation when parallel)."""
+    T = np.eye(4)
+    T[:3, 3] = p1
+    b = float(a1 @ a2)
+    y = a2 - b * a1
+    if np.linalg.norm(y) < 1e-9:
+        return T
+    y = y / np.linalg.norm(y)
+    w = p1 - p2
+    T[:3, :3] = np.column_stack([a1, y, np.cross(a1, y)])
+    T[:3, 3] += (b * float(a2 @ w) - float(a1 @ w)) / (1.0 - b * b) * a1
+    return T
+
+
+def _root_note(root_pose: np.ndarray) -> str:
+    """', its root placed ... from the arm's base' for a URDF `urdf_base` moved; '' for one rooted at the base."""
+    if np.array_equal(root_pose, np.eye(4)):
+        return ""
+    turn = math.acos(max(-1.0, min(1.0, (float(np.trace(root_pose[:3, :3])) - 1.0) / 2.0)))
+    shift = float(np.linalg.norm(root_pose[:3, 3]))
+    return f" (with its root placed {shift * 1e3:.3g} mm and {turn:.3g} rad from the arm's base)"
+
+
 def _tool(frame: str, tcp_offset_m: float) -> np.ndarray:
     if frame not in _FRAMES:
         raise InvalidRequestError(f"unknown frame {frame!r}; allowed: {', '.join(_FRAMES)}")
@@ -203,12 +228,41 @@ class URArm:
         """The arm of a config: `robot.model`."""
         return cls(model=settings.robot.model)
 
+    def urdf_base(self, model: RobotModel) -> np.ndarray:
+        """(4, 4) pose of a URDF's root link in this arm's base frame, from the first two arm joints at q = 0:
+        the base axis on the URDF's first joint axis, turned so the second joint's axis is where the DH
+        puts it, and the two axes crossing where the DH has them cross. The identity (exactly, within 1e-9)
+        for twin's URDFs, whose root is the base; a world link above the arm, or a base_link turned a half
+        turn from the controller's base (ur_description before 2020), otherwise. `urdf_mismatch` then checks
+        every joint and the flange in that frame."""
+        if len(model.arm_joints) < 2:
+            return np.eye(4)
+        q0 = np.zeros((1, 6))
+        poses = np.linalg.inv(model.root_pose) @ model.link_pose_array(q0)[0]
+        axes = []
+        for name in model.arm_joints[:2]:
+            j = model.joints[name]
+            F = poses[model.link_index[j.parent]] @ j.origin
+            axes += [F[:3, 3], F[:3, :3] @ j.axis]
+        dh = self.dh_frames(q0)[0]
+        root = _axes_frame(dh[0, :3, 3], dh[0, :3, 2], dh[1, :3, 3], dh[1, :3, 2]) @ np.linalg.inv(_axes_frame(*axes))
+        return np.eye(4) if float(np.abs(root - np.eye(4)).max()) < 1e-9 else root
+
+    def fit_urdf(self, model: RobotModel) -> RobotModel:
+        """A URDF model in this arm's base frame (`urdf_base`), with a `tcp` frame at this arm's TCP (tool0 +
+        `tcp_offset_m` along z) when the URDF has none (a collision model without twin's gripper). Check it
+        with `urdf_mismatch`."""
+        fitted = model.rebased(self.urdf_base(model))
+        if "tcp" not in fitted.link_index and "tool0" in fitted.link_index:
+            fitted = fitted.with_frame("tcp", "tool0", self._tool["tcp"])
+        return fitted
+
     def urdf_mismatch(self, model: RobotModel, *, samples: int = 16, tol: float = 1e-6) -> str | None:
         """Where a robot URDF's arm differs from this arm's DH kinematics, in words; None when it matches.
 
         Checked on `samples` seeded configurations: each arm joint's axis must lie on the DH axis it stands
         for (z of DH frame i-1: the same line, the same direction) and tool0 must be the DH flange, within
-        `tol` (m, rad). The URDF's root must be the DH base frame."""
+        `tol` (m, rad), in the model's base frame (`fit_urdf` puts a URDF there)."""
         if "tool0" not in model.link_index:
             return "it has no tool0 link (the flange)"
         qs = np.random.default_rng(0).uniform(-math.pi, math.pi, (samples, 6))
@@ -223,12 +277,14 @@ class URArm:
             tilt = float(np.abs(axis - z).max())
             off = float(np.linalg.norm(np.cross(frame[:, :3, 3] - o, z), axis=1).max())
             if tilt > tol or off > tol:
-                return f"joint {name}: its axis is {off * 1e3:.3g} mm off and {tilt:.3g} rad turned from DH axis {i}"
+                why = f"joint {name}: its axis is {off * 1e3:.3g} mm off and {tilt:.3g} rad turned from DH axis {i}"
+                return why + _root_note(model.root_pose)
         flange = poses[:, model.link_index["tool0"]]
         err_p = float(np.abs(flange[:, :3, 3] - dh[:, 6, :3, 3]).max())
         err_r = float(np.abs(flange[:, :3, :3] - dh[:, 6, :3, :3]).max())
         if err_p > tol or err_r > tol:
-            return f"tool0 is {err_p * 1e3:.3g} mm and {err_r:.3g} (rotation entries) from the DH flange"
+            why = f"tool0 is {err_p * 1e3:.3g} mm and {err_r:.3g} (rotation entries) from the DH flange"
+            return why + _root_note(model.root_pose)
         return None
 
     # ---- forward kinematics -------------------------------------------------------------------

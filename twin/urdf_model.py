@@ -251,6 +251,9 @@ class RobotModel:
     joint) are set from `finger_opening`, the total width between the fingers in m, each finger moving
     half of it along its axis (clipped to its limits). Every other movable joint sits at 0 unless given
     in `joint_values`; mimic joints follow their leader.
+
+    Poses are in the model's base frame, where the root link sits at `root_pose` (identity unless the
+    model was `rebased`: a URDF whose root is not the arm's base, e.g. a world link above it).
     """
 
     def __init__(
@@ -291,6 +294,7 @@ class RobotModel:
                 raise ConfigError(f"{source}: {n!r} is not a movable joint of {self.name!r}")
         self.arm_joints: tuple[str, ...] = tuple(arm_joints)
         self.gripper_joints: tuple[str, ...] = tuple(gripper_joints)
+        self.root_pose: np.ndarray = np.eye(4)
 
     def _topo(self, by_parent: dict[str, list[Joint]]) -> list[Joint]:
         out: list[Joint] = []
@@ -316,6 +320,28 @@ class RobotModel:
         """Read URDF XML text."""
         name, links, joints = _parse("<string>", text)
         return cls(name, links, joints, **kwargs)  # type: ignore[arg-type]
+
+    def rebased(self, root_pose: np.ndarray) -> RobotModel:
+        """A copy whose poses are in another base frame, where the root link sits at `root_pose` (4, 4)."""
+        new = self._copy(self.links, self.joints)
+        new.root_pose = np.array(root_pose, dtype=float)
+        return new
+
+    def with_frame(self, name: str, parent: str, origin: np.ndarray) -> RobotModel:
+        """A copy with one more link `name` without shapes, fixed at `origin` (4, 4) in link `parent` (a
+        frame the URDF lacks, such as a tool centre point). ConfigError when `name` exists or `parent` does
+        not."""
+        if name in self.links or parent not in self.links:
+            raise ConfigError(f"{self.source}: cannot add frame {name!r} on {parent!r} (exists, or no such parent)")
+        joint = Joint(f"{name}_frame_joint", "fixed", parent, name, np.array(origin, dtype=float), np.zeros(3))
+        new = self._copy({**self.links, name: Link(name)}, {**self.joints, joint.name: joint})
+        new.root_pose = self.root_pose.copy()
+        return new
+
+    def _copy(self, links: Mapping[str, Link], joints: Mapping[str, Joint]) -> RobotModel:
+        return RobotModel(
+            self.name, links, joints, arm_joints=self.arm_joints, gripper_joints=self.gripper_joints, source=self.source
+        )
 
     # ---- structure ----------------------------------------------------------------------------
     def parent_link(self, link: str) -> str | None:
@@ -366,11 +392,11 @@ class RobotModel:
     def link_pose_array(
         self, q_arm: np.ndarray, *, finger_opening: float | None = None, joint_values: Mapping[str, float] | None = None
     ) -> np.ndarray:
-        """(n, L, 4, 4) pose of every link (order `link_names`) in the root frame for (n, 6) q_arm."""
+        """(n, L, 4, 4) pose of every link (order `link_names`) in the base frame for (n, 6) q_arm."""
         vals = self.joint_values(q_arm, finger_opening=finger_opening, joint_values=joint_values)
         n = vals.shape[0]
         out = np.empty((n, len(self.link_names), 4, 4))
-        out[:, 0] = np.eye(4)
+        out[:, 0] = self.root_pose
         for k, j in enumerate(self.joint_order):
             parent = out[:, self.link_index[j.parent]]
             T = parent @ j.origin
@@ -385,7 +411,7 @@ class RobotModel:
     def link_poses(
         self, q_arm: np.ndarray, *, finger_opening: float | None = None, joint_values: Mapping[str, float] | None = None
     ) -> dict[str, np.ndarray]:
-        """{link: (n, 4, 4)} pose of every link in the root (robot base) frame for (n, 6) q_arm."""
+        """{link: (n, 4, 4)} pose of every link in the base frame for (n, 6) q_arm."""
         arr = self.link_pose_array(q_arm, finger_opening=finger_opening, joint_values=joint_values)
         return {name: arr[:, i] for i, name in enumerate(self.link_names)}
 

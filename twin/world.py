@@ -34,7 +34,7 @@ import pybullet as pb
 
 from twin.assets import marker_quad_obj
 from twin.config import Settings
-from twin.kinematics import JOINT_NAMES
+from twin.kinematics import JOINT_NAMES, URArm
 from twin.types import matrix_to_quat
 
 if TYPE_CHECKING:
@@ -53,6 +53,7 @@ from twin.scene_layout import (
 )
 from twin.timing import stage
 from twin.transforms import rpy_to_matrix
+from twin.urdf_model import RobotModel
 
 __all__ = [
     "ARM_JOINT_NAMES",
@@ -307,11 +308,15 @@ class World:
 
     def _load_robot(self) -> None:
         c = self._cid
+        urdf = self._urdf(self.settings.robot.urdf)
+        # the URDF's root where the arm's base is the world origin (a root above the arm: `URArm.urdf_base`)
+        model = RobotModel.from_urdf(urdf)
+        root = URArm.from_settings(self.settings).urdf_base(model)
         try:
             self.robot_id = pb.loadURDF(
-                self._urdf(self.settings.robot.urdf),
-                [0, 0, 0],
-                [0, 0, 0, 1],
+                urdf,
+                root[:3, 3].tolist(),
+                [0, 0, 0, 1] if np.array_equal(root, np.eye(4)) else matrix_to_quat(root[:3, :3]).tolist(),
                 useFixedBase=True,
                 flags=_URDF_FLAGS,
                 physicsClientId=c,
@@ -320,15 +325,15 @@ class World:
             raise WorldError(f"cannot load robot URDF {self.settings.robot.urdf}: {e}") from None
         self._bodies["robot"] = self.robot_id
         self._joint_index: dict[str, int] = {}
-        self._link_index: dict[str, int] = {"base_link": -1}
+        self._link_index: dict[str, int] = {model.root: -1}
         for j in range(pb.getNumJoints(self.robot_id, physicsClientId=c)):
             info = pb.getJointInfo(self.robot_id, j, physicsClientId=c)
             self._joint_index[info[1].decode()] = j
             self._link_index[info[12].decode()] = j
         missing = [n for n in ARM_JOINT_NAMES + FINGER_JOINT_NAMES if n not in self._joint_index]
         missing += [n for n in ("tool0", "tcp") + _FINGER_LINKS if n not in self._link_index]
-        if missing:
-            raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing}")
+        if missing:  # a collision model without twin's gripper plans (`execute: false`) but cannot run physics
+            raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing} the physics needs")
         self._arm = [self._joint_index[n] for n in ARM_JOINT_NAMES]
         self._fingers = [self._joint_index[n] for n in FINGER_JOINT_NAMES]
         for link in _FINGER_LINKS:

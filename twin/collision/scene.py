@@ -116,7 +116,7 @@ class PlanningScene:
 
     def __init__(
         self,
-        robot_urdf: str | Path,
+        robot_urdf: str | Path | RobotModel,
         *,
         fixtures: Sequence[FixtureSpec] = (),
         padding_m: float = 0.0,
@@ -128,7 +128,7 @@ class PlanningScene:
     ):
         self.padding_m = _check_padding(padding_m)
         self.sphere_filter = bool(sphere_filter)
-        model = RobotModel.from_urdf(robot_urdf)
+        model = robot_urdf if isinstance(robot_urdf, RobotModel) else RobotModel.from_urdf(robot_urdf)
         self._init_robot(model, tcp_link=tcp_link, finger_opening_m=finger_opening_m)
         self._set_rules(
             CollisionRules.from_model(
@@ -243,7 +243,8 @@ class PlanningScene:
 
     @classmethod
     def from_settings(cls, settings: Settings, *, unknown_fixtures: UnknownFixtures = "box") -> PlanningScene:
-        """The cell of a config: robot from settings.robot.urdf (gripper fully open), fixtures from
+        """The cell of a config: robot from settings.robot.urdf (gripper fully open; in the arm's base frame,
+        with the arm's TCP where the URDF has no tcp link: `URArm.fit_urdf`), fixtures from
         settings.world.fixtures, padding from settings.collision.padding_m, the sphere filter from
         settings.collision.sphere_filter; the home posture is an exclusion reference.
 
@@ -260,16 +261,18 @@ class PlanningScene:
             for f in settings.world.fixtures
             if f.known
         ]
+        from twin.kinematics import URArm
+
+        arm = URArm.from_settings(settings)
+        model = arm.fit_urdf(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
         scene = cls(
-            settings.resolve(settings.robot.urdf),
+            model,
             fixtures=fixtures,
             padding_m=settings.collision.padding_m,
             reference_configs=[settings.robot.home],
             sphere_filter=settings.collision.sphere_filter,
         )
-        from twin.kinematics import URArm
-
-        wrong = URArm.from_settings(settings).urdf_mismatch(scene.model)
+        wrong = arm.urdf_mismatch(scene.model)
         if wrong is not None:  # the planners plan with the DH kinematics: the collision model must be that arm
             raise ConfigError(
                 f"robot.urdf {settings.robot.urdf} is not the arm of robot.model {settings.robot.model}: {wrong}"
@@ -290,7 +293,8 @@ class PlanningScene:
         A + u*B + v*C with u = sin q, v = 1 - cos q (revolute, Rodrigues) or u = q, v = 0 (prismatic)."""
         m = self.model
         L0 = m.link_pose_array(np.zeros((1, 6)), finger_opening=self._opening)[0]
-        F0inv = [np.linalg.inv(L0[m.link_index[ln]]) for ln in self._frame_links]
+        # frame 0 is the base frame itself (the root link sits at the model's root_pose in it)
+        F0inv = [np.eye(4)] + [np.linalg.inv(L0[m.link_index[ln]]) for ln in self._frame_links[1:]]
         J = np.empty((6, 4, 4))
         for k, name in enumerate(m.arm_joints):
             j = m.joints[name]
@@ -371,7 +375,8 @@ class PlanningScene:
         self._moving_manager.setup()
         # clearance leaves out the shoulder: it only turns about the base axis, so its distance to the
         # cell is the same in every configuration and would hide what the arm does
-        turning = {ln for ln in self.model.link_names if self.model.rigid_parent(ln) in ("base_link", "shoulder_link")}
+        m = self.model
+        turning = {ln for ln in m.link_names if m.rigid_parent(ln) in (m.root, m.joints[m.arm_joints[0]].child)}
         self._clear_objects = [objects[i] for i in self._moving if nodes[i] not in turning]
         self._clear_manager = fcl.DynamicAABBTreeCollisionManager()
         self._clear_manager.registerObjects(self._clear_objects)

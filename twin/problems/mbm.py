@@ -6,15 +6,17 @@ ur5` does and kept in the cache."""
 
 from __future__ import annotations
 
+import io
 import os
 import subprocess
 import sys
 import tarfile
 from pathlib import Path
+from typing import IO
 
 from twin.errors import ConfigError
 
-__all__ = ["MBM_PREFIX", "SCENES", "SDIST", "mbm_problem_set", "mbm_problems_dir"]
+__all__ = ["MBM_PREFIX", "SCENES", "SDIST", "mbm_problem_set", "mbm_problems_dir", "mbm_spherized_urdf"]
 
 MBM_PREFIX = "mbm:"  # `problems: mbm:ur5/box` in a comparison scenario
 SDIST = "vamp-planner==0.6.4"
@@ -31,10 +33,28 @@ def _cache() -> Path:
 def mbm_problems_dir() -> Path:
     """MBM's unpacked UR5 problems (`<cache>/mbm/ur5_problems/problems`), downloaded and unpacked on first use;
     ConfigError when pip cannot fetch the source distribution."""
+    problems = _cache() / "ur5_problems" / "problems"
+    if not problems.is_dir():
+        with tarfile.open(fileobj=_sdist_member("resources/ur5/problems.tar.bz2"), mode="r:bz2") as tb:
+            tb.extractall(_cache() / "ur5_problems", filter="data")
+    return problems
+
+
+def mbm_spherized_urdf() -> Path:
+    """MBM's spheres-only collision model of the UR5 with its Robotiq 2F-85 (`ur5_spherized.urdf`, the model
+    VAMP plans with; root `offset_link`, the world frame of the problems), taken from the sdist on first use.
+    Usable as `robot.urdf` with `robot.model: ur5` for planning (no finger joints: it cannot run physics)."""
+    path = _cache() / "ur5_spherized.urdf"
+    if not path.is_file():
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(_sdist_member("resources/ur5/ur5_spherized.urdf").read())
+        os.replace(tmp, path)
+    return path
+
+
+def _sdist_member(suffix: str) -> IO[bytes]:
+    """A file of the vamp-planner sdist (downloaded into the cache by pip once), by the end of its path."""
     cache = _cache()
-    problems = cache / "ur5_problems" / "problems"
-    if problems.is_dir():
-        return problems
     sdists = sorted(cache.glob("vamp_planner-*.tar.gz"))
     if not sdists:
         cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--no-binary", "vamp-planner", SDIST]
@@ -44,12 +64,11 @@ def mbm_problems_dir() -> Path:
             why = (done.stderr.strip().splitlines() or ["no file"])[-1]
             raise ConfigError(f"cannot fetch MotionBenchMaker's problems ({SDIST} from the package index): {why}")
     with tarfile.open(sdists[-1]) as sd:
-        member = next(m for m in sd.getmembers() if m.name.endswith("resources/ur5/problems.tar.bz2"))
-        inner = sd.extractfile(member)
-        assert inner is not None
-        with tarfile.open(fileobj=inner, mode="r:bz2") as tb:
-            tb.extractall(cache / "ur5_problems", filter="data")
-    return problems
+        member = next((m for m in sd.getmembers() if m.name.endswith(suffix)), None)
+        inner = sd.extractfile(member) if member is not None else None
+        if inner is None:
+            raise ConfigError(f"{sdists[-1]} has no {suffix}")
+        return io.BytesIO(inner.read())
 
 
 def mbm_problem_set(name: str) -> Path:

@@ -135,16 +135,31 @@ def object_urdf(obj: CollisionObject) -> Path:
 
 
 def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem set") -> None:
-    """ConfigError unless the problem set's robot is the one `settings` loads (same URDF file name, same
+    """ConfigError unless the problem set's robot is the one `settings` loads (same URDF file name, or another
+    collision model of the same arm: the set's URDF, where it is at hand, fits the config's `robot.model`; same
     arm joints in the same order)."""
     from twin.urdf_model import RobotModel
 
     want, have = Path(ps.robot.urdf).name, Path(settings.robot.urdf).name
-    if want != have:
-        raise ConfigError(f"{source}: robot {ps.robot.urdf!r} is not the scene config's robot {settings.robot.urdf!r}")
+    if want != have and not _same_arm(settings.resolve(ps.robot.urdf), settings):
+        raise ConfigError(
+            f"{source}: robot {ps.robot.urdf!r} is not the scene config's robot {settings.robot.urdf!r} "
+            f"(nor the arm of its robot.model {settings.robot.model})"
+        )
     joints = list(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)).arm_joints)
     if list(ps.robot.joint_names) != joints:
         raise ConfigError(f"{source}: robot.joint_names {ps.robot.joint_names} are not the arm joints {joints}")
+
+
+def _same_arm(urdf: Path, settings: Settings) -> bool:
+    """Whether a URDF file is the arm of `settings.robot.model` (its joints on the arm's DH axes)."""
+    from twin.kinematics import URArm
+    from twin.urdf_model import RobotModel
+
+    if not urdf.is_file():
+        return False
+    arm = URArm.from_settings(settings)
+    return arm.urdf_mismatch(arm.fit_urdf(RobotModel.from_urdf(urdf))) is None
 
 
 def settings_for(ps: ProblemSet, base: Settings, *, world: WorldSpec | None = None) -> Settings:
@@ -170,8 +185,11 @@ def planning_scene(ps: ProblemSet, settings: Settings, *, world: WorldSpec | Non
     from twin.collision import PlanningScene
 
     scene = PlanningScene.from_settings(settings)  # the known fixtures, the perceived ones as boxes
-    if ps.robot.gripper_opening_m is not None and not math.isclose(
-        ps.robot.gripper_opening_m, scene.gripper_opening, abs_tol=1e-9
+    # a collision model without finger joints (a spheres-only arm and gripper) has no opening to set
+    if (
+        ps.robot.gripper_opening_m is not None
+        and scene.max_opening_m > 0
+        and not math.isclose(ps.robot.gripper_opening_m, scene.gripper_opening, abs_tol=1e-9)
     ):
         scene.set_gripper_opening(ps.robot.gripper_opening_m)
     held = (ps.world if world is None else world).held_object
