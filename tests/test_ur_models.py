@@ -111,6 +111,11 @@ def test_twin_ships_a_urdf_per_arm_that_matches_its_dh() -> None:
     wrong = r"not the arm of robot.model ur5: joint wrist_1_joint: .* root placed 73.3 mm"
     with pytest.raises(ConfigError, match=wrong):
         PlanningScene.from_settings(load_config("robocup", ["robot.model=ur5", "robot.urdf=urdf/ur5e.urdf"]))
+    # and one whose tcp is not where the planners put it (another gripper's TCP): pose goals would miss
+    longer = RobotModel.from_string(arm_urdf("ur5").replace('<origin xyz="0 0 0.135"', '<origin xyz="0 0 0.15"'))
+    assert URArm(model="ur5").urdf_mismatch(longer) == (
+        "its tcp link is 15 mm (or rotation entries) from the arm's TCP, tool0 + 0.135 m along z"
+    )
 
 
 @pytest.mark.parametrize("name", ["ur5", "ur10e"])

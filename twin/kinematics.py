@@ -261,8 +261,8 @@ class URArm:
         """Where a robot URDF's arm differs from this arm's DH kinematics, in words; None when it matches.
 
         Checked on `samples` seeded configurations: each arm joint's axis must lie on the DH axis it stands
-        for (z of DH frame i-1: the same line, the same direction) and tool0 must be the DH flange, within
-        `tol` (m, rad), in the model's base frame (`fit_urdf` puts a URDF there)."""
+        for (z of DH frame i-1: the same line, the same direction), tool0 must be the DH flange and a tcp link
+        this arm's TCP, within `tol` (m, rad), in the model's base frame (`fit_urdf` puts a URDF there)."""
         if "tool0" not in model.link_index:
             return "it has no tool0 link (the flange)"
         qs = np.random.default_rng(0).uniform(-math.pi, math.pi, (samples, 6))
@@ -285,6 +285,12 @@ class URArm:
         if err_p > tol or err_r > tol:
             why = f"tool0 is {err_p * 1e3:.3g} mm and {err_r:.3g} (rotation entries) from the DH flange"
             return why + _root_note(model.root_pose)
+        if "tcp" in model.link_index:  # the planners' TCP (pose goals, the held object) is the arm's
+            tcp = np.linalg.inv(flange[0]) @ poses[0, model.link_index["tcp"]]
+            err = float(np.abs(tcp - self._tool["tcp"]).max())
+            if err > tol:
+                where = f"tool0 + {self.tcp_offset_m} m along z"
+                return f"its tcp link is {err * 1e3:.3g} mm (or rotation entries) from the arm's TCP, {where}"
         return None
 
     # ---- forward kinematics -------------------------------------------------------------------

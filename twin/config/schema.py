@@ -44,7 +44,8 @@ class RobotSettings(ConfigModel):
     its URDF, home posture and joint limits (SPEC: pi rad/s, +-2pi, elbow +-pi)."""
 
     model: Literal["ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e"] = "ur5e"
-    # the arm's URDF (collision model of primitives, checked against the model's DH at load); default the one
+    # the arm's URDF (collision model of primitives, checked against the model's DH at load; its root may sit
+    # above the arm's base, and one without a tcp link gets the arm's TCP: `URArm.fit_urdf`); default the one
     # twin ships for the model, urdf/<model>.urdf (`twin.ur_urdf`)
     urdf: str = "urdf/ur5e.urdf"
     home: Q6 = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
