@@ -246,6 +246,9 @@ def test_the_set_plans_with_a_spheres_only_model_of_the_same_arm(mbm_dir: Path, 
     assert rows["ruckig.movej", "mbm#0"]["success"], rows["ruckig.movej", "mbm#0"]["reason"]
     assert not rows["ruckig.movej", "mbm#1"]["success"] and "wall" in rows["ruckig.movej", "mbm#1"]["reason"]
     assert rows["ompl.rrtconnect", "mbm#1"]["success"], rows["ompl.rrtconnect", "mbm#1"]["reason"]
+    # executing needs twin's gripper in the URDF: one line before anything runs
+    with pytest.raises(ConfigError, match=r"has no left_finger_joint, .*: it plans but cannot run in physics"):
+        run_comparison(compare_spec_from_dict({**spec, "execute": True}), out_dir=tmp_path / "o1", workers=0)
     # another arm's config refuses the set: its robot is the UR5
     spec["scenarios"] = [{**scenario, "overrides": ["robot.model=ur10e"]}]
     with pytest.raises(ConfigError, match=r"is not the scene config's robot 'urdf/ur10e\.urdf'"):

@@ -64,6 +64,7 @@ __all__ = [
     "World",
     "WorldView",
     "marker_pose_in_base",
+    "physics_parts_missing",
 ]
 
 log = logging.getLogger("twin")
@@ -182,6 +183,13 @@ class _FaultyTracking:
         tau = r.tracking_time_constant_s
         alpha = 1.0 if tau == 0 else 1.0 - math.exp(-dt / tau)
         return cls(alpha, r.tracking_noise_rad, np.random.default_rng([seed, 0x7AC]))
+
+
+def physics_parts_missing(model: RobotModel) -> list[str]:
+    """The joints and links of twin's arm and gripper the physics drives or reads that a robot URDF lacks
+    (a spheres-only collision model has no finger joints: it can plan but not run in physics)."""
+    missing = [n for n in ARM_JOINT_NAMES + FINGER_JOINT_NAMES if n not in model.joints]
+    return missing + [n for n in ("tool0", "tcp", *_FINGER_LINKS) if n not in model.link_index]
 
 
 class World:
@@ -309,8 +317,11 @@ class World:
     def _load_robot(self) -> None:
         c = self._cid
         urdf = self._urdf(self.settings.robot.urdf)
-        # the URDF's root where the arm's base is the world origin (a root above the arm: `URArm.urdf_base`)
         model = RobotModel.from_urdf(urdf)
+        missing = physics_parts_missing(model)
+        if missing:  # a collision model without twin's gripper plans (`execute: false`) but cannot run physics
+            raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing} the physics needs")
+        # the URDF's root where the arm's base is the world origin (a root above the arm: `URArm.urdf_base`)
         root = URArm.from_settings(self.settings).urdf_base(model)
         try:
             self.robot_id = pb.loadURDF(
@@ -330,10 +341,6 @@ class World:
             info = pb.getJointInfo(self.robot_id, j, physicsClientId=c)
             self._joint_index[info[1].decode()] = j
             self._link_index[info[12].decode()] = j
-        missing = [n for n in ARM_JOINT_NAMES + FINGER_JOINT_NAMES if n not in self._joint_index]
-        missing += [n for n in ("tool0", "tcp") + _FINGER_LINKS if n not in self._link_index]
-        if missing:  # a collision model without twin's gripper plans (`execute: false`) but cannot run physics
-            raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing} the physics needs")
         self._arm = [self._joint_index[n] for n in ARM_JOINT_NAMES]
         self._fingers = [self._joint_index[n] for n in FINGER_JOINT_NAMES]
         for link in _FINGER_LINKS:

@@ -29,7 +29,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from twin.compare.spec import (
     CompareSpec,
@@ -46,6 +46,9 @@ from twin.compare.spec import (
 from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, quiet_imports, worker_init
 from twin.environment import environment
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
+
+if TYPE_CHECKING:
+    from twin.config import Settings
 
 __all__ = [
     "RESULTS_FILE",
@@ -122,6 +125,21 @@ def tasks_available() -> bool:
     return True
 
 
+def _check_physics_robot(settings: Settings) -> None:
+    """ConfigError when the runs execute in physics and the robot URDF cannot (a planning-only model)."""
+    from twin.urdf_model import RobotModel
+
+    quiet_imports()  # twin.world imports PyBullet, whose banner is no output of ours
+    from twin.world import physics_parts_missing
+
+    missing = physics_parts_missing(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
+    if missing:
+        raise ConfigError(
+            f"robot.urdf {settings.robot.urdf} has no {', '.join(missing)}: it plans but cannot run in physics "
+            "(execute: false plans without executing)"
+        )
+
+
 def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: bool = True) -> None:
     """Raise ConfigError for an unknown planner or retimer name, bad planner params, or a scenario
     config that does not load, before anything runs. With `instantiate`, each planner is also built
@@ -143,6 +161,8 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
             settings.append(load_config(path, sc.overrides))
             if isinstance(sc, QueryScenario) and sc.problems is not None:
                 check_robot(sc.problem_set, settings[-1], source=sc.problems)
+            if isinstance(sc, TaskScenario) or spec.execute:
+                _check_physics_robot(settings[-1])
         except ConfigError as e:
             raise ConfigError(f"{source}: scenarios.{i} ({sc.name}): {e}") from None
     registry = default_registry()
