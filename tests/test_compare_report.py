@@ -157,3 +157,18 @@ def test_a_time_lead_is_among_the_most_successful_and_names_a_faster_planner_tha
     assert v.test is not None and (v.test.wins, v.test.n) == (8, 8) and v.significant  # Wilcoxon, 8 of 8 lower
     assert "among the 2 planners at the top success rate, 100%" in v.text
     assert "fastest of all: `quick` 1 ms (n=8) at 0% (0/8) success" in v.text
+
+
+def test_a_time_lead_over_the_reference_says_when_the_planner_solves_less(tmp_path: Path) -> None:
+    """Against the reference, a planner that gives up quickly is 'better on planning time': the line says what
+    it fails (the cage of MotionBenchMaker: bitstar stops at its work budget on 95 of 100 problems)."""
+    rows = []
+    for i in range(10):
+        rows.append(row("ref", i, planning_time_s=2.0 + 0.01 * i))
+        rows.append(row("quitter", i, success=i < 2, planning_time_s=0.3))  # solves 2, fails 8 fast
+        rows.append(row("faster", i, planning_time_s=1.0 + 0.01 * i))  # solves all, faster: a plain lead
+    write_summary(summarize(rows, planners=["ref", "quitter", "faster"]), tmp_path)
+    section = (tmp_path / "summary.md").read_text().split("Against the reference `ref`")[1].split("\n## ")[0]
+    (line,) = [ln for ln in section.splitlines() if ln.startswith("- better on planning_time_s, all scenarios")]
+    assert "`faster` (p = 0.002)" in line
+    assert "`quitter` (p = 0.002; but it fails 8 problems the reference solves, solving 0 it fails)" in line

@@ -788,11 +788,17 @@ def _against_reference(summary: Summary) -> list[str]:
     from twin.compare.verdicts import p_text
 
     groups: dict[tuple[str, str, str], list[str]] = {}
+    success = {(c.planner, c.scenario): c for c in summary.paired if c.metric == SUCCESS}
     for c in summary.paired:
         if c.p_value is not None and c.p_value < SIGNIFICANCE and c.wins != c.losses:
             side = "better" if c.wins > c.losses else "worse"
             where = "all scenarios" if c.scenario == ALL else c.scenario
-            groups.setdefault((side, c.metric, where), []).append(f"`{c.planner}` ({p_text(c.p_value)})")
+            why = p_text(c.p_value)
+            solved = success.get((c.planner, c.scenario))
+            if side == "better" and c.metric != SUCCESS and solved is not None and solved.losses > solved.wins:
+                # a planner that gives up early is quick: its time lead is no lead where it solves less
+                why += f"; but it fails {solved.losses} problems the reference solves, solving {solved.wins} it fails"
+            groups.setdefault((side, c.metric, where), []).append(f"`{c.planner}` ({why})")
     if not groups:
         return ["- no planner is significantly better or worse on any metric"]
     order = {m: i for i, m in enumerate((SUCCESS, *PAIRED_KEYS))}
