@@ -44,11 +44,11 @@ def mbm_spherized_urdf() -> Path:
     """MBM's spheres-only collision model of the UR5 with its Robotiq 2F-85 (`ur5_spherized.urdf`, the model
     VAMP plans with; root `offset_link`, the world frame of the problems), taken from the sdist on first use.
     Usable as `robot.urdf` with `robot.model: ur5` for planning (no finger joints: it cannot run physics)."""
+    from twin.assets import write_atomic
+
     path = _cache() / "ur5_spherized.urdf"
     if not path.is_file():
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(_sdist_member("resources/ur5/ur5_spherized.urdf").read())
-        os.replace(tmp, path)
+        write_atomic(path, _sdist_member("resources/ur5/ur5_spherized.urdf").read())
     return path
 
 
