@@ -31,6 +31,10 @@ A scenario with a `sweep` (see `twin.compare.spec`) is also summarised along eac
 its 95 % Wilson score interval (as every success rate), for task runs the mean share of objects placed, and
 the median cycle time per placed object (task runs) or trajectory duration (queries) with n and its
 bootstrap interval. The nominal point's runs count on every axis.
+
+summary.md (and summary.html) opens with what ran (`Provenance`): the config's name and file, when the sweep
+started, twin's commit and the machine (CPU, cores, host) as the sweep recorded them (`twin.environment`):
+a planning time means little without the code and the machine it came from.
 """
 
 from __future__ import annotations
@@ -40,8 +44,9 @@ import difflib
 import json
 import re
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -78,6 +83,7 @@ __all__ = [
     "SUCCESS",
     "SWEEP_TIME_KEYS",
     "PairedComparison",
+    "Provenance",
     "Stat",
     "Summary",
     "SummaryRow",
@@ -235,6 +241,41 @@ class SweepPoint:
 
 
 @dataclass(frozen=True)
+class Provenance:
+    """What ran: the config's `name` and file (`config_path`, None for a config built in code), when the sweep
+    started (`date`, with its time zone) and where (`environment`: a `twin.environment.environment()` record,
+    as compare.json keeps it; None when not recorded)."""
+
+    name: str
+    config_path: str | None = None
+    date: datetime | None = None
+    environment: Mapping[str, Any] | None = None
+
+    def lines(self) -> list[str]:
+        """'config: ...', 'date: ...', 'commit: ...', 'machine: ...': summary.md's opening lines (names, paths,
+        the commit and the host in backticks, as Markdown sets code)."""
+        env = self.environment or {}
+        twin = env.get("twin") or {}
+        if twin.get("commit"):
+            commit = f"`{twin['commit']}`" + (" with uncommitted changes" if twin.get("dirty") else "")
+        else:
+            commit = "unknown (not run from a git checkout)" if twin else "not recorded"
+        if twin.get("version"):
+            commit += f", twin {twin['version']}"
+        cpu = env.get("cpu") or {}
+        cores = f"{_known(cpu.get('cores'))} cores ({_known(cpu.get('usable_cores'))} usable)"
+        host = f", host `{env['hostname']}`" if env.get("hostname") else ""
+        machine = f"{cpu.get('model') or 'CPU unknown'}, {cores}{host}" if env else "not recorded"
+        config = f"`{self.name}`" + (f" (`{self.config_path}`)" if self.config_path else "")
+        date = self.date.isoformat(sep=" ", timespec="seconds") if self.date else "not recorded"
+        return [f"config: {config}", f"date: {date}", f"commit: {commit}", f"machine: {machine}"]
+
+
+def _known(v: Any) -> str:
+    return "?" if v is None else str(v)
+
+
+@dataclass(frozen=True)
 class Summary:
     """Overall rows (one per planner, in config order) and per-scenario rows; skipped runs with reasons;
     the paired comparison of every planner with `reference`; the sweep points of swept scenarios."""
@@ -248,6 +289,7 @@ class Summary:
     # (planner, scenario) -> runs skipped there (a pair that could not run: not a failure, not a 0 %)
     skipped_pairs: dict[tuple[str, str], int] = field(default_factory=dict)
     verdicts: list[Verdict] = field(default_factory=list)  # who leads on what (`twin.compare.verdicts`)
+    provenance: Provenance | None = None  # what ran, when, where: summary.md's opening lines
 
     def sweep_axes(self) -> list[tuple[str, str]]:
         """(scenario, key) of every swept key, in the order the rows first show them."""
@@ -456,12 +498,14 @@ def summarize(
     skipped: Sequence[tuple[str, str]] = (),
     reference: str | None = None,
     skipped_pairs: dict[tuple[str, str], int] | None = None,
+    provenance: Provenance | None = None,
 ) -> Summary:
     """Group result rows by planner (in `planners` order, then any others) and by planner x scenario, with
     bootstrap intervals and failure counts, compare every planner with `reference` on the problems both
     ran (default: the first planner in that order that has runs), and name who leads on what
     (`twin.compare.verdicts`). `skipped` are the (run id, reason) of runs that could not run and
-    `skipped_pairs` their count per (planner, scenario); rows with status "skipped" count there too."""
+    `skipped_pairs` their count per (planner, scenario); rows with status "skipped" count there too.
+    `provenance`: what ran, for summary.md's opening lines."""
     rows = list(rows)
     pairs = Counter(dict(skipped_pairs or {}))
     pairs.update((r["planner"], r["scenario"]) for r in rows if r.get("status") == "skipped")
@@ -488,7 +532,14 @@ def summarize(
         raise ConfigError(f"reference planner {reference!r} is not compared here.{hint} Planners: {', '.join(order)}")
     paired = _paired(rows, order, scenarios, reference) if reference is not None else []
     summary = Summary(
-        overall, by_scenario, list(skipped), paired, reference, sweep_points(rows, planners=order), dict(pairs)
+        overall,
+        by_scenario,
+        list(skipped),
+        paired,
+        reference,
+        sweep_points(rows, planners=order),
+        dict(pairs),
+        provenance=provenance,
     )
     from twin.compare.verdicts import verdicts
 
@@ -680,7 +731,10 @@ def summary_markdown(summary: Summary) -> str:
     defs = {d.key: d for d in _DEFS}
     keys = summary.metric_keys()
     planners = [r.planner for r in summary.overall]
-    lines = ["# Planner comparison", "", INTERVALS]
+    lines = ["# Planner comparison", ""]
+    if summary.provenance is not None:
+        lines += [f"- {line}" for line in summary.provenance.lines()] + [""]
+    lines += [INTERVALS]
     lines += _verdicts_markdown(summary)
     lines += ["", "## Success", ""]
     lines += ["| planner | runs | success (runs) [95% CI] | errors |", "|---|---:|---:|---:|"]

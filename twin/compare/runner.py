@@ -28,6 +28,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -617,6 +618,7 @@ def run_comparison(
     `on_row(row, done, total)` is called as each run finishes (the CLI prints progress).
     """
     t_start = time.perf_counter()
+    started = datetime.now().astimezone()  # summary.md says when the sweep ran (with its time zone)
     spec = _load(spec, overrides)
     if backend not in ("local", "ray"):
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
@@ -661,8 +663,9 @@ def run_comparison(
     if resume:
         read_results(results, repair=True)  # a line cut short by a crash goes before anything is appended
     # where this sweep ran (twin, Python, backends, machine): the gate names what changed since its baseline
+    env = environment()
     spec_path.write_text(
-        json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs, "environment": environment()}, indent=1)
+        json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs, "environment": env}, indent=1)
     )
 
     finished = {row["run_id"]: row for row in existing if row["run_id"] in wanted and row.get("status") != "error"}
@@ -709,7 +712,7 @@ def run_comparison(
     latest = dict(finished)
     latest.update({row["run_id"]: row for row in new_rows})  # a rerun replaces its 'error' row
     rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
-    from twin.compare.report import summarize, write_summary
+    from twin.compare.report import Provenance, summarize, write_summary
 
     skipped_ids = {rid for rid, _ in skipped}
     skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
@@ -719,6 +722,7 @@ def run_comparison(
         skipped=skipped,
         reference=spec.reference,
         skipped_pairs=dict(skipped_pairs),
+        provenance=Provenance(spec.name, spec.source if spec.source != "<dict>" else None, started, env),
     )
     files = [results, *write_summary(summary, out)]
     pictures: list[Path] = []
