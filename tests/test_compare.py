@@ -572,3 +572,37 @@ def test_a_run_that_hangs_or_kills_its_worker_is_an_error_row_and_the_sweep_goes
     assert crashed["status"] == "error" and "WorkerDied" in crashed["reason"] and "exit code 3" in crashed["reason"]
     assert set(METRIC_KEYS) == set(hung["metrics"]) and hung["planner"] == "ruckig.movej"
     assert [r["status"] for r in fine] == ["success", "success"]
+
+
+class SlowToStart:
+    """A run function whose worker takes `start_s` to receive it (unpickling it sleeps, in the worker process
+    as it starts): a stand-in for a fresh worker importing twin on a busy machine."""
+
+    def __init__(self, start_s: float):
+        self.start_s = start_s
+
+    def __getstate__(self) -> float:
+        return self.start_s
+
+    def __setstate__(self, start_s: float) -> None:
+        time.sleep(start_s)
+        self.start_s = start_s
+
+    def __call__(self, task: Any) -> dict[str, Any]:
+        return {"run_id": task.run_id, "status": "success"}
+
+
+def test_a_workers_start_up_is_no_part_of_a_runs_timeout():
+    """Each worker takes 3 s to start and each run has 1 s: the timeout counts from when the worker starts the
+    run, so every run succeeds (counted from when it was sent, every run was stopped before its worker started)."""
+    from dataclasses import replace
+
+    from twin.compare.runner import _run_local
+
+    spec = compare_spec_from_dict(
+        dict(SWEEP, seeds=[0], planners=["ruckig.movej"], scenarios=[dict(SWEEP["scenarios"][0], random={"count": 2})])
+    )
+    tasks = [replace(t, timeout_s=1.0) for t in expand_runs(spec)]
+    rows = list(_run_local(tasks, 2, run=SlowToStart(3.0)))
+    assert sorted(r["run_id"] for r in rows) == sorted(t.run_id for t in tasks)
+    assert [r["status"] for r in rows] == ["success", "success"], rows

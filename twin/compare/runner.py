@@ -335,11 +335,21 @@ class _Worker:
     process: Any
     conn: Any
     task: RunTask | None = None
-    started: float = 0.0
+    sent: float = 0.0  # time.monotonic() when the task was sent
+    started: float | None = None  # when the worker said it started the run (`_STARTED`); None: not yet
+
+
+# what a worker sends when it has received a task and starts running it: the run's timeout counts from here, so
+# a worker process still starting (a fresh one imports twin first: seconds on a busy machine) uses none of it
+_STARTED = "started"
+# how long a worker may take to start a run it was sent (process start and imports); a run's own timeout
+# counts after that (a worker stuck before its run would otherwise hold the sweep for ever)
+_START_TIMEOUT_S = 300.0
 
 
 def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]], threads: int) -> None:
-    """A local worker: run each task it is sent and send its row back, until it is sent None."""
+    """A local worker: for each task it is sent, say it started (`_STARTED`), run it and send its row back,
+    until it is sent None."""
     worker_init(threads)
     while True:
         try:
@@ -351,12 +361,15 @@ def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]], threads: i
         conn.send(run(task))
 
 
+        conn.send(_STARTED)
 def _run_local(
     todo: Sequence[RunTask], workers: int, run: Callable[[RunTask], dict[str, Any]] = execute_run
 ) -> Iterator[dict[str, Any]]:
     """Run `todo` on `workers` processes. A run that outlives its `timeout_s` (a planner ignoring its time
     limit in native code, where nothing else can interrupt it) or whose worker dies (a crash in a native
-    library) becomes an error row; its worker is replaced and the sweep goes on."""
+    library) becomes an error row; its worker is replaced and the sweep goes on. The timeout counts from
+    when the worker starts the run (`_STARTED`), not from when it was sent: a fresh worker's start-up is
+    no part of any run."""
     from multiprocessing.connection import wait
 
     ctx = _mp_context()
@@ -372,13 +385,17 @@ def _run_local(
         return _Worker(proc, parent)
 
     def give(w: _Worker) -> None:
-        w.task, w.started = (queue.pop(), time.monotonic()) if queue else (None, 0.0)
+        w.task, w.sent, w.started = (queue.pop() if queue else None), time.monotonic(), None
         if w.task is not None:
             w.conn.send(w.task)
 
     def replace(w: _Worker) -> _Worker:
         w.process.kill()
         w.process.join(5)
+    def deadline(w: _Worker) -> float:
+        assert w.task is not None
+        return w.sent + _START_TIMEOUT_S if w.started is None else w.started + w.task.timeout_s
+
         w.conn.close()
         fresh = spawn()
         pool[pool.index(w)] = fresh
@@ -392,8 +409,7 @@ def _run_local(
             busy = [w for w in pool if w.task is not None]
             if not busy:
                 return
-            now = time.monotonic()
-            wait_s = max(0.0, min(w.started + w.task.timeout_s for w in busy if w.task) - now)
+            wait_s = max(0.0, min(deadline(w) for w in busy) - time.monotonic())
             ready = wait([w.conn for w in busy], timeout=wait_s)
             for w in busy:
                 task = w.task
@@ -401,17 +417,28 @@ def _run_local(
                 if w.conn in ready:
                     try:
                         row = w.conn.recv()
-                    except (EOFError, OSError):  # the worker died while running it
+                        if row == _STARTED:  # its timeout counts from now; its row comes later
+                            w.started = time.monotonic()
+                            continue
+                    except (EOFError, OSError):  # the worker died while running it (or starting it)
                         w.process.join(5)
                         code = w.process.exitcode
                         log.warning("run %s: its worker process died (exit code %s)", task.run_id, code)
                         row = error_row(
                             task,
                             f"WorkerDied: the worker process died running this (exit code {code})",
-                            wall_time_s=time.monotonic() - w.started,
+                            wall_time_s=time.monotonic() - (w.sent if w.started is None else w.started),
                         )
                         w = replace(w)
-                elif time.monotonic() - w.started >= task.timeout_s:
+                elif time.monotonic() < deadline(w):
+                    continue
+                elif w.started is None:
+                    log.warning("run %s: its worker did not start it in %.0f s", task.run_id, _START_TIMEOUT_S)
+                    row = error_row(
+                        task, f"RunTimeout: the worker did not start this run within {_START_TIMEOUT_S:g} s"
+                    )
+                    w = replace(w)
+                else:
                     log.warning("run %s: no result after %.0f s; stopping it", task.run_id, task.timeout_s)
                     row = error_row(
                         task,
@@ -420,8 +447,6 @@ def _run_local(
                         wall_time_s=task.timeout_s,
                     )
                     w = replace(w)
-                else:
-                    continue
                 give(w)
                 yield row
     finally:
