@@ -3,7 +3,11 @@ twin's planners through twin's judge, beside the numbers VAMP publishes for it (
 prints a table and asserts nothing.
 
     python bench/bench_mbm.py [--planners ompl.rrtconnect,ompl.bitstar] [--time-limit 10] [--workers N]
-                              [--scenes box,cage] [--out out/bench-mbm] [--robot-urdf twin|spherized]
+                              [--scenes box,cage] [--problems N] [--out out/bench-mbm]
+                              [--robot-urdf twin|spherized]
+
+`--scenes` and `--problems N` pick a subset of the suite: those scenes (a name not in MBM's UR5 suite is a
+one-line error listing the ones that are), the first N problems of each (MBM's file order).
 
 The problems are `twin.problems.mbm`'s (vamp-planner 0.6.4's source distribution, fetched by pip into twin's
 cache once, each scene imported as `twin problems import-moveit DIR --robot ur5` does: a world per problem),
@@ -22,13 +26,14 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from twin.compare import compare_spec_from_dict, run_comparison
-from twin.problems import load_problem_set
+from twin.problems import ProblemSet, load_problem_set, save_problem_set
 from twin.problems.mbm import SCENES, mbm_problem_set, mbm_spherized_urdf
 
 # VAMP's README (0.6.4): UR5, its vectorised RRT-Connect, AMD Ryzen 9 7950X; and what its 0.6.4 sphere model
@@ -85,12 +90,59 @@ def _row_stats(rows: list[dict[str, Any]]) -> tuple[int, int, str]:
     )
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def scene_list(text: str) -> list[str]:
+    """The MBM scenes of 'a,b' in the order given, each once; an unknown name or none is an error that lists
+    the allowed ones."""
+    scenes = list(dict.fromkeys(s.strip() for s in text.split(",") if s.strip()))
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown or not scenes:
+        what = f"unknown scene {', '.join(map(repr, unknown))}" if unknown else "no scene given"
+        raise argparse.ArgumentTypeError(f"{what}; MotionBenchMaker's UR5 scenes: {', '.join(SCENES)}")
+    return scenes
+
+
+def positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return n
+
+
+def first_problems(ps: ProblemSet, n: int | None) -> ProblemSet:
+    """`ps` with its first `n` problems only (all of them when `n` is None or not fewer than it has)."""
+    return ps if n is None or n >= len(ps.problems) else ps.model_copy(update={"problems": ps.problems[:n]})
+
+
+def subset_sets(sets: dict[str, Path], n: int | None, folder: Path) -> dict[str, Path]:
+    """Each scene's problem-set file cut to its first `n` problems, written into `folder` as
+    `<scene>-first<n>.json` (a set with no more than `n` problems is used as it is)."""
+    out = {}
+    for scene, path in sets.items():
+        ps = load_problem_set(path)
+        cut = first_problems(ps, n)
+        out[scene] = path if cut is ps else save_problem_set(cut, folder / f"{scene}-first{n}.json").resolve()
+    return out
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:  # one line, not the usage too
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    ap = _Parser(prog="bench_mbm.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("--planners", default="ompl.rrtconnect", help="comma-separated planner names")
     ap.add_argument("--time-limit", type=float, default=10.0, help="planning time limit per problem, s")
     ap.add_argument("--workers", type=int, default=None, help="parallel runs (default: all CPUs)")
-    ap.add_argument("--scenes", default=",".join(SCENES), help="comma-separated MBM scenes")
+    ap.add_argument(
+        "--scenes", type=scene_list, default=list(SCENES), help="comma-separated MBM scenes (default: all seven)"
+    )
+    ap.add_argument(
+        "--problems", type=positive_int, default=None, metavar="N", help="the first N problems of each scene"
+    )
     ap.add_argument("--out", default="out/bench-mbm", help="folder for the comparison")
     ap.add_argument(
         "--robot-urdf",
@@ -98,14 +150,19 @@ def main() -> int:
         default="twin",
         help="collision model: twin's primitive UR5 (default) or MBM's ur5_spherized.urdf (VAMP's)",
     )
-    args = ap.parse_args()
+    return ap.parse_args(argv)
+
+
+def main() -> int:
+    args = parse_args()
     out = Path(args.out)
-    scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    scenes: list[str] = args.scenes
     t0 = time.perf_counter()
     overrides = ["robot.model=ur5"]
     if args.robot_urdf == "spherized":
         overrides.append(f"robot.urdf={mbm_spherized_urdf()}")
     sets = {scene: mbm_problem_set(f"ur5/{scene}") for scene in scenes}  # fetched and imported on first use
+    sets = subset_sets(sets, args.problems, out / "problems")
     numbers = {s: [int(p.id.rpartition("#")[2]) for p in load_problem_set(sets[s]).problems] for s in scenes}
     scenarios = [
         {
