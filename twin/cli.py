@@ -267,6 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the results as OMPL benchmark logs and a Planner Arena database (twin export)",
     )
     p.add_argument(
+        "--latex", default=None, metavar="OUT.tex", help="also write the summary as a booktabs table (twin report)"
+    )
+    p.add_argument(
         "--baseline",
         default=None,
         metavar="RESULTS.jsonl",
@@ -624,6 +627,10 @@ def _cmd_compare(args: argparse.Namespace) -> int:
             environment=recorded_environment(result.results_path) or {},
         )
         print("Planner Arena export: " + ", ".join(str(f) for f in files))
+    if args.latex is not None:
+        from twin.compare.latex import write_latex
+
+        print(f"LaTeX table: {write_latex(result.summary, args.latex)}")
     if baseline is not None:
         report = gate(
             result.rows,

@@ -1,8 +1,9 @@
 """The command line of what twin exchanges with other tools: problem sets in and out (`twin problems`),
-results out as OMPL benchmark logs and a Planner Arena database (`twin export`).
+results out as OMPL benchmark logs and a Planner Arena database (`twin export`) and as a LaTeX table for a
+paper (`twin report --latex`).
 
 Kept apart from `twin.cli` (which runs and compares) so that each stays a thin layer over one library
-module: `twin.problems` and `twin.compare.ompl_export`.
+module: `twin.problems`, `twin.compare.ompl_export` and `twin.compare.latex`.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ def _positive_int(text: str) -> int:
 
 
 def add_parsers(sub: Any) -> None:
-    """Add `problems` and `export` to the `twin` subcommand parsers `sub`."""
+    """Add `problems`, `export` and `report` to the `twin` subcommand parsers `sub`."""
     p = sub.add_parser("problems", help="problem sets: export a scene's queries, import MoveIt scenes (JSON files)")
     psub = p.add_subparsers(dest="problems_command", metavar="ACTION", required=True)
     e = psub.add_parser("export", help="seeded random motion queries of a scene config as a problem-set file")
@@ -95,6 +96,18 @@ def add_parsers(sub: Any) -> None:
     x.add_argument("results", help="a results.jsonl of `twin compare` (or its output folder)")
     x.add_argument("--out", required=True, metavar="DIR", help="folder for the .log files and the .db")
     x.add_argument("--name", default=None, help="experiment name prefix (default: the results folder's name)")
+
+    r = sub.add_parser("report", help="a sweep's results as a table for a paper (booktabs LaTeX)")
+    r.add_argument("results", help="a results.jsonl of `twin compare` (or its output folder)")
+    r.add_argument(
+        "--latex",
+        required=True,
+        metavar="OUT.tex",
+        help="write a booktabs table: per scenario and planner the success rate with its Wilson interval and n, "
+        "median planning time and duration with their bootstrap intervals (\\usepackage{booktabs})",
+    )
+    r.add_argument("--caption", default=None, help="the table's caption, as LaTeX (default: what the columns are)")
+    r.add_argument("--label", default=None, help="the table's \\label (default tab:planner-comparison)")
 
 
 def _cmd_problems(args: argparse.Namespace) -> int:
@@ -178,4 +191,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-COMMANDS = {"problems": _cmd_problems, "export": _cmd_export}
+def _cmd_report(args: argparse.Namespace) -> int:
+    from twin.compare.latex import DEFAULT_LABEL, latex_report
+
+    path, summary = latex_report(args.results, args.latex, caption=args.caption, label=args.label or DEFAULT_LABEL)
+    scenarios = len(dict.fromkeys(r.scenario for r in summary.by_scenario))
+    print(f"{path}: {len(summary.overall)} planners x {scenarios} scenarios (needs \\usepackage{{booktabs}})")
+    return EXIT_OK
+
+
+COMMANDS = {"problems": _cmd_problems, "export": _cmd_export, "report": _cmd_report}

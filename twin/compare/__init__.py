@@ -8,7 +8,8 @@
 Modules: `spec` (the config model and the run list), `metrics` (what one run measures), `worker` (one
 run, the function every backend executes), `runner` (the sweep, results.jsonl, resume, backends),
 `report` (summary.csv, summary.md, rich table; sweep.csv per swept level), `plots` (PNG, sweep_<key>.png per
-swept key; the only matplotlib user), `stats` (bootstrap and Wilson intervals, paired tests).
+swept key; the only matplotlib user), `stats` (bootstrap and Wilson intervals, paired tests), `latex` (the
+summary as a booktabs table for a paper: `twin report --latex`).
 Importing this package loads neither PyBullet, FCL, Ray nor matplotlib.
 """
 
