@@ -358,10 +358,10 @@ def _worker_loop(conn: Any, run: Callable[[RunTask], dict[str, Any]], threads: i
             return
         if task is None:
             return
+        conn.send(_STARTED)
         conn.send(run(task))
 
 
-        conn.send(_STARTED)
 def _run_local(
     todo: Sequence[RunTask], workers: int, run: Callable[[RunTask], dict[str, Any]] = execute_run
 ) -> Iterator[dict[str, Any]]:
@@ -389,13 +389,13 @@ def _run_local(
         if w.task is not None:
             w.conn.send(w.task)
 
-    def replace(w: _Worker) -> _Worker:
-        w.process.kill()
-        w.process.join(5)
     def deadline(w: _Worker) -> float:
         assert w.task is not None
         return w.sent + _START_TIMEOUT_S if w.started is None else w.started + w.task.timeout_s
 
+    def replace(w: _Worker) -> _Worker:
+        w.process.kill()
+        w.process.join(5)
         w.conn.close()
         fresh = spawn()
         pool[pool.index(w)] = fresh
