@@ -9,6 +9,10 @@ with the median's 95 % percentile-bootstrap interval as an error bar beside it a
 under the planner's name, each success bar the 95 % Wilson interval of its success rate, each sweep line
 the band of its 95 % interval (Wilson for a success rate, the bootstrap for a median time;
 `report.SweepPoint`).
+
+"Best first" is the same order everywhere (`best_first`): the most successful planner first, then the
+fastest (in a box plot, the best value of its metric) — a planner that fails fast is never on top. Log axes
+label decades and, over a narrow range, 2 and 5 between them as plain numbers, never every minor tick.
 """
 
 from __future__ import annotations
@@ -29,9 +33,9 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from twin.compare.report import Stat, Summary, SweepPoint
+    from twin.compare.report import Stat, Summary, SummaryRow, SweepPoint
 
-__all__ = ["BOX_PLOTS", "BoxPlot", "comparison_figures", "sweep_figures", "write_plots"]
+__all__ = ["BOX_PLOTS", "BoxPlot", "best_first", "comparison_figures", "sweep_figures", "write_plots"]
 
 log = logging.getLogger("twin")
 
@@ -66,6 +70,8 @@ _MARKERS = "osD^vP*Xh<>p"
 _TIME_LABELS = {"cycle_time_s": "cycle time per placed object (s)", "duration_s": "trajectory duration (s)"}
 _SKIPPED = "not run (skipped)"
 _ROW_IN = 0.3  # inches per planner in a panel of horizontal boxes or bars
+_ALIKE_M = 1e-6  # values of one query closer than this are the same value (a shared closest point)
+_TIME_KEYS = ("planning_time_s", "task_planning_time_s")
 
 
 def _pyplot() -> Any:
@@ -84,6 +90,48 @@ def _value(row: dict[str, Any], key: str) -> float | None:
     if v is None:
         v = row.get("timing", {}).get(key)
     return None if v is None else float(v)
+
+
+def _median_time(row: SummaryRow | None) -> float:
+    """The median planning time of a summary row (per query, else per motion of its task runs); inf without."""
+    for key in _TIME_KEYS:
+        st = row.stats.get(key) if row is not None else None
+        if st is not None and st.median is not None:
+            return st.median
+    return math.inf
+
+
+def best_first(row: SummaryRow | None, value: float | None = None) -> tuple[float, float]:
+    """The sort key of "best first": the success rate (highest first; no runs last), then `value` (lower
+    first: a time, or a negated value where higher is better), by default the median planning time."""
+    rate = row.success_rate if row is not None and row.runs and row.success_rate is not None else -1.0
+    then = _median_time(row) if value is None else value
+    return (-rate, then if math.isfinite(then) else math.inf)
+
+
+def _log_ticks(axis: Any) -> None:
+    """Label a log axis so no two labels collide: the decades, and between them 2 and 5 when it spans at
+    most two decades (every integer multiple below 0.6 of one), as plain numbers ('0.002', '0.05'); the
+    other minor ticks stay unlabelled. A range with fewer than two such ticks is widened to the nearest."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+
+    lo, hi = sorted(axis.get_view_interval())
+    if not (lo > 0 and hi > lo):
+        return
+    span = math.log10(hi / lo)
+    subs = (1.0,) if span > 2.0 else (1.0, 2.0, 5.0) if span > 0.6 else tuple(float(k) for k in range(1, 10))
+    decades = range(math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 2)
+    ticks = sorted(k * 10.0**d for d in decades for k in subs)
+    inside = [t for t in ticks if lo * (1 - 1e-9) <= t <= hi * (1 + 1e-9)]
+    if len(inside) < 2:  # too narrow to hold two: widen to the neighbouring ticks
+        below = max((t for t in ticks if t <= lo), default=lo)
+        above = min((t for t in ticks if t >= hi), default=hi)
+        axis.set_view_interval(below, above, ignore=True)
+        inside = [t for t in ticks if below <= t <= above]
+    axis.set_major_locator(FixedLocator(inside))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_locator(LogLocator(subs=tuple(float(k) for k in range(2, 10))))
+    axis.set_minor_formatter(NullFormatter())
 
 
 def _panels(plt: Any, heights: Sequence[float], *, width: float = 7.0) -> tuple[Figure, list[Axes]]:
@@ -113,24 +161,35 @@ def _scenarios(rows: Sequence[dict[str, Any]], summary: Summary) -> list[tuple[s
     return [(s, kinds.get(s, "query")) for s in names]
 
 
-def _box_panel(
-    ax: Axes, title: str, key: str, entries: list[tuple[str, list[float], Stat | None]], box: BoxPlot
-) -> None:
-    """Horizontal boxes, best median on top, `n` beside each name, the median's bootstrap interval under
-    its box; a planner that ran here without a value of `key` keeps its row (n=0)."""
+@dataclass(frozen=True)
+class _Entry:
+    """One planner's row in a box panel: its values of the metric, their statistics and its summary row
+    on the scenario (for its success rate)."""
 
-    def rank(e: tuple[str, list[float], Stat | None]) -> float:
-        med = float(np.median(e[1])) if e[1] else math.inf
-        return -med if box.higher_is_better and e[1] else med
+    planner: str
+    values: list[float]
+    stat: Stat | None
+    row: SummaryRow | None
+
+
+def _box_panel(ax: Axes, title: str, key: str, entries: list[_Entry], box: BoxPlot, note: str | None) -> None:
+    """Horizontal boxes best first (`best_first`: success, then the median), the success rate and `n`
+    beside each name, the median's bootstrap interval under its box; a planner that ran here without a
+    value of `key` keeps its row (n=0). `note` is written over the panel (why its values are alike)."""
+
+    def rank(e: _Entry) -> tuple[float, float]:
+        med = float(np.median(e.values)) if e.values else math.inf
+        return best_first(e.row, -med if box.higher_is_better and e.values else med)
 
     entries = sorted(entries, key=rank)
-    data = [vals or [math.nan] for _, vals, _ in entries]
+    data = [e.values or [math.nan] for e in entries]
     ys = list(range(1, len(entries) + 1))
     ax.boxplot(data, positions=ys, orientation="horizontal", widths=0.5, showfliers=True)
-    ax.set_yticks(ys, [f"{p}  n={len(v)}" for p, v, _ in entries], fontsize="small")
-    ax.invert_yaxis()
+    ax.set_yticks(ys, [f"{e.planner}  {_rate_text(e.row)}  n={len(e.values)}" for e in entries], fontsize="small")
+    ax.set_ylim(len(entries) + 0.5, 0.5 - (1.5 if note else 0.0))  # best on top; room for the note
     x, y, lo, hi = [], [], [], []
-    for i, (_, _, st) in zip(ys, entries, strict=True):
+    for i, e in zip(ys, entries, strict=True):
+        st = e.stat
         if st is not None and st.median is not None and st.ci is not None:
             x.append(st.median)
             y.append(i + _CI_OFFSET)
@@ -138,19 +197,65 @@ def _box_panel(
             hi.append(st.ci[1] - st.median)
     if x:
         ax.errorbar(x, y, xerr=[lo, hi], fmt="D", ms=3, color="C3", capsize=2.5, lw=1.1)
-    values = [v for _, vals, _ in entries for v in vals]
+    values = [v for e in entries for v in e.values]
     if box.log_scale and values and all(v > 0 for v in values):
         ax.set_xscale("log")
+        _log_ticks(ax.xaxis)
     else:
         ax.set_xlim(left=min(0.0, *values) if values else 0.0)
-    for i, (_, vals, _) in zip(ys, entries, strict=True):
-        if not vals:
+    for i, e in zip(ys, entries, strict=True):
+        if not e.values:
             ax.text(
                 0.01, i, "no value", transform=ax.get_yaxis_transform(), va="center", fontsize="x-small", color="0.4"
             )
+    if note:
+        ax.text(
+            0.02,
+            0.97,
+            note,
+            transform=ax.transAxes,
+            ha="left",
+            va="top",
+            fontsize="x-small",
+            color="0.15",
+            bbox={"boxstyle": "round,pad=0.3", "fc": "#fff6d5", "ec": "0.6", "lw": 0.6},
+        )
     ax.set_xlabel(_AXIS.get(key, key))
     ax.set_title(title, fontsize="medium")
     ax.grid(axis="x", alpha=0.3)
+
+
+def _rate_text(row: SummaryRow | None) -> str:
+    """'100% ok' (the planner's success rate on the scenario) or '' without runs."""
+    if row is None or not row.runs or row.success_rate is None:
+        return ""
+    return f"{100 * row.success_rate:.0f}% ok"
+
+
+def _alike_note(rows: list[dict[str, Any]], key: str) -> str | None:
+    """A line when every planner has the same value of `key` on each query of a scenario (two or more
+    planners with a value on it): then the plot shows no difference between planners, only between
+    queries. For clearance that is a shared closest point: the query's start or goal (a grasp near the
+    table), or the same path, when the straight joint motion is free and the planners return it."""
+    by_case: dict[str, list[float]] = {}
+    free: dict[str, bool] = {}
+    for r in rows:
+        if (v := _value(r, key)) is not None:
+            case = str(r.get("case") or r.get("run_id"))
+            by_case.setdefault(case, []).append(v)
+            free[case] = bool(r.get("straight_free"))
+    shared = {c: vs for c, vs in by_case.items() if len(vs) > 1}
+    if not shared or any(max(vs) - min(vs) > _ALIKE_M for vs in shared.values()):
+        return None
+    n = len(shared)
+    line = f"the same value for every planner on each of its {n} quer{'y' if n == 1 else 'ies'}"
+    if key == "min_clearance_m":
+        k = sum(free[c] for c in shared)
+        line += (
+            f":\nthe paths share their closest point (the start or goal, or the\nstraight joint line, which is free"
+            f" on {k} of {n})"
+        )
+    return line
 
 
 def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: list[str]) -> dict[str, Figure]:
@@ -169,17 +274,17 @@ def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: 
                 if mine:
                     row = summary.row(p, scenario)
                     vals = [v for r in mine if (v := _value(r, key)) is not None]
-                    entries.append((p, vals, row.stats.get(key) if row is not None else None))
-            if any(vals for _, vals, _ in entries):
-                panels.append((scenario, key, entries))
+                    entries.append(_Entry(p, vals, row.stats.get(key) if row is not None else None, row))
+            if any(e.values for e in entries):
+                panels.append((scenario, key, entries, _alike_note(here, key)))
         if not panels:
             continue  # no empty plot files
-        fig, axes = _panels(plt, [_ROW_IN * len(e) + 1.3 for _, _, e in panels])
-        for ax, (scenario, key, entries) in zip(axes, panels, strict=True):
-            _box_panel(ax, scenario, key, entries, box)
+        fig, axes = _panels(plt, [_ROW_IN * len(e) + 1.3 + 0.5 * bool(n) for _, _, e, n in panels])
+        for ax, (scenario, key, entries, note) in zip(axes, panels, strict=True):
+            _box_panel(ax, scenario, key, entries, box, note)
         fig.suptitle(
-            "best first; box: quartiles, whiskers 1.5 IQR; red: the median with its 95 % bootstrap CI; "
-            "n: runs with a value",
+            "best first: most successful, then best median; box: quartiles, whiskers 1.5 IQR; red: the median "
+            "with its 95 % bootstrap CI; n: runs with a value",
             fontsize="small",
             y=1 - 0.08 / fig.get_figheight(),
             va="top",
@@ -190,9 +295,9 @@ def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: 
 
 
 def _success_order(summary: Summary, order: list[str]) -> list[str]:
-    """Planners by overall success rate, best first (config order among equals; no runs last)."""
-    rate = {r.planner: r.success_rate for r in summary.overall}
-    return sorted(order, key=lambda p: -(rate.get(p) if rate.get(p) is not None else -1.0))  # type: ignore[operator]
+    """Planners best first over all scenarios (`best_first`: success, then median planning time; config
+    order among equals; no runs last)."""
+    return sorted(order, key=lambda p: best_first(summary.row(p)))
 
 
 def _heatmap(plt: Any, summary: Summary, order: list[str], scenarios: list[str]) -> Figure:
@@ -245,7 +350,7 @@ def _success_bars(plt: Any, summary: Summary, order: list[str], scenarios: list[
     fig, axes = _panels(plt, heights, width=6.5)
     for ax, s in zip(axes, scenarios, strict=True):
         ran = [r for p in order if (r := summary.row(p, s)) is not None and r.runs]
-        ran.sort(key=lambda r: -(r.success_rate or 0.0))
+        ran.sort(key=best_first)
         skipped = [p for p in order if summary.row(p, s) is None and summary.skipped_pairs.get((p, s))]
         ys = list(range(len(ran)))
         rates = [100.0 * (r.success_rate or 0.0) for r in ran]
@@ -290,10 +395,25 @@ def _pareto(points: list[tuple[str, float, float]]) -> set[str]:
     return front
 
 
+def _front_line(ax: Axes, on: list[tuple[float, float]], right: float) -> None:
+    """The Pareto front as the dashed edge of what it dominates: up from 0 % at the fastest planner on it,
+    across to the next one's time, up to its rate, ..., and across to the axis' right edge at the best rate
+    (anything below and right of the line is beaten on both); drawn for a front of one planner too."""
+    xs: list[float] = []
+    ys: list[float] = []
+    below = 0.0
+    for t, rate in on:  # by time: each next one on the front is slower and more successful
+        xs += [t, t]
+        ys += [below, rate]
+        below = rate
+    ax.plot([*xs, max(right, xs[-1])], [*ys, below], color="0.3", lw=1, ls="--", zorder=1, label="Pareto front")
+
+
 def _tradeoff(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: list[str]) -> Figure | None:
     """Per scenario, success rate against median planning time (the choice a user makes): a point per
-    planner with both intervals; the Pareto front (nobody both faster and more successful) filled and
-    joined."""
+    planner with both intervals; the Pareto front (nobody both faster and at least as successful) outlined,
+    named and joined by a dashed line; a planner that never succeeds is off the front, however fast, and
+    the panel says so."""
     panels = []
     for scenario, kind in _scenarios(rows, summary):
         key = BOX_PLOTS[0].keys.get(kind)
@@ -312,8 +432,6 @@ def _tradeoff(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: lis
     for ax, (scenario, key, pts) in zip(axes, panels, strict=True):
         front = _pareto([(r.planner, st.median or 0.0, r.success_rate or 0.0) for r, st in pts])
         on = sorted(((st.median or 0.0, 100 * (r.success_rate or 0.0)) for r, st in pts if r.planner in front))
-        if len(on) > 1:
-            ax.step([t for t, _ in on], [y for _, y in on], where="post", color="0.3", lw=1, ls="--")
         for r, st in pts:
             rate = 100 * (r.success_rate or 0.0)
             med = st.median or 0.0
@@ -334,22 +452,49 @@ def _tradeoff(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: lis
                 elinewidth=0.6,
                 capsize=1.5,
                 alpha=0.9,
+                zorder=3,
             )
             if best:
                 ax.annotate(r.planner, (med, rate), xytext=(6, -12), textcoords="offset points", fontsize=7)
         ax.set_xscale("log")
+        left, right = ax.get_xlim()
+        if on:
+            _front_line(ax, on, right)
+        ax.set_xlim(left, right)
+        _log_ticks(ax.xaxis)
+        never = [r.planner for r, _ in pts if not r.success_rate]
+        if never:
+            ax.text(
+                0.98,
+                0.04,
+                f"0 % success: off the front, however fast ({len(never)} planner{'s' if len(never) > 1 else ''})",
+                transform=ax.transAxes,
+                ha="right",
+                va="bottom",
+                fontsize="x-small",
+                color="0.25",
+                bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.7", "lw": 0.5},
+            )
         ax.set_ylim(0, 108)
         ax.set_yticks(range(0, 101, 20))
         ax.set_xlabel("median " + _AXIS.get(key, key) + ", 95 % CI")
         ax.set_ylabel("success rate (%), 95 % Wilson CI")
-        ax.set_title(f"{scenario}: named and outlined = nobody both faster and more successful", fontsize="small")
+        ax.set_title(scenario, fontsize="medium")
         ax.grid(alpha=0.3)
     from matplotlib.lines import Line2D
 
     shown = list(dict.fromkeys(r.planner for _, _, pts in panels for r, _ in pts))
     labels = {p: Line2D([], [], ls="", marker=style[p][1], color=style[p][0], ms=6) for p in shown}
+    labels["Pareto front"] = Line2D([], [], color="0.3", lw=1, ls="--")
     ncol = min(len(labels), 5)
     fig.legend(list(labels.values()), list(labels), loc="lower center", ncol=ncol, frameon=False, fontsize="small")
+    fig.suptitle(
+        "named and outlined: on the Pareto front (dashed): no other planner is both faster and at least as "
+        "successful;\na planner that never succeeds (0 %) is off the front, however fast",
+        fontsize="small",
+        y=1 - 0.08 / fig.get_figheight(),
+        va="top",
+    )
     legend_in = 0.25 + 0.2 * math.ceil(len(labels) / ncol)  # the legend's height, in inches
     fig.tight_layout(rect=(0, legend_in / fig.get_figheight(), 1, 1))
     return fig
