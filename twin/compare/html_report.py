@@ -22,13 +22,16 @@ PLOT_CAPTIONS = {
     "success": "Per scenario, each planner's success rate with its 95 % Wilson interval, best first, successes/runs "
     "at the bar. Wide intervals mean few runs: two planners whose intervals overlap are not shown to differ.",
     "tradeoff": "The choice a user makes: success rate against median planning time, per scenario. Outlined and named: "
-    "no other planner is both at least as successful and faster (the Pareto front, dashed).",
-    "planning_time": "Planning time per scenario (per query; per planned motion for task runs), fastest first, n "
-    "beside each planner, the median's 95 % bootstrap interval in red.",
+    "no other planner is both at least as successful and faster (the Pareto front, dashed). A planner that never "
+    "succeeds is off the front, however fast.",
+    "planning_time": "Planning time per scenario (per query; per planned motion for task runs), most successful "
+    "first, then fastest, its success rate and n beside each planner, the median's 95 % bootstrap interval in red.",
     "duration": "Trajectory duration per scenario, successful plans only (n says how many): a planner that solved "
     "only the easy queries can look fast here.",
-    "clearance": "The smallest distance to the cell along each successful trajectory, per scenario, largest first.",
-    "cycle_time": "Task runs: simulated time per placed object, per scenario, fastest first.",
+    "clearance": "The smallest distance to the cell along each successful trajectory, per scenario, most "
+    "successful first, then largest. A panel where every planner has the same value on each query says so: the "
+    "paths share their closest point (the start or goal, or the same straight joint line).",
+    "cycle_time": "Task runs: simulated time per placed object, per scenario, most successful first, then fastest.",
 }
 _SWEEP_CAPTION = (
     "One swept key: success rate (top) and median time (bottom, from zero) against its level, per planner with "
