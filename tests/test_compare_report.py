@@ -319,3 +319,37 @@ def test_a_clearance_panel_where_every_planner_has_the_same_value_says_why() -> 
         assert [t.get_text().split()[0] for t in blocked.get_yticklabels()] == ["c", "b", "a"]  # largest first
     finally:
         _close(figs)
+
+
+def test_clearance_is_the_minimum_along_the_path_not_at_its_start_or_goal() -> None:
+    """Two paths between the same start and goal: the straight joint motion, and one that dips the gripper
+    towards the green bin on the way. clearance.png's number is the minimum along each path, so they differ
+    and the dip reads below both ends."""
+    from twin.collision import PlanningScene
+    from twin.compare.metrics import trajectory_metrics
+    from twin.config import load_config
+    from twin.kinematics import UR5e
+    from twin.types import Trajectory
+
+    settings = load_config(Path(__file__).resolve().parent.parent / "configs/robocup.yaml")
+    scene, kin = PlanningScene.from_settings(settings), UR5e()
+    start = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    goal = start + [0.8, 0.0, 0.0, 0.0, 0.0, 0.0]
+    dip = start + [0.4, 0.35, 0.3, 0.0, 0.0, 0.0]
+
+    def clearance(*waypoints: np.ndarray) -> tuple[float, str]:
+        q = np.array(waypoints)
+        still = np.zeros_like(q)
+        metrics, pair = trajectory_metrics(
+            Trajectory(np.arange(len(q), dtype=float), q, still, still), kin=kin, scene=scene, settings=settings
+        )
+        value = metrics["min_clearance_m"]
+        assert value is not None
+        return value, pair
+
+    straight, _ = clearance(start, goal)
+    dipping, pair = clearance(start, dip, goal)
+    ends = min(scene.clearance(start).distance, scene.clearance(goal).distance)
+    assert straight == pytest.approx(ends, abs=1e-6)  # this path is closest at its ends ...
+    assert dipping < ends - 0.05 and dipping > 0.0  # ... that one between them: 26 mm from the green bin
+    assert pair.endswith("->bin_green")

@@ -90,7 +90,12 @@ METRICS: tuple[MetricDef, ...] = (
         "largest joint jerk / its limit, as max_vel_ratio; judged only for a planner that declares itself "
         "jerk-limited (TOPP-RA-timed motion is not)",
     ),
-    MetricDef("min_clearance_m", "m", "minimum FCL distance to the environment along the trajectory", "higher"),
+    MetricDef(
+        "min_clearance_m",
+        "m",
+        "minimum FCL distance to the environment along the trajectory, its start and goal included",
+        "higher",
+    ),
     MetricDef("contacts", "", "distinct (robot link, body) contacts seen when executed in physics"),
     MetricDef("contact_time_s", "s", "simulated time with any unexpected robot contact"),
     MetricDef("goal_error_m", "m", "TCP position error after execution and settling"),
@@ -201,7 +206,9 @@ def trajectory_metrics(
 
     Path lengths and jerk use a fine resampling (`jerk_dt_s`) so that coarse and dense planners are
     measured alike. Clearance is the FCL distance robot-vs-environment (self pairs excluded: some stay
-    close by construction) at the planning API's own check resolution.
+    close by construction) at the planning API's own check resolution, its minimum over the whole path:
+    where the query's start or goal is the closest point (a grasp just above the table), every path to it
+    has the same clearance, and so do planners that return the same path (the straight joint motion).
     """
     from twin.planning import densify
 
