@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tests.cli_runner import twin
-from twin.annotate import project
+from twin.annotate import place_labels, project
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import load_config
 from twin.errors import ConfigError
@@ -58,6 +58,45 @@ def test_the_snapshot_writes_two_titled_panels(tmp_path: Path) -> None:
     assert image is not None and image.shape[1] > image.shape[0]  # side by side
     strip = image[:20]
     assert strip.mean() < 60 and strip.max() > 200  # a dark title strip with light text over the panels
+
+
+def _apart(boxes: list[tuple[int, int, int, int]]) -> bool:
+    return all(
+        a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1]
+        for i, a in enumerate(boxes)
+        for b in boxes[i + 1 :]
+    )
+
+
+@pytest.mark.parametrize("config", ["warehouse.yaml", "robocup.yaml"])
+def test_the_overview_writes_every_name_near_its_point_and_none_over_another(config: str) -> None:
+    """The warehouse of the report wrote 'warehouse_cube_green_0' over 'warehouse_cube_red_0' and 'obstacle'
+    over 'green drop'; robocup 'can_0' against 'aruco_plate'."""
+    settings = load_config(ROOT / "configs" / config)
+    views = render_views(settings)
+    labels = views.labels
+    with World(settings, seed=settings.seed) as world:
+        objects = {o.name for o in world.objects()}
+    names = {label.text for label in labels}
+    assert objects <= names and "aruco_plate" in names
+    assert {m.name for m in task_landmarks(settings)} <= names  # the drop zones are placed with the rest
+    boxes = [label.box for label in labels]
+    assert _apart(boxes), [(label.text, label.box) for label in labels]
+    h, w = views.overview.shape[:2]
+    for label in labels:
+        x0, y0, x1, y1 = label.box
+        assert 0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h
+        u, v = label.anchor  # within a few lines of its point: read as its name
+        assert max(x0 - u, u - x1, 0) + max(y0 - v, v - y1, 0) < 80, label
+
+
+def test_labels_crowded_on_one_row_are_pushed_apart() -> None:
+    """Five long names on points 20 px apart on one row: each written beside its point would cover the next."""
+    anchors = [(100 + 20 * i, 200) for i in range(5)]
+    boxes = place_labels(anchors, [(150, 14)] * 5, (400, 640))
+    assert _apart(boxes)
+    assert boxes[0] == (104, 182, 254, 196)  # the first (leftmost, on top) where a single label goes: right-above
+    assert all(0 <= b[0] and b[2] <= 640 and 0 <= b[1] and b[3] <= 400 for b in boxes)
 
 
 def test_the_warehouse_task_names_its_drop_zones() -> None:

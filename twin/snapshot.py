@@ -1,6 +1,7 @@
 """Scene snapshots for people: what the camera sees where perception uses it (a wrist camera at the
 capture pose, a fixed one where it is mounted) and an overview framed on the cell with every object and
-fixture named, side by side in one PNG with a title over each panel."""
+fixture named, side by side in one PNG with a title over each panel. The names (objects, fixtures, the
+task's drop zones) are placed together so none is written over another (`annotate.draw_labels`)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.annotate import banner, cell_points, draw_circle_on_table, draw_label, framed_overview
+from twin.annotate import Label, banner, cell_points, draw_circle_on_table, draw_labels, framed_overview
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import Settings
 from twin.errors import ConfigError
@@ -18,6 +19,8 @@ __all__ = ["SceneViews", "render_views", "save_snapshot"]
 
 _OVERVIEW_SCALE = 1.5  # the overview is rendered this much larger than the camera image
 _LABEL_LIFT_M = 0.03  # names are written this far above an object's centre
+_NAME_COLOR = (255, 255, 255)
+_ZONE_COLOR = (255, 230, 120)  # a drop zone's circle and name
 
 
 @dataclass(frozen=True)
@@ -32,6 +35,7 @@ class SceneViews:
     overview_pose: np.ndarray
     overview_intrinsics: Intrinsics
     points: np.ndarray  # (N, 3) what the overview frames: bodies and robot links (`annotate.cell_points`)
+    labels: tuple[Label, ...] = ()  # the names written on the overview, where (no two boxes overlap)
 
 
 def _overview_intrinsics(settings: Settings) -> Intrinsics:
@@ -59,15 +63,19 @@ def render_views(settings: Settings, *, settle_s: float = 0.5) -> SceneViews:
         camera_title = f"camera ({where}): what perception sees"
         wide = _overview_intrinsics(settings)
         objects = world.objects()
-        named = [(o.name, o.position + [0.0, 0.0, _LABEL_LIFT_M]) for o in objects]
-        named += [(f.name, np.asarray(f.position, dtype=float)) for f in settings.world.fixtures if f.name != "table"]
+        named = [(o.position + [0.0, 0.0, _LABEL_LIFT_M], o.name, _NAME_COLOR) for o in objects]
+        named += [
+            (np.asarray(f.position, dtype=float), f.name, _NAME_COLOR)
+            for f in settings.world.fixtures
+            if f.name != "table"
+        ]
         points = cell_points(world)
         T_over = framed_overview(points, wide)
         overview = np.ascontiguousarray(world.render(T_over, wide, near_m=0.05, far_m=8.0).rgb)
-    for name, p in named:
-        draw_label(overview, T_over, wide, p, name)
     for mark in task_landmarks(settings):
-        draw_circle_on_table(overview, T_over, wide, mark, color=(255, 230, 120))
+        draw_circle_on_table(overview, T_over, wide, mark, color=_ZONE_COLOR, name=False)
+        named.append((np.asarray(mark.position, dtype=float), mark.name, _ZONE_COLOR))
+    labels = draw_labels(overview, T_over, wide, named)
     return SceneViews(
         camera=image,
         camera_title=camera_title,
@@ -77,6 +85,7 @@ def render_views(settings: Settings, *, settle_s: float = 0.5) -> SceneViews:
         overview_pose=T_over,
         overview_intrinsics=wide,
         points=points,
+        labels=tuple(labels),
     )
 
 
