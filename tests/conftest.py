@@ -14,8 +14,8 @@ ROOT = Path(__file__).resolve().parent.parent
 # hookimpl`, `twin.types`, `twin.planning`): it must keep working. The task `acme.wave` is the newer hook.
 ACME_PLUGIN = '''
 """A throwaway third-party twin plugin: a straight joint-space planner within the limits but without a
-collision check, one beyond the limits, a crashing receding-horizon planner, and a task that waves the arm
-and places nothing."""
+collision check, one beyond the limits, one that raises on its first plan(), a crashing receding-horizon
+planner, and a task that waves the arm and places nothing."""
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -144,6 +144,20 @@ class Wave:
         return []
 
 
+class Flaky(Hasty):
+    """Hasty within the limits, but its first plan() raises (a bug in a plugin): the rest plan as Hasty."""
+
+    def __init__(self, params, context):
+        super().__init__(Hasty.Params(factor=1.0), context)
+        self.calls = 0
+
+    def plan(self, request, scene):
+        self.calls += 1
+        if self.calls == 1:
+            return 1 / 0
+        return super().plan(request, scene)
+
+
 @hookimpl
 def twin_register_tasks(registry):
     registry.add_task("acme.wave", "acme_twin_plugin:Wave", description="waves the arm (test plugin)")
@@ -156,6 +170,9 @@ def twin_register_planners(registry):
     )
     registry.add_planner(
         "acme.hasty", "acme_twin_plugin:Hasty", description="straight line beyond a joint limit (test plugin)"
+    )
+    registry.add_planner(
+        "acme.flaky", "acme_twin_plugin:Flaky", description="raises on its first plan(), then Hasty (test plugin)"
     )
     registry.add_planner(
         "acme.crash", "acme_twin_plugin:Crash", receding_horizon=True, description="drives into the table (test plugin)"

@@ -123,7 +123,7 @@ def _transfer_params(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
     def fake_run_task(settings: Any, **kw: Any) -> RunSummary:
         planners = stage_planners(settings, kw.get("planner"))
         seen.append(planners["transfer"].inner.params)
-        return _summary(settings.planners["transfer"].name, placed=(True,))
+        return _summary(settings.planners.transfer.name, placed=(True,))
 
     monkeypatch.setattr(twin_tasks, "run_task", fake_run_task)
     return seen

@@ -323,7 +323,7 @@ def test_task_runs_take_the_whole_planner_block_as_transfer_planner(monkeypatch)
         return RunSummary(
             config="robocup.yaml",
             seed=kw["seed"],
-            planner=settings.planners["transfer"].name,
+            planner=settings.planners.transfer.name,
             objects=(),
             sim_time_s=1.0,
             wall_time_s=0.1,
@@ -341,9 +341,9 @@ def test_task_runs_take_the_whole_planner_block_as_transfer_planner(monkeypatch)
     row = execute_run(task)
     assert row["status"] != "error", row["reason"]
     [(settings, kw)] = seen
-    assert settings.planners["transfer"].model_dump() == block
+    assert settings.planners.transfer.model_dump() == block
     assert kw.get("planner") is None and kw["seed"] == 2
-    assert settings.planners["movej"] == load_config(ROOT / "configs" / "robocup.yaml").planners["movej"]
+    assert settings.planners.movej == load_config(ROOT / "configs" / "robocup.yaml").planners.movej
 
 
 # ---- resume: changed configs, error rows -----------------------------------------------------------

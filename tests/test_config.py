@@ -69,7 +69,7 @@ def test_overrides_apply_last_and_are_validated(tmp_path):
     cfg = write(tmp_path / "c.yaml", "seed: 1\n")
     s = load_config(cfg, ["seed=9", "world.objects.lying_probability=0.25", "planners.transfer.name=ruckig.movej"])
     assert s.seed == 9 and s.world.objects.lying_probability == 0.25
-    assert s.planners["transfer"].name == "ruckig.movej"
+    assert s.planners.transfer.name == "ruckig.movej"
     with pytest.raises(ConfigError, match=r"unknown key 'robot\.nope'"):
         load_config(cfg, ["robot.nope=1"])
     with pytest.raises(ConfigError, match=r"key\.path=value"):

@@ -73,7 +73,7 @@ def run_config(path: Path, *, world: bool = True) -> Outcome:
     outcomes.append(out)
     if context is not None:
         blocks = {g: stage_block(s, g) for g in sorted(set(STAGE_GROUPS.values()))}
-        blocks.update(s.planners)
+        blocks.update(s.planners.given())
         for group, block in sorted(blocks.items()):
             outcomes.append(_stage(f"planner {group}", lambda b=block: make_planner(b, context))[1])
     if world:

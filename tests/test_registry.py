@@ -126,15 +126,15 @@ def test_third_party_plugin_is_listed_and_plans_by_name_from_config(acme_plugin,
     s = load_config(cfg)
     start, goal = np.array([0.0, -1.6, 1.5, -1.5, -1.57, 0.0]), np.array([0.3, -1.4, 1.2, -1.4, -1.57, 0.2])
     req = MotionRequest(start, JointGoal(goal), limits_from_settings(s))
-    res = plan(s, s.planners["transfer"], req)
+    res = plan(s, s.planners.transfer, req)
     assert res.status is Status.SUCCESS, res.reason
     np.testing.assert_allclose(res.trajectory.q[-1], goal, atol=1e-9)
     # a quarter of the velocity limit was asked for
     assert np.abs(res.trajectory.qd).max() <= 0.25 * s.robot.max_joint_vel + 1e-9
     with pytest.raises(ConfigError, match=r"acme.straight: parameter 'speed_fraction'"):
-        plan(s, load_config(cfg, ["planners.transfer.params.speed_fraction=3"]).planners["transfer"], req)
+        plan(s, load_config(cfg, ["planners.transfer.params.speed_fraction=3"]).planners.transfer, req)
     with pytest.raises(ConfigError, match=r"unknown parameter 'sped'; allowed: speed_fraction"):
-        plan(s, load_config(cfg, ["planners.transfer.params.sped=0.1"]).planners["transfer"], req)
+        plan(s, load_config(cfg, ["planners.transfer.params.sped=0.1"]).planners.transfer, req)
 
 
 def test_every_hook_is_documented_in_the_readme():

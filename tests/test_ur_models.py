@@ -154,8 +154,9 @@ def test_the_mpc_planners_refuse_an_arm_their_sphere_models_do_not_cover() -> No
     from twin.planning import make_context, make_planner
 
     settings = load_config("robocup", ["robot.model=ur10e"])
-    with pytest.raises(ConfigError, match=r"sphere model of the arm is the UR5e's; robot\.model ur10e"):
-        make_planner("nmpc", context=make_context(settings))
+    for name in ("nmpc", "croc"):
+        with pytest.raises(ConfigError, match=rf"^{name} does not plan for robot\.model ur10e; it plans for ur5e$"):
+            make_planner(name, context=make_context(settings))
 
 
 def test_a_urdf_rooted_above_the_arm_is_placed_on_the_base_in_plan_and_physics(tmp_path) -> None:

@@ -4,6 +4,9 @@ A user mistake (bad config, unknown name, bad value, missing file) prints one li
 Exit 1 is a result that fell short, never a mistake: `twin plan` when the planner found no solution, `twin
 run` when an object was not placed (a script or CI job sees a failed run without reading the table),
 `twin compare --baseline` when the gate fails, `twin check-planner` when a rule breaks.
+Exit 3 is a plugin that failed: it raised an exception of its own or broke the planner contract (`twin plan`;
+`twin run` when a stage failed so, even one a retry recovered from: the stage fails with the plugin's exception
+and the run goes on). One line names the plugin and the exception; `-v` adds its traceback.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ __all__ = ["build_parser", "main"]
 
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_USAGE = 0, 1, 2
 EXIT_NOT_PLACED = EXIT_NO_SOLUTION  # `twin run`: an object did not end in its bin
+EXIT_PLUGIN_ERROR = 3  # a plugin raised an exception of its own or broke its contract
 
 
 # a comma-separated list of numbers as a user types it, e.g. "-0.5,-1.5708,1.5708" (inf/nan included, so
@@ -207,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--speed",
         type=float,
-        default=1.0,
+        default=None,
         metavar="X",
         help="with --record: the video plays X times faster than the run (default 1: real time)",
     )
@@ -457,7 +461,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scene = PlanningScene.from_settings(settings)
     if getattr(args, "verbose", False):
         print(_scene_line(scene))
-    result = plan(settings, settings.planners["transfer"], request, scene=scene)
+    block = settings.planners.transfer
+    assert block is not None  # `--planner` is required and made the transfer block
+    result = plan(settings, block, request, scene=scene)
     traj = result.trajectory
     summary = {
         "planner": args.planner,
@@ -488,6 +494,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from twin.timing import format_breakdown, process_age_s
 
     startup = process_age_s()  # interpreter start, imports and argument parsing, before the run's own clock
+    if args.speed is not None and args.record is None:
+        from twin.errors import ConfigError
+
+        raise ConfigError(
+            f"--speed {args.speed:g} goes with --record PATH (the video it speeds up); give both or neither"
+        )
     settings = _settings(args, transfer_planner=args.planner)
     console = Console(stderr=True)
     with Progress(
@@ -498,7 +510,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             settings,
             gui=args.gui,
             record=args.record,
-            record_speed=args.speed,
+            record_speed=1.0 if args.speed is None else args.speed,
             rerun=args.rerun,
             rerun_serve=args.rerun_serve,
             config_name=str(args.config),
@@ -513,9 +525,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         data["timings"] = timings
         data["command_wall_time_s"] = total
         data["environment"] = environment()  # where it ran: twin's commit, Python, backends, machine
+        # what ran, beside the planner blocks (`planners`): the config as named and every change made to it
+        data["config_path"] = str(Path(str(args.config)).resolve()) if Path(str(args.config)).is_file() else None
+        data["overrides"] = _run_overrides(args)
         _write_json(args.json_path, data)
     table = Table(
-        title=f"{args.config} seed {summary.seed}, transfer planner {summary.planner}",
+        title=_ran_title(args, settings, summary.seed),
         caption="perception err: how far (xy) perception's first estimate of the object was from where it lay",
     )
     for col in ("object", "class", "colour", "target", "placed", "cycle s", "perception err mm", "error"):
@@ -538,7 +553,31 @@ def _cmd_run(args: argparse.Namespace) -> int:
         f" ({summary.sim_time_s / total:.1f}x real time over the whole command, {total:.1f} s)"
     )
     print(f"time: {format_breakdown(timings, total)}")
+    if summary.plugin_errors:  # a bug in a plugin, even one the task recovered from, is not a pass
+        print(f"plugin errors: {len(summary.plugin_errors)}, the first: {summary.plugin_errors[0]}")
+        return EXIT_PLUGIN_ERROR
     return EXIT_OK if all(o.placed for o in summary.objects) else EXIT_NOT_PLACED
+
+
+def _run_overrides(args: argparse.Namespace) -> list[str]:
+    """The changes a command line made to its config, as typed: `--planner NAME` and every `--set`."""
+    planner = [f"--planner {args.planner}"] if getattr(args, "planner", None) else []
+    return planner + [f"--set {o}" for o in args.overrides]
+
+
+def _ran_title(args: argparse.Namespace, settings: Any, seed: int) -> str:
+    """What a run ran, for its table's title: config, seed, each stage group's planner with the parameters the
+    config gives it, and the command line's overrides."""
+    from twin.tasks.cell import stage_block
+
+    groups = []
+    for group in ("transfer", "movej", "movel"):
+        block = stage_block(settings, group)
+        given = [f"{k}={v}" for k, v in block.params.items()] + ([f"retimer {block.retimer}"] if block.retimer else [])
+        groups.append(f"{group} {block.name}" + (f" ({', '.join(given)})" if given else ""))
+    title = f"{args.config} seed {seed}; " + "; ".join(groups)
+    overrides = _run_overrides(args)
+    return title + (f"; {' '.join(overrides)}" if overrides else "")
 
 
 def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:
@@ -564,7 +603,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from twin.compare import plan_comparison, run_comparison
     from twin.compare.gate import Tolerance, check_shares_runs, gate, load_baseline, load_baseline_environment
     from twin.compare.report import summary_table, sweep_tables
-    from twin.compare.runner import recorded_environment
+    from twin.compare.runner import check_run_options, recorded_environment
     from twin.errors import ConfigError
 
     if args.tolerance is not None and args.baseline is None:
@@ -572,6 +611,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     tolerance = Tolerance.parse(args.tolerance) if args.tolerance is not None else Tolerance()
     baseline = load_baseline(args.baseline) if args.baseline is not None else None  # a typo fails before the sweep
     shared = 0
+    check_run_options(workers=args.workers, backend=args.backend, resume=args.resume, force=args.force)
     if baseline is not None or args.dry_run:
         dry = plan_comparison(args.config, overrides=args.overrides)  # knows every run id; runs nothing
         if baseline is not None:  # an unrelated baseline fails now, not after the whole sweep ran

@@ -8,6 +8,7 @@
      +-- DependencyMissing      an optional backend is not installed (also ImportError)
      +-- InvalidRequestError    a malformed motion request or bad argument (also ValueError)
      +-- PlanningError          a planner broke its contract (not "no solution": that is a status)
+     |    +-- PluginCrashed     a plugin raised an exception of its own (a bug in the plugin, not the input)
      +-- WorldError             the simulated world cannot be built as asked
 
 "No solution" is never an exception: it is a status with a reason in a result.
@@ -24,6 +25,7 @@ __all__ = [
     "DuplicateNameError",
     "InvalidRequestError",
     "PlanningError",
+    "PluginCrashed",
     "PluginError",
     "TwinError",
     "UnknownNameError",
@@ -77,6 +79,16 @@ class InvalidRequestError(TwinError, ValueError):
 
 class PlanningError(TwinError):
     """A planner broke its contract (for example returned a colliding trajectory)."""
+
+
+class PluginCrashed(PlanningError):
+    """A plugin raised an exception that is not one of twin's (a bug in the plugin): the message names the
+    plugin, what it was doing and the exception; the original is the `__cause__` (its traceback)."""
+
+    def __init__(self, plugin: str, doing: str, error: BaseException):
+        super().__init__(f"{plugin} raised {type(error).__name__} in {doing}: {error}")
+        self.plugin = plugin
+        self.error = error
 
 
 class WorldError(TwinError):

@@ -33,6 +33,7 @@ FAILURES: dict[str, str] = {
     "grasp_lost": "a task run did not get an object where it belongs: never perceived, grasp not sensed, slipped, "
     "dropped, or released outside its bin",
     "dependency_missing": "the planner's backend is not installed",
+    "plugin_error": "the planner plugin raised an exception of its own (a bug in the plugin)",
     "error": "the run raised an error or was stopped (time-out of the run, crashed worker)",
 }
 

@@ -14,16 +14,18 @@ simulated arm (`twin.executor`).
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.errors import InvalidRequestError, PlanningError, TwinError
+from twin.errors import InvalidRequestError, PlanningError, PluginCrashed, TwinError
 from twin.limit_check import LIMIT_TOLERANCE, LimitExcess, limit_excess, stitched
 from twin.registry import PluginContext, Registry, default_registry
 from twin.timing import stage
@@ -51,6 +53,7 @@ __all__ = [
     "cannot_reach",
     "colliding_pair",
     "declared_goal_kinds",
+    "declared_robot_models",
     "densify",
     "densify_path",
     "describe_goal_kinds",
@@ -63,6 +66,7 @@ __all__ = [
     "make_planner",
     "plan",
     "plan_with",
+    "robot_refusal",
 ]
 
 log = logging.getLogger("twin")
@@ -216,6 +220,20 @@ def cannot_reach(name: str, kind: str, kinds: frozenset[str]) -> str:
     return f"{name} cannot reach {describe_goal_kinds({kind})}; it serves {describe_goal_kinds(kinds)}"
 
 
+def declared_robot_models(planner_class: type) -> frozenset[str] | None:
+    """The arms (`robot.model` names) a planner class declares it plans for (`robot_models`); None: every arm."""
+    models = getattr(planner_class, "robot_models", None)
+    return None if models is None else frozenset(models)
+
+
+def robot_refusal(name: str, planner_class: type, model: str) -> str | None:
+    """Why planner `name` does not plan for the arm `model` (the one message), or None when it does."""
+    models = declared_robot_models(planner_class)
+    if models is None or model in models:
+        return None
+    return f"{name} does not plan for robot.model {model}; it plans for {', '.join(sorted(models))}"
+
+
 def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) -> Limits:
     """The config's joint limits, each joint's speed no faster than the arm's datasheet allows
     (`twin.ur_models`: the UR10e's base and shoulder turn at most 120 deg/s)."""
@@ -245,7 +263,13 @@ def make_planner(block: PlannerBlock | str, context: PluginContext) -> CheckedPl
     if isinstance(block, str):
         block = PlannerBlock(name=block)
     entry = context.registry.entry(block.name, (Kind.PLANNER, Kind.RECEDING_HORIZON))
-    planner = context.registry.planner(block.name, block.params, context)
+    refusal = robot_refusal(block.name, entry.load(), context.kinematics.model)
+    if refusal is not None:
+        from twin.errors import ConfigError
+
+        raise ConfigError(refusal)
+    with _plugin_code(block.name, "its constructor"):
+        planner = context.registry.planner(block.name, block.params, context)
     if block.retimer is not None:
         if not accepts_retimer(type(planner)):
             from twin.errors import ConfigError
@@ -255,6 +279,18 @@ def make_planner(block: PlannerBlock | str, context: PluginContext) -> CheckedPl
     return CheckedPlanner(
         planner, name=block.name, receding_horizon=entry.kind is Kind.RECEDING_HORIZON, context=context
     )
+
+
+@contextlib.contextmanager
+def _plugin_code(name: str, doing: str) -> Iterator[None]:
+    """Around a call into a plugin: an exception of the plugin's own (not a TwinError, which says what is
+    wrong with the input) becomes PluginCrashed naming the plugin, the call and the exception."""
+    try:
+        yield
+    except TwinError:
+        raise
+    except Exception as e:  # any bug of a plugin is reported as the plugin's
+        raise PluginCrashed(name, doing, e) from e
 
 
 # ---- trajectory checks ----------------------------------------------------------------------------
@@ -453,7 +489,8 @@ class CheckedPlanner:
         self._check_time_s = 0.0
         self._last, self._ratios = None, {}
         t0 = time.perf_counter()
-        self.inner.reset(request, scene)
+        with _plugin_code(self.name, "reset()"):
+            self.inner.reset(request, scene)
         self._reset_time_s = time.perf_counter() - t0
 
     def step(self, q: np.ndarray) -> Segment | MotionResult:
@@ -462,7 +499,8 @@ class CheckedPlanner:
             raise PlanningError(f"{self.name}.step() called before reset()")
         q = np.asarray(q, dtype=float)
         t0 = time.perf_counter()
-        out = self.inner.step(q)
+        with _plugin_code(self.name, "step()"):
+            out = self.inner.step(q)
         elapsed = time.perf_counter() - t0
         if isinstance(out, MotionResult):
             if out.success and self._last is not None:  # the arm stops at the end: from the last segment to rest
@@ -550,7 +588,8 @@ class CheckedPlanner:
     # ---- one-shot, checked ----------------------------------------------------------------------
     def _plan_one_shot(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:
         t0 = time.perf_counter()
-        result = self.inner.plan(request, scene)
+        with _plugin_code(self.name, "plan()"):
+            result = self.inner.plan(request, scene)
         elapsed = time.perf_counter() - t0
         if not isinstance(result, MotionResult):
             raise PlanningError(f"{type(self.inner).__name__}.plan returned {type(result).__name__}, not MotionResult")

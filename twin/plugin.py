@@ -5,8 +5,10 @@ Built-in plugins import only from here (a test enforces it); names not listed he
 change. Heavy modules (FCL, OpenCV) load on first use of a name that needs them.
 
 Contracts are declared, not probed:
-- a planner class may declare `goal_kinds` (subset of `GOAL_KINDS`, default all) and `Params` (a pydantic
-  model validating its parameters); a path planner that takes a retimer subclasses `PathPlanner`;
+- a planner class may declare `goal_kinds` (subset of `GOAL_KINDS`, default all), `robot_models` (the
+  `robot.model` arms it plans for, default all: the factory refuses another, a comparison skips the pair) and
+  `Params` (a pydantic model validating its parameters); a path planner that takes a retimer subclasses
+  `PathPlanner`;
 - a planner that stops near its goal rather than on it says how near in `MotionResult.goal_tolerance_m`;
 - a planner (or retimer) whose timing cannot keep the request's jerk limit declares `jerk_limited = False`
   (TOPP-RA bounds velocity and acceleration only); `PathPlanner` answers for its retimer;

@@ -346,6 +346,11 @@ class RunSummary:
     # wall seconds per stage (twin.timing): physics, rendering, perception.<step>, planning.<planner>,
     # execution, world_build, other; they sum to wall_time_s
     timings: dict[str, float] = field(default_factory=dict)
+    # what ran: each stage group's planner ('movej', 'movel', 'transfer') as a block with every parameter the
+    # plugin ran with (its validated params, defaults included: two runs of one planner in different modes differ)
+    planners: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # every exception a planner plugin raised ("stage: plugin raised ..."), the stage failing with it
+    plugin_errors: tuple[str, ...] = ()
 
     @property
     def success_rate(self) -> float:
@@ -356,6 +361,8 @@ class RunSummary:
             "config": self.config,
             "seed": self.seed,
             "planner": self.planner,
+            "planners": self.planners,
+            "plugin_errors": list(self.plugin_errors),
             "objects": [
                 {
                     "id": o.id,

@@ -47,7 +47,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.plugin import (
-    ConfigError,
     JointGoal,
     MotionRequest,
     MotionResult,
@@ -113,17 +112,15 @@ class RecedingHorizonMPC:
 
     Params: type[RecedingParams] = RecedingParams
     goal_kinds = frozenset({"position"})  # see the module docstring
+    # the sphere models (params) are the UR5e's links; another arm's are not written, so the factory refuses
+    # another `robot.model` and a comparison skips such a pair
+    robot_models = frozenset({"ur5e"})
     name = "mpc"  # in log lines
 
     def __init__(self, params: RecedingParams | None, context: PluginContext):
         self.params = params if params is not None else self.Params()
         self.context = context
         self.kin: UR5e = context.kinematics
-        if self.kin.model != "ur5e":  # the sphere models (params) are the UR5e's links; another arm's are not written
-            raise ConfigError(
-                f"{type(self).__name__}: its sphere model of the arm is the UR5e's; robot.model {self.kin.model} is "
-                "not supported by the MPC planners (the OMPL and MoveJ/MoveL planners plan for every arm)"
-            )
         col = context.settings.collision
         self._resolution = {"max_step_rad": col.check_resolution_rad, "max_step_m": col.check_resolution_m}
         self._robot_sph = robot_spheres(self.params.tool_spheres, self.params.wrist_spheres)

@@ -141,9 +141,12 @@ def failure_of_row(row: dict[str, Any]) -> str | None:
 
 
 def failure_of_exception(e: BaseException) -> str:
-    """dependency_missing for a planner whose backend is not installed, else error."""
-    from twin.errors import DependencyMissing
+    """dependency_missing for a planner whose backend is not installed, plugin_error for a plugin that raised
+    an exception of its own, else error."""
+    from twin.errors import DependencyMissing, PluginCrashed
 
+    if isinstance(e, PluginCrashed):
+        return "plugin_error"
     return "dependency_missing" if isinstance(e, DependencyMissing) else "error"
 
 

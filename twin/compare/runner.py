@@ -55,6 +55,7 @@ __all__ = [
     "RESULTS_FILE",
     "CompareResult",
     "DryRun",
+    "check_run_options",
     "check_spec",
     "latest_rows",
     "plan_comparison",
@@ -149,7 +150,7 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
     of each scenario is drawn, so a region that cannot yield what it asks for (`straight: blocked` with
     nothing in the way) is one error now rather than an error row per run."""
     from twin.config import load_config
-    from twin.planning import accepts_retimer, make_context, make_planner
+    from twin.planning import accepts_retimer, make_context, make_planner, robot_refusal
     from twin.problems.world import check_robot
     from twin.registry import Kind, default_registry, validate_params
 
@@ -183,8 +184,10 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
                 except UnknownNameError as e:
                     raise ConfigError(str(e)) from None
                 validate_params(rentry, rentry.load(), p.retimer_params)
-            if instantiate:
-                make_planner(p.block(), make_context(settings[0], registry))
+            # built for the first scenario whose arm it plans for (the pairs of the others are skipped)
+            accepted = [s for s in settings if robot_refusal(p.name, cls, s.robot.model) is None]
+            if instantiate and accepted:
+                make_planner(p.block(), make_context(accepted[0], registry))
         except (ConfigError, DependencyMissing) as e:
             raise type(e)(f"{source}: planners.{i} ({p.id}): {e}") from None
     if draw_queries:
@@ -582,30 +585,53 @@ def _goal_kind(run: RunTask) -> str | None:
 
 
 def _runnable(runs: Sequence[RunTask]) -> tuple[list[RunTask], list[tuple[str, str]]]:
-    """(runs that can run here, (run_id, reason) of the others): task runs when twin.tasks is missing, and
+    """(runs that can run here, (run_id, reason) of the others): task runs when twin.tasks is missing,
     query runs whose goal kind the planner declares it cannot reach (`goal_kinds`, e.g. nmpc: positions
-    only). Such a pair is not a failure of the planner; it is not a comparison at all."""
-    from twin.planning import cannot_reach, declared_goal_kinds
+    only), and runs on an arm the planner declares it does not plan for (`robot_models`, e.g. nmpc: the
+    UR5e only). Such a pair is not a failure of the planner; it is not a comparison at all."""
+    from twin.config import load_config
+    from twin.planning import cannot_reach, declared_goal_kinds, robot_refusal
     from twin.registry import default_registry
 
     have_tasks = tasks_available()
-    kinds: dict[str, frozenset[str]] = {}
+    classes: dict[str, type] = {}
+    arms: dict[tuple[str, tuple[str, ...]], str] = {}  # (config, overrides) -> robot.model
     ok: list[RunTask] = []
     skipped: list[tuple[str, str]] = []
     for r in runs:
         if r.kind == "task" and not have_tasks:
             skipped.append((r.run_id, TASKS_UNAVAILABLE))
             continue
+        name = r.planner["name"]
+        if name not in classes:
+            classes[name] = default_registry().entry(name).load()
         kind = _goal_kind(r)
         if kind is not None:
-            name = r.planner["name"]
-            if name not in kinds:
-                kinds[name] = declared_goal_kinds(default_registry().entry(name).load())
-            if kind not in kinds[name]:
-                skipped.append((r.run_id, cannot_reach(r.planner_id, kind, kinds[name])))
+            kinds = declared_goal_kinds(classes[name])
+            if kind not in kinds:
+                skipped.append((r.run_id, cannot_reach(r.planner_id, kind, kinds)))
                 continue
+        key = (r.config, tuple(r.overrides))
+        if key not in arms:
+            arms[key] = load_config(r.config, r.overrides).robot.model
+        refusal = robot_refusal(r.planner_id, classes[name], arms[key])
+        if refusal is not None:
+            skipped.append((r.run_id, refusal))
+            continue
         ok.append(r)
     return ok, skipped
+
+
+def check_run_options(*, workers: int | None, backend: str, resume: bool = False, force: bool = False) -> None:
+    """How a sweep is run, checked before anything runs (`run_comparison` and a dry run alike): ConfigError."""
+    if backend not in ("local", "ray"):
+        raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if workers is not None and workers < 0:
+        raise ConfigError(f"workers must be >= 0 (0: in this process), got {workers}")
+    if force and not resume:
+        raise ConfigError(
+            "--force goes with --resume (it accepts a changed config); to start over, choose another --out"
+        )
 
 
 def plan_comparison(spec: CompareSpec | str | Path, *, overrides: Iterable[str] = ()) -> DryRun:
@@ -645,14 +671,7 @@ def run_comparison(
     t_start = time.perf_counter()
     started = datetime.now().astimezone()  # summary.md says when the sweep ran (with its time zone)
     spec = _load(spec, overrides)
-    if backend not in ("local", "ray"):
-        raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
-    if workers is not None and workers < 0:
-        raise ConfigError(f"workers must be >= 0, got {workers}")
-    if force and not resume:
-        raise ConfigError(
-            "--force goes with --resume (it accepts a changed config); to start over, choose another --out"
-        )
+    check_run_options(workers=workers, backend=backend, resume=resume, force=force)
     check_spec(spec)
     out = Path(out_dir) if out_dir is not None else Path("out") / spec.name
     results = out / RESULTS_FILE

@@ -81,6 +81,7 @@ from pydantic import (
 )
 
 from twin.config import PlannerBlock, apply_override, find_config, load_config, read_yaml
+from twin.config.loader import unknown_key_hint
 from twin.errors import ConfigError
 from twin.problems.model import ProblemSet, load_problem_set
 from twin.problems.queries import query_of_problem
@@ -733,7 +734,7 @@ def _format(source: str, err: ValidationError) -> str:
     where = ".".join(loc) or "(top level)"
     more = f" (and {len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
     if e["type"] == "extra_forbidden":
-        return f"{source}: unknown key {where!r}{more}"
+        return f"{source}: unknown key {where!r}{more}.{unknown_key_hint(CompareSpec, raw)}".rstrip(".")
     msg = e["msg"].removeprefix("Value error, ")
     return f"{source}: {where}: {msg}{more}"
 

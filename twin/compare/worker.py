@@ -430,7 +430,7 @@ def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> N
     # are two different task runs
     settings = load_config(task.config, task.overrides)
     block = PlannerBlock(**task.planner)
-    settings = settings.model_copy(update={"planners": {**settings.planners, "transfer": block}})
+    settings = settings.model_copy(update={"planners": settings.planners.model_copy(update={"transfer": block})})
     summary = run_task(settings, seed=task.seed, config_name=os.path.basename(task.config), rerun=rerun)
     m = task_metrics(summary)
     row["metrics"].update(m)

@@ -16,12 +16,14 @@ import difflib
 import json
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import UnionType
+from typing import Annotated, Any, Union, get_args, get_origin
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, Tag, ValidationError
 
 from twin.config.schema import Settings
 from twin.errors import ConfigError
@@ -29,6 +31,7 @@ from twin.resources import CONFIG_SUFFIXES, config_names, packaged_config
 
 __all__ = [
     "apply_override",
+    "blamed_source",
     "find_config",
     "format_validation",
     "load_config",
@@ -37,6 +40,7 @@ __all__ = [
     "read_yaml",
     "settings_from_dict",
     "short_repr",
+    "unknown_key_hint",
 ]
 
 
@@ -289,14 +293,80 @@ def apply_override(data: dict[str, Any], override: str) -> None:
     node[parts[-1]] = value
 
 
-def format_validation(source: str, err: ValidationError) -> str:
-    """One line for a pydantic error: the dotted path of the first bad key and what is wrong with it."""
+def _union_members(annotation: Any) -> dict[str, Any]:
+    """tag -> model of a union of models (`Annotated[A, Tag('a')] | B`, pydantic's location names a member
+    by its tag, else by its class name); {} for anything else."""
+    if get_origin(annotation) is Annotated:
+        return _union_members(get_args(annotation)[0])
+    if get_origin(annotation) not in (Union, UnionType):
+        return {}
+    out: dict[str, Any] = {}
+    for member in get_args(annotation):
+        tag = None
+        if get_origin(member) is Annotated:
+            member, *meta = get_args(member)
+            tag = next((m.tag for m in meta if isinstance(m, Tag)), None)
+        if isinstance(member, type) and issubclass(member, BaseModel):
+            out[tag or member.__name__] = member
+    return out
+
+
+def _walk(model: type[BaseModel], loc: Sequence[object]) -> type[BaseModel] | None:
+    """The model class of the mapping at `loc` (None where it is not one of the models): through
+    `X | None`, the items of `list[X]` and `dict[str, X]`, and tagged unions of models."""
+    current: Any = model
+    for part in loc:
+        if isinstance(current, _Item):  # a list index or a mapping key: the item's model
+            current = current.annotation
+            continue
+        members = _union_members(current)
+        if len(members) > 1:  # the location names the member
+            current = members.get(str(part))
+            continue
+        if not (isinstance(current, type) and issubclass(current, BaseModel)):
+            return None
+        field = current.model_fields.get(str(part))
+        if field is None:
+            return None
+        ann = field.annotation
+        members = _union_members(ann)
+        if len(members) == 1:  # X | None
+            ann = next(iter(members.values()))
+        elif get_origin(ann) in (Union, UnionType):
+            ann = next((a for a in get_args(ann) if a is not type(None)), ann)
+        current = _Item(get_args(ann)[-1]) if get_origin(ann) in (list, dict) else ann
+    return current if isinstance(current, type) and issubclass(current, BaseModel) else None
+
+
+@dataclass(frozen=True)
+class _Item:
+    """In `_walk`: the next part of the location is a list index or mapping key of items of this type."""
+
+    annotation: Any
+
+
+def unknown_key_hint(model: type[BaseModel], loc: Sequence[object]) -> str:
+    """' Did you mean 'x'? Allowed keys here: a, b, c' for an unknown key at `loc` of `model` ('' when
+    the keys allowed there are not known)."""
+    parent = _walk(model, loc[:-1])
+    if parent is None:
+        return ""
+    allowed = [f.alias or name for name, f in parent.model_fields.items()]
+    close = difflib.get_close_matches(str(loc[-1]), allowed, n=1, cutoff=0.6)
+    hint = f" Did you mean {close[0]!r}?" if close else ""
+    return f"{hint} Allowed keys here: {', '.join(allowed)}"
+
+
+def format_validation(source: str, err: ValidationError, model: type[BaseModel] | None = None) -> str:
+    """One line for a pydantic error: the dotted path of the first bad key and what is wrong with it; for
+    an unknown key of `model`, the key probably meant and the keys allowed there."""
     errors = err.errors()
     e = errors[0]
     loc = _dotted(e["loc"]) or "(top level)"
     more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
     if e["type"] == "extra_forbidden":
-        return one_line(f"{source}: unknown key {loc!r}{more}", 500)
+        hint = unknown_key_hint(model, e["loc"]) if model is not None else ""
+        return one_line(f"{source}: unknown key {loc!r}{more}.{hint}".rstrip("."), 700)
     scalar = isinstance(e.get("input"), (str, int, float)) and e["type"] != "missing"
     got = f" (got {short_repr(e['input'])})" if scalar else ""
     return one_line(f"{source}: {loc}: {e['msg']}{got}{more}", 500)
@@ -313,24 +383,32 @@ _ARUCO_SIZES = {
 }
 
 
-def _check_settings(settings: Settings, source: str) -> None:
+def _check_settings(settings: Settings, source: str, overrides: Sequence[str] = ()) -> None:
     """Checks across what the models validate field by field, found by fuzzing (tests/test_config_fuzz.py):
     values the models accept but the world cannot use, caught here with the dotted key instead."""
     if settings.seed < 0:  # numpy's generators (object layout, noise) take non-negative seeds only
-        raise ConfigError(f"{source}: seed: must be a non-negative integer, got {settings.seed}")
+        where = blamed_source(source, ("seed",), overrides)
+        raise ConfigError(f"{where}: seed: must be a non-negative integer, got {settings.seed}")
     name, marker = settings.aruco.dictionary, settings.aruco.id
     m = re.fullmatch(r"DICT_(\d)X\1_(\d+)", name)
     size = int(m.group(2)) if m else _ARUCO_SIZES.get(name.upper())
     if size is not None and marker >= size:  # OpenCV would fail when the marker image is drawn
-        raise ConfigError(f"{source}: aruco.id: {name} has markers 0..{size - 1}, got {marker}")
+        where = blamed_source(source, ("aruco",), overrides)
+        raise ConfigError(f"{where}: aruco.id: {name} has markers 0..{size - 1}, got {marker}")
 
 
 def settings_from_dict(
-    data: dict[str, Any], *, source: str = "<dict>", config_dirs: Iterable[str | Path] = ()
+    data: dict[str, Any],
+    *,
+    source: str = "<dict>",
+    config_dirs: Iterable[str | Path] = (),
+    overrides: Sequence[str] = (),
 ) -> Settings:
     """Validate a plain mapping into Settings; raise ConfigError naming the dotted path on failure.
 
     `config_dirs`: where relative paths in it are looked up before twin's shipped data (`Settings.resolve`).
+    `overrides`: the `key=value` overrides applied to `data`; an error at a key one of them set names it,
+    not the file, as where the mistake is.
     """
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: the top level must be a mapping of keys, got {type(data).__name__}")
@@ -338,30 +416,49 @@ def settings_from_dict(
     try:
         settings = Settings.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(format_validation(source, err)) from None
+        where = blamed_source(source, err.errors()[0]["loc"], overrides)
+        raise ConfigError(format_validation(where, err, Settings)) from None
     except RecursionError:
         raise ConfigError(f"{source}: nested too deeply to validate") from None
-    _check_settings(settings, source)
+    _check_settings(settings, source, overrides)
     dirs = tuple(Path(d) for d in config_dirs)
     return settings.with_config_dirs(dirs) if dirs else settings
 
 
-def _check_files(settings: Settings, source: str) -> None:
+def _override_key(override: str) -> tuple[str, ...]:
+    """The dotted key an override sets, as `apply_override` reads it."""
+    return tuple(p.strip() for p in override.split("=", 1)[0].strip().split("."))
+
+
+def blamed_source(source: str, loc: Sequence[object], overrides: Sequence[str]) -> str:
+    """Where a mistake at the dotted key `loc` was made: the last override that set that key, a section
+    holding it or a key inside it ("override 'a.b=1' (on FILE)"), else the file `source`."""
+    key = tuple(str(p) for p in loc)
+    for o in reversed(overrides):
+        k = _override_key(o)
+        n = min(len(k), len(key))
+        if k[:n] == key[:n]:
+            return f"override {short_repr(o, 120)} (on {source})"
+    return source
+
+
+def _check_files(settings: Settings, source: str, overrides: Sequence[str] = ()) -> None:
     """Every URDF the config names must be a regular file: a directory, a device (/dev/zero never ends)
     or a missing file would otherwise fail deep inside the scene or the world, or not at all."""
     named = [("robot.urdf", settings.robot.urdf)] + [
         (f"world.fixtures.{i}.urdf", f.urdf) for i, f in enumerate(settings.world.fixtures)
     ]
     for where, name in named:
+        source_of = blamed_source(source, where.split("."), overrides)
         try:
             resolved = settings.resolve(name)
             ok = resolved.is_file()
         except (OSError, ValueError) as e:  # an embedded NUL byte, a name too long for the system
-            raise ConfigError(f"{source}: {where}: unusable path {short_repr(name)} ({one_line(e)})") from None
+            raise ConfigError(f"{source_of}: {where}: unusable path {short_repr(name)} ({one_line(e)})") from None
         if not ok:
             what = "is not a file" if resolved.exists() else "not found"
             raise ConfigError(
-                f"{source}: {where}: {short_repr(name)} {what} (resolved to {short_repr(str(resolved), 200)})"
+                f"{source_of}: {where}: {short_repr(name)} {what} (resolved to {short_repr(str(resolved), 200)})"
             )
 
 
@@ -374,11 +471,12 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:
     """
     p = find_config(path)
     data, dirs = _read_chain(p)
+    overrides = list(overrides)
     for o in overrides:
         apply_override(data, o)
-    settings = settings_from_dict(data, source=str(p), config_dirs=dirs)
-    _check_files(settings, str(p))
-    _check_task(settings, str(p))
+    settings = settings_from_dict(data, source=str(p), config_dirs=dirs, overrides=overrides)
+    _check_files(settings, str(p), overrides)
+    _check_task(settings, blamed_source(str(p), ("task", "kind"), overrides))
     return settings
 
 

@@ -12,7 +12,15 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Field, PrivateAttr, field_validator, model_validator
+from pydantic import (
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    SerializerFunctionWrapHandler,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 
 from twin.config.base import Q6, ConfigModel, Vec3
 from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSettings
@@ -31,6 +39,7 @@ __all__ = [
     "ObjectSpec",
     "PerceptionSettings",
     "PlannerBlock",
+    "PlannerGroups",
     "RobotSettings",
     "Settings",
     "TaskSettings",
@@ -337,6 +346,34 @@ class PlannerBlock(ConfigModel):
     retimer_params: dict[str, Any] = Field(default_factory=dict)
 
 
+class PlannerGroups(ConfigModel):
+    """The planner of each group of a task's motion stages (`twin.tasks.cell.STAGES`): `movej` (capture pose,
+    base alignment, pre-grasp hover, home), `movel` (descent, ascent, placing) and `transfer` (carrying the
+    object to its bin). A group left out gets the task's default (`twin.tasks.cell.DEFAULT_PLANNERS`); any
+    other key is refused (a misspelt group would otherwise leave the default running silently)."""
+
+    movej: PlannerBlock | None = None
+    movel: PlannerBlock | None = None
+    transfer: PlannerBlock | None = None
+
+    @model_serializer(mode="wrap")
+    def _given_only(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """Only the groups a config gives: a dump (and the run ids hashed from it) is what it was when
+        `planners` was a mapping of the groups given."""
+        return {k: v for k, v in handler(self).items() if v is not None}
+
+    def get(self, group: str) -> PlannerBlock | None:
+        """The block of `group` ('movej', 'movel', 'transfer'); None when the config leaves it to the task."""
+        if group not in type(self).model_fields:
+            raise KeyError(f"no planner group {group!r}; the groups are {', '.join(type(self).model_fields)}")
+        block: PlannerBlock | None = getattr(self, group)
+        return block
+
+    def given(self) -> dict[str, PlannerBlock]:
+        """group -> block, for the groups the config gives."""
+        return {g: b for g in type(self).model_fields if (b := getattr(self, g)) is not None}
+
+
 class DetectorBlock(ConfigModel):
     """A detector plugin chosen by name, with its own parameters (validated by the plugin's model)."""
 
@@ -427,7 +464,7 @@ class Settings(ConfigModel):
     aruco: ArucoSettings = Field(default_factory=ArucoSettings)
     camera: CameraSettings = Field(default_factory=CameraSettings)
     collision: CollisionSettings = Field(default_factory=CollisionSettings)
-    planners: dict[str, PlannerBlock] = Field(default_factory=dict)
+    planners: PlannerGroups = Field(default_factory=PlannerGroups)
     task: TaskSettings = Field(default_factory=TaskSettings)
     perception: PerceptionSettings = Field(default_factory=PerceptionSettings)
 

@@ -16,14 +16,17 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from pydantic import BaseModel
+
 from twin.timing import collect_timings, stage
 from twin.types import Landmark, RunSummary
 
 if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
-    from twin.config import Settings
+    from twin.config import PlannerBlock, Settings
+    from twin.planning import CheckedPlanner
     from twin.registry import PluginContext
 
-__all__ = ["make_task", "run_task", "task_landmarks"]
+__all__ = ["make_task", "ran_block", "run_task", "task_landmarks"]
 
 log = logging.getLogger("twin")
 
@@ -147,4 +150,22 @@ def run_task(
         wall_time_s=wall,
         metrics=cell.metrics(),
         timings=clock.breakdown(wall),
+        planners={group: ran_block(cell.block(group), p) for group, p in sorted(planners.items())},
+        plugin_errors=tuple(cell.plugin_errors),
     )
+
+
+def ran_block(block: PlannerBlock, planner: CheckedPlanner) -> dict[str, Any]:
+    """A planner block as it ran: its name, the parameters the plugin was built with (its validated `params`,
+    defaults included) and its retimer's (the block's as given where a plugin keeps no model)."""
+    params = getattr(planner.inner, "params", None)
+    retimer = getattr(planner.inner, "retimer", None) if block.retimer is not None else None
+    retimer_params = getattr(retimer, "params", None)
+    return {
+        "name": block.name,
+        "params": params.model_dump(mode="json") if isinstance(params, BaseModel) else dict(block.params),
+        "retimer": block.retimer,
+        "retimer_params": retimer_params.model_dump(mode="json")
+        if isinstance(retimer_params, BaseModel)
+        else dict(block.retimer_params),
+    }

@@ -18,7 +18,7 @@ import numpy as np
 from twin.camera import RGBDFrame
 from twin.collision import PlanningScene
 from twin.config import PlannerBlock, Settings
-from twin.errors import ConfigError
+from twin.errors import ConfigError, PluginCrashed
 from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
 from twin.limit_check import RATIO_METRICS
@@ -227,6 +227,8 @@ class Cell:
     on_stage: Callable[[str], None] | None = None
     records: list[MotionRecord] = field(default_factory=list)
     trace: RunTrace | None = None  # told every planned stage (a recording; None: none)
+    # every exception a planner plugin raised in this run ("stage: plugin raised ..."), recovered from or not
+    plugin_errors: list[str] = field(default_factory=list)
 
     planners: dict[str, CheckedPlanner] = field(default_factory=dict)  # built ahead by `stage_planners`, else here
 
@@ -296,17 +298,24 @@ class Cell:
                 planned_at = self.world.sim_time
                 if retreat:
                     ignore = tuple(sorted(set(ignore) | set(self.world.touched_objects())))
-                result, record = plan_and_execute(
-                    self.world,
-                    self.planner(group),
-                    request,
-                    self.scene,
-                    self.context,
-                    stage=stage,
-                    planner_name=name,
-                    ignore_bodies=ignore,
-                    fingers_may_touch_objects=stage in _GRASPING_STAGES,
-                )
+                try:
+                    result, record = plan_and_execute(
+                        self.world,
+                        self.planner(group),
+                        request,
+                        self.scene,
+                        self.context,
+                        stage=stage,
+                        planner_name=name,
+                        ignore_bodies=ignore,
+                        fingers_may_touch_objects=stage in _GRASPING_STAGES,
+                    )
+                except PluginCrashed as e:  # the stage fails with the plugin's exception; the run goes on
+                    if not any(str(e) in seen for seen in self.plugin_errors):  # a repeat: once is enough
+                        log.warning("%s: %s (the stage failed; the run goes on)", stage, e)
+                        log.info("the traceback of %s:", e.plugin, exc_info=e.error)  # with -v
+                    self.plugin_errors.append(f"{stage}: {e}")
+                    raise StageFailed(stage, str(e), failure="plugin_error", planner=name) from e
                 self.records.append(record)
                 if self.trace is not None:
                     self.trace.motion(planned_at, stage, name, request, result)
