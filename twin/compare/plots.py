@@ -177,9 +177,9 @@ def _box_panel(ax: Axes, title: str, key: str, entries: list[_Entry], box: BoxPl
     beside each name, the median's bootstrap interval under its box; a planner that ran here without a
     value of `key` keeps its row (n=0). `note` is written over the panel (why its values are alike)."""
 
-    def rank(e: _Entry) -> tuple[float, float]:
-        med = float(np.median(e.values)) if e.values else math.inf
-        return best_first(e.row, -med if box.higher_is_better and e.values else med)
+    def rank(e: _Entry) -> tuple[float, float, float]:
+        med = float(f"{np.median(e.values):.9g}") if e.values else math.inf  # equal to 9 digits: a tie
+        return (*best_first(e.row, -med if box.higher_is_better and e.values else med), _median_time(e.row))
 
     entries = sorted(entries, key=rank)
     data = [e.values or [math.nan] for e in entries]
@@ -232,7 +232,7 @@ def _rate_text(row: SummaryRow | None) -> str:
     return f"{100 * row.success_rate:.0f}% ok"
 
 
-def _alike_note(rows: list[dict[str, Any]], key: str) -> str | None:
+def _alike_note(rows: list[dict[str, Any]], key: str, kind: str) -> str | None:
     """A line when every planner has the same value of `key` on each query of a scenario (two or more
     planners with a value on it): then the plot shows no difference between planners, only between
     queries. For clearance that is a shared closest point: the query's start or goal (a grasp near the
@@ -248,7 +248,8 @@ def _alike_note(rows: list[dict[str, Any]], key: str) -> str | None:
     if not shared or any(max(vs) - min(vs) > _ALIKE_M for vs in shared.values()):
         return None
     n = len(shared)
-    line = f"the same value for every planner on each of its {n} quer{'y' if n == 1 else 'ies'}"
+    what = ("query", "queries") if kind == "query" else ("problem", "problems")
+    line = f"the same value for every planner on each of its {n} {what[n != 1]}"
     if key == "min_clearance_m":
         k = sum(free[c] for c in shared)
         line += (
@@ -276,20 +277,20 @@ def _box_figures(plt: Any, rows: list[dict[str, Any]], summary: Summary, order: 
                     vals = [v for r in mine if (v := _value(r, key)) is not None]
                     entries.append(_Entry(p, vals, row.stats.get(key) if row is not None else None, row))
             if any(e.values for e in entries):
-                panels.append((scenario, key, entries, _alike_note(here, key)))
+                panels.append((scenario, key, entries, _alike_note(here, key, kind)))
         if not panels:
             continue  # no empty plot files
         fig, axes = _panels(plt, [_ROW_IN * len(e) + 1.3 + 0.5 * bool(n) for _, _, e, n in panels])
         for ax, (scenario, key, entries, note) in zip(axes, panels, strict=True):
             _box_panel(ax, scenario, key, entries, box, note)
         fig.suptitle(
-            "best first: most successful, then best median; box: quartiles, whiskers 1.5 IQR; red: the median "
-            "with its 95 % bootstrap CI; n: runs with a value",
+            "best first: most successful, then best median; n: runs with a value\n"
+            "box: quartiles, whiskers 1.5 IQR; red: the median with its 95 % bootstrap CI",
             fontsize="small",
             y=1 - 0.08 / fig.get_figheight(),
             va="top",
         )
-        fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))  # room for the title, in inches
+        fig.tight_layout()  # it leaves room for the suptitle
         figs[box.stem] = fig
     return figs
 
