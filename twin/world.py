@@ -30,7 +30,6 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import pybullet as pb
 
 from twin.assets import marker_quad_obj
 from twin.config import Settings
@@ -130,6 +129,34 @@ def _flush_c_stdout() -> None:
         pass
 
 
+@contextmanager
+def _quiet_fds(*fds: int) -> Iterator[None]:
+    """Silence C-level writes to these file descriptors (1: stdout, 2: stderr) while the block runs: PyBullet
+    and its EGL plugin print banners from C (`printf`), which `sys.stdout`/`sys.stderr` never see. Keep the
+    block short: Python's own writes to a silenced fd (a log line) are lost too."""
+    saved: list[tuple[int, int]] = []  # (fd, a copy of what it was)
+    try:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        with open(os.devnull, "wb") as devnull:
+            for fd in fds:
+                saved.append((fd, os.dup(fd)))
+                os.dup2(devnull.fileno(), fd)
+    except (OSError, ValueError, AttributeError):  # no such fd, or a closed stream: what it printed shows
+        pass
+    try:
+        yield
+    finally:
+        _flush_c_stdout()
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
+with _quiet_fds(2):  # "pybullet build time: ..." on stderr, at every import: no output of twin's
+    import pybullet as pb
+
+
 # Implicit cylinders: PyBullet otherwise meshes every cylinder into a polygon, and its geometry then
 # differs from the FCL planning scene's exact cylinders by up to 2 mm.
 _URDF_FLAGS = pb.URDF_USE_INERTIA_FROM_FILE | pb.URDF_USE_IMPLICIT_CYLINDER
@@ -149,20 +176,8 @@ def _quiet_stdout(active: bool = True) -> Iterator[None]:
     if not active:
         yield
         return
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):
+    with _quiet_fds(1):
         yield
-        return
-    try:
-        with open(os.devnull, "wb") as devnull:
-            os.dup2(devnull.fileno(), 1)
-        yield
-    finally:
-        _flush_c_stdout()
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 @dataclass
@@ -300,7 +315,8 @@ class World:
         try:
             spec = importlib.util.find_spec("eglRenderer")
             if spec is not None and spec.origin:
-                plugin = pb.loadPlugin(spec.origin, "_eglRendererPlugin", physicsClientId=self._cid)
+                with _quiet_fds(1, 2):  # "EGL device choice: -1 of 1." on stderr, banners on stdout
+                    plugin = pb.loadPlugin(spec.origin, "_eglRendererPlugin", physicsClientId=self._cid)
                 if plugin >= 0:
                     self._egl = True
                     return "egl"
