@@ -47,6 +47,14 @@ _AHEAD_M = 0.1  # the facing-down point: this far along the tool axis
 SEED_WEIGHTS = Weights(1.0, 10.0, 0.02, 1e4, 1e3)  # position, terminal factor, step, table, facing down
 
 
+def _one_thread(problem: crocoddyl.ShootingProblem) -> None:
+    """Run the problem's knots on one thread. A problem with a model written in Python (`PairDistances`) runs on
+    one already, and Crocoddyl answers setting it with "Warning: the number of threads won't affect the
+    computational performance ..." on stderr each time: set it only when it is not 1."""
+    if problem.nthreads != 1:
+        problem.nthreads = 1
+
+
 class PairDistances(crocoddyl.ResidualModelAbstract):  # type: ignore[misc]
     """The distances between pairs of frames' origins (sphere centres), one row per slot, re-targetable (`pairs`:
     per slot a pair of frame ids, or None: the row reads 0 and is left open). A Python residual: crocoddyl has no
@@ -239,7 +247,7 @@ class HorizonProblem:
         self.problem = crocoddyl.ShootingProblem(np.zeros(state.nx), models[:-1], models[-1])
         # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
         # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
-        self.problem.nthreads = 1
+        _one_thread(self.problem)
         self._bound_slack = 2 * qp_tolerance
         self._tolerances = (termination_tolerance, qp_tolerance)
         self.solver = self._new_solver()
@@ -256,7 +264,7 @@ class HorizonProblem:
         self.problem = crocoddyl.ShootingProblem(
             self.problem.x0, list(self.problem.runningModels), self.problem.terminalModel
         )
-        self.problem.nthreads = 1
+        _one_thread(self.problem)
         self.solver = self._new_solver()
         self._last = None
 

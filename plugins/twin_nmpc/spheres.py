@@ -50,8 +50,9 @@ CHECK_TOL_M = 5e-4  # the numpy re-check of the hard constraints accepts this mu
 
 @functools.lru_cache(maxsize=64)
 def _warn_large_spheres(size: tuple[float, ...], r: float, r_max: float, n: int) -> None:
-    """Say once per process and box (not at every receding-horizon step) that its spheres are coarse."""
-    log.warning("nmpc: held box %s needs spheres of %.3f m (> %.3f m) with %d spheres", list(size), r, r_max, n)
+    """Say once per process and box (not at every receding-horizon step) that its spheres are coarse: at info
+    level (`-v`), a detail of the model that explains a conservative plan, not a fault to act on."""
+    log.info("nmpc: held box %s needs spheres of %.3f m (> %.3f m) with %d spheres", list(size), r, r_max, n)
 
 
 def object_spheres(size: np.ndarray, T_tcp_obj: np.ndarray, *, r_min: float, r_max: float, max_n: int) -> np.ndarray:
