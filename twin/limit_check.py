@@ -44,12 +44,14 @@ LIMIT_KINDS: tuple[str, ...] = ("velocity", "acceleration", "jerk")
 # the metric each kind's worst ratio is reported as (compare rows, a run's per-planner metrics)
 RATIO_METRICS: dict[str, str] = {"velocity": "max_vel_ratio", "acceleration": "max_acc_ratio", "jerk": "max_jerk_ratio"}
 _UNITS = {"velocity": "rad/s", "acceleration": "rad/s^2", "jerk": "rad/s^3"}
+_Source = tuple[str, tuple[np.ndarray, np.ndarray]]  # what a limit is judged on: (name, (values (n, 6), times (n,)))
 
 
 @dataclass(frozen=True)
 class LimitExcess:
     """The worst sample of one kind of limit: `ratio` = |value| / limit of joint `joint` (0-based), seen in
-    `source` ('declared qd', 'differences of q', ...)."""
+    `source` ('declared qd', 'differences of q', ...) at `t_s` (s, the trajectory's time; a difference's:
+    the middle of the samples it spans; before 0 or after the end: the jump from or to rest)."""
 
     kind: str
     ratio: float
@@ -57,11 +59,13 @@ class LimitExcess:
     value: float
     limit: float
     source: str
+    t_s: float | None = None
 
     def reason(self) -> str:
-        """'joint 2 reaches 5.17 rad/s (declared qd), limit 3.14 (1.65x)'."""
+        """'joint 2 reaches 5.17 rad/s (declared qd) at t=0.420 s, limit 3.14 (1.65x)'."""
+        at = "" if self.t_s is None else f" at t={self.t_s:.3f} s"
         return (
-            f"joint {self.joint + 1} reaches {self.value:.4g} {_UNITS[self.kind]} ({self.source}), "
+            f"joint {self.joint + 1} reaches {self.value:.4g} {_UNITS[self.kind]} ({self.source}){at}, "
             f"limit {self.limit:.4g} ({self.ratio:.2f}x)"
         )
 
@@ -122,27 +126,28 @@ def limit_excess(
         return out
     t, _, qd, qdd = _at_rest(traj, _thinned(traj.t, _MIN_DIFF_DT_S), from_rest=from_rest, to_rest=to_rest)
 
-    def differences(order: int, lim: np.ndarray) -> np.ndarray:
+    def differences(order: int, lim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The order-th divided differences of q (times order!), over samples far enough apart that the
-        positions' round-off stays within the tolerance of the smallest limit."""
+        positions' round-off stays within the tolerance of the smallest limit; and the middle of the time each
+        spans."""
         spacing = max(_MIN_DIFF_DT_S, 2.0 * (Q_ROUND_OFF_RAD / (LIMIT_TOLERANCE * float(lim.min()))) ** (1.0 / order))
         ts, d, _, _ = _at_rest(traj, _thinned(traj.t, spacing), from_rest=from_rest, to_rest=to_rest)
         for k in range(1, order + 1):
             if ts.shape[0] <= k:
-                return np.zeros((0, 6))
+                return np.zeros((0, 6)), np.zeros(0)
             d = k * np.diff(d, axis=0) / (ts[k:] - ts[:-k])[:, None]
-        return d
+        return d, 0.5 * (ts[order:] + ts[:-order])
 
-    checks: list[tuple[str, np.ndarray, tuple[tuple[str, np.ndarray], ...]]] = [
+    checks: list[tuple[str, np.ndarray, tuple[_Source, ...]]] = [
         (
             "velocity",
             limits.max_joint_vel,
-            (("declared qd", qd), ("differences of q", differences(1, limits.max_joint_vel))),
+            (("declared qd", (qd, t)), ("differences of q", differences(1, limits.max_joint_vel))),
         ),
         (
             "acceleration",
             limits.max_joint_acc,
-            (("declared qdd", qdd), ("second differences of q", differences(2, limits.max_joint_acc))),
+            (("declared qdd", (qdd, t)), ("second differences of q", differences(2, limits.max_joint_acc))),
         ),
     ]
     if jerk:
@@ -152,14 +157,14 @@ def limit_excess(
                 "jerk",
                 limits.max_joint_jerk,
                 (
-                    ("differences of qdd", jerk_declared),
+                    ("differences of qdd", (jerk_declared, 0.5 * (t[1:] + t[:-1]))),
                     ("third differences of q", differences(3, limits.max_joint_jerk)),
                 ),
             )
         )
     for kind, lim, sources in checks:
         worst: LimitExcess | None = None
-        for src, values in sources:
+        for src, (values, times) in sources:
             if values.size == 0:
                 continue
             ratio = np.abs(values) / lim[None, :]
@@ -167,7 +172,7 @@ def limit_excess(
             r = float(ratio[at])
             if worst is None or r > worst.ratio:
                 j = int(at[1])
-                worst = LimitExcess(kind, r, j, float(np.abs(values[at])), float(lim[j]), src)
+                worst = LimitExcess(kind, r, j, float(np.abs(values[at])), float(lim[j]), src, float(times[at[0]]))
         if worst is not None:
             out[kind] = worst
     return out

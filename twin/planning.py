@@ -93,6 +93,23 @@ def _over_limits(excess: dict[str, LimitExcess], *, jerk: bool) -> str | None:
     return "; ".join(f"{e.kind} {e.reason()}" for e in over) or None
 
 
+# the judge's refusals per (planner, what) in this process: the first is a warning that says what broke, the
+# repeats are debug lines with their count (a sweep said "planner returned a trajectory beyond the joint limits"
+# 15 times in a row, and never which joint)
+_REFUSALS: dict[tuple[str, str], int] = {}
+
+
+def _refused(planner: str, what: str, detail: str) -> None:
+    """Log that the judge refused a motion of `planner`: 'ompl.rrt returned a trajectory beyond the joint limits;
+    reported as LIMIT_VIOLATION: velocity joint 2 reaches 5.17 rad/s (declared qd) at t=0.420 s, limit 3.14
+    (1.65x)', once per planner and `what`; later ones at debug level (-vv), counted."""
+    n = _REFUSALS[planner, what] = _REFUSALS.get((planner, what), 0) + 1
+    if n == 1:
+        log.warning("%s %s: %s (said once per planner; -vv shows every one)", planner, what, detail)
+    else:
+        log.debug("%s %s (%d times so far): %s", planner, what, n, detail)
+
+
 def _worst(ratios: dict[str, float], excess: dict[str, LimitExcess]) -> dict[str, float]:
     """`ratios` raised to the ratios of `excess` where those are larger."""
     out = dict(ratios)
@@ -546,7 +563,9 @@ class CheckedPlanner:
         if over is not None:
             self._check_time_s += time.perf_counter() - t0
             self._segments += 1
-            log.warning("%s: %s %d exceeds the joint limits; not executed", self.name, kind, self._segments)
+            _refused(
+                self.name, "planned a segment beyond the joint limits; not executed", f"{kind} {self._segments}: {over}"
+            )
             return MotionResult(
                 Status.LIMIT_VIOLATION,
                 f"{kind} {self._segments} would exceed the joint limits ({over}); not executed",
@@ -566,10 +585,11 @@ class CheckedPlanner:
             qs = densify(
                 traj, self.context.kinematics, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m
             )
-            log.warning("%s: %s %d collides; not executed", self.name, kind, self._segments)
+            pair = colliding_pair(self._scene, qs[hit])
+            _refused(self.name, "planned a colliding segment; not executed", f"{kind} {self._segments}: {pair}")
             return MotionResult(
                 Status.COLLISION,
-                f"{kind} {self._segments} would collide ({colliding_pair(self._scene, qs[hit])}); not executed",
+                f"{kind} {self._segments} would collide ({pair}); not executed",
                 info=dict(out.info, **self._info_extra(), rejected_by=FINAL_CHECK),
             )
         if out.fallback:
@@ -602,7 +622,7 @@ class CheckedPlanner:
         if not result.success:
             return result
         t0 = time.perf_counter()
-        checked = _checked(result, request, scene, self.context, jerk=jerk_limited(self.inner))
+        checked = _checked(result, request, scene, self.context, jerk=jerk_limited(self.inner), name=self.name)
         return replace(checked, info=dict(checked.info, final_check_time_s=time.perf_counter() - t0))
 
     # ---- the one loop ---------------------------------------------------------------------------
@@ -697,7 +717,13 @@ def plan_with(planner: Any, request: MotionRequest, scene: PlanningScene, contex
 
 
 def _checked(
-    result: MotionResult, request: MotionRequest, scene: PlanningScene, context: PluginContext, *, jerk: bool = True
+    result: MotionResult,
+    request: MotionRequest,
+    scene: PlanningScene,
+    context: PluginContext,
+    *,
+    jerk: bool = True,
+    name: str = "planner",
 ) -> MotionResult:
     """The judge of a one-shot success: it starts at the start, ends on the goal, keeps the joint limits
     (jerk when `jerk`: the planner declares itself jerk-limited) and is collision-free; else a failure
@@ -722,7 +748,7 @@ def _checked(
     result = replace(result, info=dict(result.info, **{LIMIT_RATIOS: {k: e.ratio for k, e in excess.items()}}))
     over = _over_limits(excess, jerk=jerk)
     if over is not None:
-        log.warning("planner returned a trajectory beyond the joint limits; reported as LIMIT_VIOLATION")
+        _refused(name, "returned a trajectory beyond the joint limits; reported as LIMIT_VIOLATION", over)
         return replace(
             result,
             status=Status.LIMIT_VIOLATION,
@@ -733,14 +759,15 @@ def _checked(
         )
     hit = first_collision(traj, scene, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
     if hit is not None:
-        log.warning("planner returned a colliding trajectory; reported as COLLISION")
         qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
+        pair = f"{colliding_pair(scene, qs[hit])}, checked sample {hit}"
+        _refused(name, "returned a colliding trajectory; reported as COLLISION", pair)
         return replace(
             result,
             status=Status.COLLISION,
             trajectory=None,
             path=result.path if result.path is not None else traj.q,  # the refused motion (for seeing why)
-            reason=f"the trajectory collides ({colliding_pair(scene, qs[hit])}, checked sample {hit})",
+            reason=f"the trajectory collides ({pair})",
             info=dict(result.info, rejected_by=FINAL_CHECK),
         )
     return result
