@@ -13,9 +13,25 @@ baseline sweep? Why it works the way it does:
   both sides have the value (duration: runs successful in both sweeps; planning time: runs that finished
   a plan in both), so a planner that now also solves a hard query with a long trajectory is not
   reported as slower, and one that fails a query it solved before is reported once, by its success rate;
-* the tolerances are loose where the quantity is noise and tight where it is not: success and duration
-  are (nearly) deterministic for the same run id, planning time is wall-clock time on a shared CI machine
-  (see `Tolerance`);
+* a check regresses only when the difference is both real and large: significantly worse on the paired
+  runs (`twin.compare.stats`' paired tests, two-sided p < SIGNIFICANCE = 0.05 and pointing to worse: the
+  exact McNemar test on the runs that only one sweep solved, for success; the Wilcoxon signed-rank test
+  on the log-ratios now/baseline of the paired runs, for a time: ranks, so one slow outlier weighs as
+  one run, and ratios, so a 1 ms planner and a 1 s one count alike) AND beyond the tolerance's limit
+  (`Tolerance`: how large a change matters). Neither alone: a p95 of four runs is their maximum, and one
+  run that a busy neighbour slowed 3x moves it beyond any limit with no code change (issue 38: a rerun of
+  the same commit on a busy machine "FAILED, 4 of 21 checks regressed"), while a significant 3 % is real
+  but no reason to fail a CI job;
+* a check with too few paired runs to judge says "not enough runs (n = 4; need >= 20)" and is never
+  'regressed', whatever its values: success needs MIN_SUCCESS_RUNS = 6 paired runs, because the exact
+  test reaches p < 0.05 only when at least 6 runs differ (6 of 6 lost: p = 2/2^6 = 0.031; 5 of 5: 0.0625,
+  4 of 4: 0.125, so compare-smoke's 4 runs per planner cannot tell even a total loss from chance); a p95
+  needs MIN_P95_RUNS = 20, the value one run in 20 exceeds: with fewer runs none is expected above it and
+  the p95 is mostly the maximum (numpy's linear p95 of 4 runs is 0.15 x the 3rd + 0.85 x the 4th);
+* the paired test removes per-run noise, not a sweep-wide shift: a sweep run while the machine was twice as
+  loaded as during the baseline looks, to any test on its own numbers, like code twice as slow. That is
+  what the loose planning-time tolerance (may double) and the environment lines below are for; success
+  and duration are (nearly) deterministic for the same run id, so their limits stay tight (`Tolerance`);
 * a sweep records where it ran (`twin.environment`, in the compare.json beside its results.jsonl), and the
   report names every difference that can move a result (twin commit, Python, a backend's version, CPU
   model, core count), so a slower p95 on another machine is not mistaken for a code regression. It never
@@ -37,11 +53,15 @@ from typing import Any, Literal
 import numpy as np
 
 from twin.compare.runner import RESULTS_FILE, latest_rows, read_results, recorded_environment
+from twin.compare.stats import MIN_DISCORDANT, SIGNIFICANCE, is_tie, sign_test, signed_rank
+from twin.compare.verdicts import p_text
 from twin.environment import environment_changes
 from twin.errors import ConfigError
 
 __all__ = [
     "DEFAULT_TOLERANCE",
+    "MIN_P95_RUNS",
+    "MIN_SUCCESS_RUNS",
     "GateCheck",
     "GateReport",
     "Tolerance",
@@ -52,7 +72,18 @@ __all__ = [
 ]
 
 Quantity = Literal["success_rate", "planning_time_p95_s", "duration_p95_s"]
-Verdict = Literal["ok", "regressed", "n/a"]
+Verdict = Literal["ok", "regressed", "not_enough_runs", "n/a"]
+
+# The fewest paired runs a check is judged on (below: "not enough runs", never a regression).
+# Success: the exact two-sided McNemar p reaches SIGNIFICANCE only with MIN_DISCORDANT = 6 runs that differ
+# (all lost: 2 / 2^6 = 0.031; with 5: 0.0625), so fewer than 6 paired runs can never show a real loss.
+MIN_SUCCESS_RUNS = MIN_DISCORDANT
+# A p95 is the value one run in 20 exceeds: below 20 runs none is expected above it, and the p95 is mostly
+# the largest of the runs (numpy's linear p95 weighs the maximum 0.95 (n - 1) - (n - 2): 85 % at n = 4, 5 %
+# at n = 20), which one run slowed by a busy machine moves as far as it likes. 20 >= MIN_DISCORDANT, so the
+# paired test can reach significance too.
+MIN_P95_RUNS = 20
+_TINY_S = 1e-9  # a time of 0 s is taken as 1 ns in a log-ratio (stats.TIE_ABS: nothing below it is resolved)
 
 # the keys of `Tolerance.parse` (as a user types them) and the fields they set
 _KEYS: dict[str, str] = {
@@ -68,12 +99,15 @@ _EPS = 1e-9  # float noise: a value this close to its limit is within it
 
 @dataclass(frozen=True)
 class Tolerance:
-    """How much worse than the baseline a planner may get before the gate fails.
+    """How much worse than the baseline a planner may get before the gate fails: the practical half of the
+    rule. A check also has to be significantly worse on the paired runs (`gate`), so a limit says how large
+    a change matters, and the test whether it is more than noise.
 
     `success_drop`: absolute drop of the success rate allowed (0.05 = five percentage points). Default 0:
     a run id fixes the planner, the problem and the seed, so a run that succeeded in the baseline and fails
-    now is a change in behaviour, not noise. Raise it for sampling planners whose success depends on timing
-    (an RRT that finds a path just inside its time limit on a fast machine may miss it on a loaded one).
+    now is a change in behaviour; the exact test decides whether the runs lost (against those gained) are
+    more than a sampling planner's timing luck (an RRT that finds a path just inside its time limit on a
+    fast machine may miss it on a loaded one). Raise it to let a real but small loss pass.
 
     `planning_time`: relative growth of the p95 planning time allowed (1.0 = may double). Default 1.0:
     planning time is wall-clock time, and CI machines are shared, throttled and differ from the one that
@@ -149,8 +183,18 @@ DEFAULT_TOLERANCE = Tolerance()
 @dataclass(frozen=True)
 class GateCheck:
     """One planner, one quantity: baseline and current value over the same `n` paired runs, and `limit`,
-    the worst current value allowed (the lowest success rate, or the highest p95 in seconds). `verdict` is
-    'n/a' when there is nothing to compare (a planner with no successful paired run has no duration)."""
+    the worst current value allowed (the lowest success rate, or the highest p95 in seconds).
+
+    The paired test on those runs: `worse` and `better` count the runs that got worse or better (successes
+    lost and gained; runs slower or faster, trajectories longer or shorter; the rest tie), `p_value` is the
+    two-sided p of the exact McNemar test (success) or of the Wilcoxon signed-rank test on the log-ratios
+    now/baseline (times), None when fewer than MIN_DISCORDANT runs differ. `beyond`: the value is past its
+    limit; `significant`: p < SIGNIFICANCE and the difference is a worsening. `min_n`: the fewest paired runs
+    this quantity is judged on (MIN_SUCCESS_RUNS, MIN_P95_RUNS).
+
+    `verdict`: 'regressed' when beyond and significant; 'not_enough_runs' when n < min_n (the values are
+    shown, never judged); 'n/a' when there is nothing to compare (a planner with no successful paired run has
+    no duration); else 'ok'."""
 
     planner: str
     quantity: Quantity
@@ -159,6 +203,36 @@ class GateCheck:
     limit: float | None
     verdict: Verdict
     n: int
+    p_value: float | None = None
+    worse: int = 0
+    better: int = 0
+    min_n: int = 0
+    beyond: bool = False
+    significant: bool = False
+
+    @property
+    def verdict_text(self) -> str:
+        """The verdict as the table shows it: 'REGRESSED', 'not enough runs (n = 4; need >= 20)', 'ok' (or
+        'ok: not significant' beyond the limit, 'ok: within tolerance' significantly worse), 'n/a'."""
+        if self.verdict == "regressed":
+            return "REGRESSED"
+        if self.verdict == "not_enough_runs":
+            return f"not enough runs (n = {self.n}; need >= {self.min_n})"
+        if self.verdict == "ok" and self.beyond:
+            return "ok: not significant"
+        if self.verdict == "ok" and self.significant:
+            return "ok: within tolerance"
+        return self.verdict
+
+    @property
+    def test_text(self) -> str:
+        """The paired test in words: 'exact McNemar p = 0.031', 'Wilcoxon signed-rank p < 0.001', or why
+        there is no p."""
+        differ = self.worse + self.better
+        if self.p_value is None:
+            return "no run differs" if not differ else f"no test: {differ} differ, fewer than {MIN_DISCORDANT}"
+        test = "exact McNemar" if self.quantity == "success_rate" else "Wilcoxon signed-rank on log-ratios"
+        return f"{test} {p_text(self.p_value)}"
 
     @property
     def change(self) -> float | None:
@@ -199,15 +273,24 @@ class GateReport:
     def regressions(self) -> list[GateCheck]:
         return [c for c in self.checks if c.verdict == "regressed"]
 
+    @property
+    def not_judged(self) -> list[GateCheck]:
+        """The checks with too few paired runs to judge (shown, never failing)."""
+        return [c for c in self.checks if c.verdict == "not_enough_runs"]
+
     def render(self) -> str:
         """A markdown table (readable as plain text in a CI log, rendered in a job summary) with a verdict
-        line above it and each regression spelled out below it."""
+        line above it, each check's n, paired counts, p and verdict in it, the rule and each regression spelled
+        out below it."""
         bad = self.regressions
         head = (
             f"regression gate: FAILED, {len(bad)} of {len(self.checks)} checks regressed"
             if bad
             else f"regression gate: passed, none of {len(self.checks)} checks regressed"
         )
+        unjudged = self.not_judged
+        if unjudged:
+            head += f" ({len(unjudged)} not judged: not enough runs)"
         lines = [
             head,
             f"runs compared: {self.matched} in both sweeps, {self.only_new} only in this sweep, "
@@ -216,15 +299,17 @@ class GateReport:
             *self._environment_lines(),
             "",
         ]
-        header = ["planner", "quantity", "n", "baseline", "now", "change", "limit", "verdict"]
-        right = {2, 3, 4, 5, 6}
+        header = ["planner", "quantity", "n", "baseline", "now", "change", "limit", "worse/better", "p", "verdict"]
+        right = {2, 3, 4, 5, 6, 7, 8}
         body = [
             [
                 c.planner.replace("|", "\\|"),
                 c.quantity,
                 str(c.n),
                 *_cells(c),
-                "REGRESSED" if c.verdict == "regressed" else c.verdict,
+                "-" if c.verdict == "n/a" else f"{c.worse}/{c.better}",
+                _p_cell(c),
+                c.verdict_text,
             ]
             for c in self.checks
         ]
@@ -244,11 +329,22 @@ class GateReport:
             "|" + "|".join("-" * (w + 1) + ":" if i in right else "-" * (w + 2) for i, w in enumerate(widths)) + "|"
         )
         lines += [row(r) for r in body]
+        lines += [
+            "",
+            f"a check regresses when its value is beyond the limit AND the paired runs are significantly worse "
+            f"(two-sided p < {SIGNIFICANCE:g}; success: exact McNemar test on the runs one sweep solved and the "
+            "other did not; times: Wilcoxon signed-rank test on the log-ratios now/baseline); worse/better: paired "
+            f"runs that got worse/better; judged from {MIN_SUCCESS_RUNS} paired runs (success) and "
+            f"{MIN_P95_RUNS} (a p95) on",
+        ]
         if bad:
             lines += ["", "regressions:"]
             for c in bad:
                 base, now, _, limit = _cells(c)
-                lines.append(f"- {c.planner}: {_LABEL[c.quantity]} {base} -> {now} (limit {limit}, n={c.n})")
+                lines.append(
+                    f"- {c.planner}: {_LABEL[c.quantity]} {base} -> {now} (limit {limit}, n={c.n}, {c.worse} "
+                    f"{_WORSE[c.quantity]}, {c.better} {_BETTER[c.quantity]}, {c.test_text})"
+                )
         return "\n".join(lines) + "\n"
 
     def _environment_lines(self) -> list[str]:
@@ -282,6 +378,8 @@ _LABEL: dict[str, str] = {
     "planning_time_p95_s": "p95 planning time",
     "duration_p95_s": "p95 duration",
 }
+_WORSE = {"success_rate": "lost", "planning_time_p95_s": "slower", "duration_p95_s": "longer"}
+_BETTER = {"success_rate": "gained", "planning_time_p95_s": "faster", "duration_p95_s": "shorter"}
 
 
 # ---- the gate -------------------------------------------------------------------------------------
@@ -347,7 +445,9 @@ def gate(
     """Compare this sweep's rows with a baseline's, run id by run id (the last row of each id on each
     side; 'skipped' rows are no runs), and check per planner, over the paired runs: the success rate
     (may drop by `tolerance.success_drop`), the p95 planning time over runs that finished a plan on both
-    sides, and the p95 duration over runs successful on both sides (may grow as `Tolerance` says).
+    sides, and the p95 duration over runs successful on both sides (may grow as `Tolerance` says). A check
+    regresses when it is beyond that limit and its paired test says the runs got significantly worse; with
+    fewer than MIN_SUCCESS_RUNS (success) or MIN_P95_RUNS (a p95) paired runs it is 'not_enough_runs'.
 
     `environment`, `baseline_environment`: where each sweep ran (`twin.environment.environment()`
     records); the report lists what differs, or says that the baseline recorded nothing, and the verdict
@@ -414,29 +514,69 @@ def _num(row: dict[str, Any], group: str, key: str) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _verdict(n: int, min_n: int, beyond: bool, significant: bool) -> Verdict:
+    """The rule: too few runs are never judged; a regression is beyond the limit AND significantly worse."""
+    if n < min_n:
+        return "not_enough_runs"
+    return "regressed" if beyond and significant else "ok"
+
+
 def _success_check(planner: str, pairs: list[tuple[dict[str, Any], dict[str, Any]]], tol: Tolerance) -> GateCheck:
+    """The success rate over the paired runs; its test: the exact McNemar test (`stats.sign_test`) on the
+    runs solved in the baseline only (lost) against those solved now only (gained)."""
     n = len(pairs)
+    lost = sum(1 for o, r in pairs if o.get("success") and not r.get("success"))
+    gained = sum(1 for o, r in pairs if r.get("success") and not o.get("success"))
     before = sum(1 for o, _ in pairs if o.get("success")) / n
     now = sum(1 for _, r in pairs if r.get("success")) / n
     limit = max(0.0, before - tol.success_drop)
-    verdict: Verdict = "regressed" if now < limit - _EPS else "ok"
-    return GateCheck(planner, "success_rate", before, now, limit, verdict, n)
+    beyond = now < limit - _EPS
+    p = sign_test(gained, lost)
+    significant = p is not None and p < SIGNIFICANCE and lost > gained
+    verdict = _verdict(n, MIN_SUCCESS_RUNS, beyond, significant)
+    return GateCheck(
+        planner, "success_rate", before, now, limit, verdict, n, p, lost, gained, MIN_SUCCESS_RUNS, beyond, significant
+    )
 
 
-def _p95(values: list[float]) -> float:
-    return float(np.percentile(np.asarray(values, dtype=float), 95))  # linear, as summary.md's p95
+def _p95(values: np.ndarray) -> float:
+    return float(np.percentile(values, 95))  # linear, as summary.md's p95
+
+
+def _log_ratio_test(before: np.ndarray, now: np.ndarray) -> tuple[int, int, float | None, bool]:
+    """The paired test of a time: the Wilcoxon signed-rank test (`stats.signed_rank`) on log(now / before),
+    pairs that `stats.is_tie` calls equal counted as ties. Returns the runs slower now, the runs faster now,
+    the two-sided p (None below MIN_DISCORDANT runs that differ) and whether the signed ranks lean to slower
+    (the side a small p is about)."""
+    from scipy.stats import rankdata
+
+    tie = is_tie(now, before)
+    ratio = np.where(tie, 0.0, np.log(np.maximum(now, _TINY_S)) - np.log(np.maximum(before, _TINY_S)))
+    zero = np.zeros_like(ratio)
+    t = signed_rank(ratio, zero)  # a 'win' is a lower log-ratio: faster now
+    d = ratio[~is_tie(ratio, zero)]
+    ranks = rankdata(np.abs(d))
+    slower = float(ranks[d > 0].sum()) > float(ranks[d < 0].sum())
+    return t.losses, t.wins, t.p_value, slower
 
 
 def _growth_check(
     planner: str, quantity: Quantity, pairs: list[tuple[float, float]], rel: float, abs_s: float
 ) -> GateCheck:
+    """The p95 of a time over the paired runs against `before * (1 + rel) + abs_s`; its test: the Wilcoxon
+    signed-rank test on the paired log-ratios (`_log_ratio_test`)."""
     if not pairs:
-        return GateCheck(planner, quantity, None, None, None, "n/a", 0)
-    before = _p95([a for a, _ in pairs])
-    now = _p95([b for _, b in pairs])
+        return GateCheck(planner, quantity, None, None, None, "n/a", 0, min_n=MIN_P95_RUNS)
+    a = np.array(pairs, dtype=float)
+    before, now = _p95(a[:, 0]), _p95(a[:, 1])
     limit = math.inf if math.isinf(rel) else before * (1.0 + rel) + abs_s
-    verdict: Verdict = "regressed" if now > limit + _EPS * max(1.0, abs(limit)) else "ok"
-    return GateCheck(planner, quantity, before, now, limit, verdict, len(pairs))
+    beyond = now > limit + _EPS * max(1.0, abs(limit))
+    slower, faster, p, leans_slower = _log_ratio_test(a[:, 0], a[:, 1])
+    significant = p is not None and p < SIGNIFICANCE and leans_slower
+    verdict = _verdict(len(pairs), MIN_P95_RUNS, beyond, significant)
+    return GateCheck(
+        planner, quantity, before, now, limit, verdict, len(pairs), p, slower, faster, MIN_P95_RUNS, beyond, significant
+    )
 
 
 # ---- formatting -----------------------------------------------------------------------------------
@@ -459,6 +599,13 @@ def _seconds(v: float) -> str:
     if a < 1:
         return f"{v * 1e3:.3g} ms"
     return f"{v:.3g} s"
+
+
+def _p_cell(c: GateCheck) -> str:
+    """The p column: the p-value, or '-' (n/a, or fewer than MIN_DISCORDANT runs differ: no test)."""
+    if c.p_value is None:
+        return "-"
+    return "<0.001" if c.p_value < 1e-3 else f"{c.p_value:.3f}"
 
 
 def _cells(c: GateCheck) -> tuple[str, str, str, str]:
