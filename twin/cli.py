@@ -278,13 +278,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="RESULTS.jsonl",
         help="regression gate: exit 1 when a planner's success drops or its p95 planning time or duration grows "
-        "beyond the tolerance on the runs this sweep shares with the baseline",
+        "beyond the tolerance on the runs this sweep shares with the baseline AND a paired test says the change is "
+        "significant (p < 0.05); a check with too few paired runs (success: 6, a p95: 20) says 'not enough runs'",
     )
     p.add_argument(
         "--tolerance",
         default=None,
         metavar="KEY=VALUE,...",
-        help="with --baseline: success=0, planning_time=1.0 (relative), planning_time_abs_s=0.005, duration=0.05",
+        help="with --baseline, how large a change matters: success=0 (drop), planning_time=1.0 (relative growth of "
+        "the p95), planning_time_abs_s=0.005, duration=0.05 (relative)",
     )
 
     p = sub.add_parser(
