@@ -426,15 +426,15 @@ REAL_CONFIGS: dict[str, dict[str, Any]] = {
         ],
     },
 }
-# compare-smoke's planners: a typical planning time (s) as measured on a quiet machine
+# compare-smoke's planners: their median planning time (s) in a real compare-smoke sweep (2 shared cores)
 _SMOKE_TIMES = {
-    "ruckig.movej": 0.0015,
-    "seed.quintic_movej": 0.001,
-    "toppra.movel": 0.015,
-    "seed.slerp_movel": 0.008,
-    "ompl.rrtconnect": 0.03,
-    "ompl.bitstar": 1.0,  # anytime: it plans for its whole time limit
-    "nmpc": 0.4,
+    "ruckig.movej": 0.0026,
+    "seed.quintic_movej": 0.0022,
+    "toppra.movel": 0.0134,
+    "seed.slerp_movel": 0.0085,
+    "ompl.rrtconnect": 0.0095,
+    "ompl.bitstar": 0.051,
+    "nmpc": 0.47,
 }
 
 
