@@ -19,13 +19,18 @@ import os
 import re
 import sys
 import textwrap
-from collections.abc import Iterable, Sequence
+import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from twin.cli_exchange import COMMANDS as EXCHANGE_COMMANDS
 from twin.cli_exchange import add_parsers as add_exchange_parsers
-from twin.errors import TwinError
+from twin.errors import PlanningError, TwinError
+
+if TYPE_CHECKING:
+    from twin.compare import DryRun
+    from twin.progress import ProgressClock
 
 __all__ = ["build_parser", "main"]
 
@@ -147,12 +152,50 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+_AFTER = "_after_command"  # where -v/-q given after the command land, until `_MainParser` adds them in
+
+
+def _add_verbosity(p: argparse.ArgumentParser, *, after_command: bool) -> None:
+    """-v/-q on the main parser and on every command's: `twin -v run X` and `twin run X -v` parse the same.
+    After the command they default to SUPPRESS and land apart (argparse copies a command's namespace over
+    the main one), so `twin -v run X -v` counts two."""
+    suffix, quiet = (_AFTER, argparse.SUPPRESS) if after_command else ("", False)
+    p.add_argument(
+        "-v",
+        "--verbose",
+        dest="verbose" + suffix,
+        action="count",
+        default=argparse.SUPPRESS if after_command else 0,
+        help="log more on stderr: -v what each step does (info), -vv debug; before or after the command",
+    )
+    p.add_argument(
+        "-q",
+        "--quiet",
+        dest="quiet" + suffix,
+        action="store_true",
+        default=quiet,
+        help="log errors only, and show no progress display; before or after the command",
+    )
+
+
+class _MainParser(_Parser):
+    """The `twin` parser: -v/-q given after the command are added to those given before it."""
+
+    def parse_known_args(self, args: Iterable[str] | None = None, namespace: Any = None) -> tuple[Any, list[str]]:
+        ns, rest = super().parse_known_args(args, namespace)
+        ns.verbose = getattr(ns, "verbose", 0) + vars(ns).pop("verbose" + _AFTER, 0)
+        ns.quiet = bool(getattr(ns, "quiet", False) or vars(ns).pop("quiet" + _AFTER, False))
+        if ns.verbose and ns.quiet:
+            self.error("-v/--verbose and -q/--quiet exclude each other")
+        return ns, rest
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = _MainParser(
         prog="twin",
         description="A PyBullet digital twin of a UR5e sorting cell: plan, run and compare motion planners.",
     )
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
+    _add_verbosity(parser, after_command=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     p = sub.add_parser("planners", help="list every registered planner, retimer and detector")
@@ -189,9 +232,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --goal-position: how near the tcp must end, m (default: the config's task.transfer_tolerance_m)",
     )
     p.add_argument("--time-limit", type=float, default=1.0, help="planning time limit, s (default 1)")
-    p.add_argument(  # also here, so that `twin plan ... -v` works; SUPPRESS keeps `twin -v plan` as it was
-        "-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress and the scene's objects"
-    )
     p.add_argument(
         "--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here"
     )
@@ -338,6 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here"
     )
     add_exchange_parsers(sub)
+    for p in {id(p): p for p in sub.choices.values()}.values():  # `twin run X -v` as `twin -v run X`
+        _add_verbosity(p, after_command=True)
     return parser
 
 
@@ -488,10 +530,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from rich.console import Console
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
     from twin.environment import environment
+    from twin.progress import RunDisplay
     from twin.tasks import run_task
     from twin.timing import format_breakdown, process_age_s
 
@@ -503,11 +545,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             f"--speed {args.speed:g} goes with --record PATH (the video it speeds up); give both or neither"
         )
     settings = _settings(args, transfer_planner=args.planner)
-    console = Console(stderr=True)
-    with Progress(
-        SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console, transient=True
-    ) as progress:
-        bar = progress.add_task(f"{settings.name} seed {settings.seed}: starting", total=None)
+    # stage, objects done, elapsed and time left on stderr where it is a terminal; gone when the run ends
+    with RunDisplay(f"{settings.name} seed {settings.seed}", enabled=not args.quiet) as shown:
         summary = run_task(  # `--planner` is in `settings.planners.transfer` already
             settings,
             gui=args.gui,
@@ -516,7 +555,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             rerun=args.rerun,
             rerun_serve=args.rerun_serve,
             config_name=str(args.config),
-            on_stage=lambda text: progress.update(bar, description=f"{settings.name} seed {settings.seed}: {text}"),
+            on_stage=shown.stage,
+            on_objects=shown.objects,
         )
     timings = dict(summary.timings)
     if startup is not None:
@@ -590,13 +630,49 @@ def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:
         print(f"{verb} {n} runs: {reason}")
 
 
-def progress_line(row: dict[str, Any], done: int, total: int, *, width: int = 160) -> str:
-    """'[3/26] run_id: status (reason)' for a finished run: a long reason is cut at a word, never in the
-    middle of a value, and ends in ' ...' when cut (the row in results.jsonl keeps all of it)."""
-    line = f"[{done}/{total}] {row['run_id']}: {row['status']}"
+def _dry_run_estimate(dry: DryRun, args: argparse.Namespace) -> str:
+    """How long the sweep would take: from the rows of a sweep recorded in its output folder, else rough."""
+    from twin.compare import read_results
+    from twin.compare.estimate import estimate_sweep
+
+    results = (Path(args.out) if args.out is not None else Path("out") / dry.spec.name) / "results.jsonl"
+    try:
+        recorded = read_results(results)
+    except (OSError, TwinError):  # an unreadable or foreign file: no measurement to go on
+        recorded = []
+    return estimate_sweep(dry.runs, workers=args.workers, recorded=recorded, source=results).describe()
+
+
+def progress_line(
+    row: dict[str, Any], done: int, total: int, *, width: int = 160, watch: ProgressClock | None = None
+) -> str:
+    """'[3/26 00:41 eta 05:12] run_id: status (reason)' for a finished run: the sweep's elapsed time and the time
+    left at the rate of the runs done so far, from `watch` (without one: '[3/26]'). A long reason is cut at a
+    word, never in the middle of a value, and ends in ' ...' when cut (the row in results.jsonl keeps all of it)."""
+    counts = f"{done}/{total}" if watch is None else watch.stamp(done, total)
+    line = f"[{counts}] {row['run_id']}: {row['status']}"
     if not row.get("success") and row.get("reason"):
         line += f" ({textwrap.shorten(str(row['reason']), width, placeholder=' ...')})"
     return line
+
+
+def compare_progress(
+    *, clock: Callable[[], float] = time.monotonic, write: Callable[[str], None] | None = None
+) -> Callable[[dict[str, Any], int, int], None]:
+    """`run_comparison`'s `on_row`: a `progress_line` with elapsed time and estimate per finished run, timed by
+    `clock` from now, printed (flushed) or given to `write`."""
+    from twin.progress import ProgressClock
+
+    watch = ProgressClock(clock=clock)
+
+    def on_row(row: dict[str, Any], done: int, total: int) -> None:
+        line = progress_line(row, done, total, watch=watch)
+        if write is None:
+            print(line, flush=True)
+        else:
+            write(line)
+
+    return on_row
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
@@ -634,10 +710,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         _print_skipped(dry.skipped, "would skip")
         if baseline is not None:
             print(f"baseline {args.baseline}: shares {shared} of this sweep's {dry.total} runs")
+        print(_dry_run_estimate(dry, args))
         return EXIT_OK
-
-    def progress(row: dict[str, Any], done: int, total: int) -> None:
-        print(progress_line(row, done, total), flush=True)
 
     result = run_comparison(
         args.config,
@@ -647,7 +721,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         resume=args.resume,
         force=args.force,
         overrides=args.overrides,
-        on_row=progress,
+        on_row=None if args.quiet else compare_progress(),
     )
     console = Console(width=200)
     console.print(summary_table(result.summary, title=f"{Path(args.config).name}: {len(result.rows)} runs"))
@@ -838,6 +912,29 @@ _COMMANDS["replay"] = _cmd_replay
 _COMMANDS.update(EXCHANGE_COMMANDS)
 
 
+def _log_level(verbose: int, quiet: bool) -> int:
+    """-q: errors only; none: warnings; -v: info; -vv: debug."""
+    if quiet:
+        return logging.ERROR
+    return (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+
+
+class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """Writes to whatever `sys.stderr` is when a record comes, so that a log line during `twin run` goes above
+    its progress display (which stands in for `sys.stderr` while it shows) instead of through it."""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     return _main(argv)[0]
 
@@ -850,10 +947,19 @@ def _main(argv: Sequence[str] | None) -> tuple[int, str | None]:
         parser.print_help()
         return EXIT_USAGE, None
     logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+        level=_log_level(args.verbose, args.quiet),
+        format="%(levelname)s %(name)s: %(message)s",
+        handlers=[_StderrHandler()],
     )
     try:
         return _COMMANDS[args.command](args), args.command
+    except PlanningError as e:  # a plugin's failure, not the user's: its own code, and its traceback with -v
+        if getattr(args, "verbose", False):
+            import traceback
+
+            traceback.print_exception(e.__cause__ or e, file=sys.stderr)
+        sys.stderr.write(f"twin {args.command}: plugin error: {e}\n")
+        return EXIT_PLUGIN_ERROR, args.command
     except TwinError as e:
         sys.stderr.write(f"twin {args.command}: error: {e}\n")
         return EXIT_USAGE, args.command

@@ -71,14 +71,16 @@ def run_task(
     rerun: str | None = None,
     rerun_serve: bool = False,
     on_stage: Callable[[str], None] | None = None,
+    on_objects: Callable[[int, int], None] | None = None,
     config_name: str = "",
 ) -> RunSummary:
     """Run the configured task once on scene `seed` (default: the config's); `planner` replaces the
     transfer planner; `record` writes a video (.mp4/.gif) from the overview camera, played `record_speed`
     times faster than the run (`twin.recording.Recorder`), `rerun` a Rerun
     recording (.rrd: `twin.rerun_log`), `rerun_serve` serves it live in Rerun's web viewer on 127.0.0.1 (the
-    address is logged; the viewer keeps serving after the run). Bad config or planner names raise before anything
-    is simulated."""
+    address is logged; the viewer keeps serving after the run). `on_stage(text)` is told each stage as it starts,
+    `on_objects(done, total)` how many of the objects the task knows of it is done with (`Cell.objects_done`).
+    Bad config or planner names raise before anything is simulated."""
     from twin.recording import Recorder
     from twin.tasks.cell import Cell, stage_planners
 
@@ -101,7 +103,9 @@ def run_task(
             world = World(settings, seed=seed, gui=gui)
         with world:
             shown = on_stage if recorder is None else _to_both(recorder.stage, on_stage)
-            cell = Cell(settings, world, planner_override=planner, on_stage=shown, planners=planners)
+            cell = Cell(
+                settings, world, planner_override=planner, on_stage=shown, planners=planners, on_objects=on_objects
+            )
             if recorder is not None:
                 recorder.attach(world)
             recording = None

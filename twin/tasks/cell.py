@@ -231,6 +231,7 @@ class Cell:
     plugin_errors: list[str] = field(default_factory=list)
 
     planners: dict[str, CheckedPlanner] = field(default_factory=dict)  # built ahead by `stage_planners`, else here
+    on_objects: Callable[[int, int], None] | None = None  # told (done, known) objects: `objects_done`
 
     def __post_init__(self) -> None:
         if not self.planners:
@@ -248,6 +249,12 @@ class Cell:
         from twin.tasks.judge import DisplacementWatch  # judging only: the referees read it, no task does
 
         self.watch = DisplacementWatch(self.world)
+
+    def objects_done(self, done: int, total: int) -> None:
+        """Tell the progress display (`on_objects`, `twin run`'s) how many of the `total` objects the task knows
+        of it is done with (placed or given up on); a task that never says shows its stages only."""
+        if self.on_objects is not None:
+            self.on_objects(done, total)
 
     # ---- planners -------------------------------------------------------------------------------
     def block(self, group: str) -> PlannerBlock:

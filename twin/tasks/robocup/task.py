@@ -463,6 +463,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         cell.perceived(cap.frame, T_bc, [(e.label, e.position) for e in seen.objects], unknown)
         most_seen = max(most_seen, sum(not _in_any_bin(e.position, bins) for e in seen.objects))
         est = _choose(seen.objects, targets, bins, task.retries)
+        cell.objects_done(*_counts(seen.objects, targets, bins, task.retries))
         if est is None:
             break
         prefetch_next_capture(world, settings)  # there will be another look
@@ -486,6 +487,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
             cell.recover()
         tgt.cycle_time_s += world.sim_time - t0
+        cell.objects_done(*_counts(seen.objects, targets, bins, task.retries))
         try:
             cell.move_joints_over("home", home)
         except StageFailed as e:
@@ -593,6 +595,19 @@ def _choose(
         if best is None or key < best[0]:
             best = (key, est)
     return None if best is None else best[1]
+
+
+def _counts(
+    estimates: tuple[ObjectEstimate, ...], targets: list[_Target], bins: dict[str, BinGeometry], retries: int
+) -> tuple[int, int]:
+    """(objects done with: placed or given up on, those and the ones on the table still to do), for the
+    progress display: what the task knows after a capture, not the truth."""
+    finished = sum(t.done or t.attempts > retries for t in targets)
+    to_do = 0
+    for est in estimates:
+        t = _find(est, targets)
+        to_do += not _in_any_bin(est.position, bins) and (t is None or not (t.done or t.attempts > retries))
+    return finished, finished + to_do
 
 
 def _find(est: ObjectEstimate, targets: list[_Target]) -> _Target | None:

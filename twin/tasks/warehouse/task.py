@@ -194,7 +194,8 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
             float(a.cube.centroid[1]),
         )
     )
-    for att in attempts:
+    for i, att in enumerate(attempts):
+        cell.objects_done(i, len(attempts))
         zone = task.drop_zones.get(att.cube.color_label)
         cell.current = f"{att.cube.color_label} cube"
         t0 = world.sim_time
@@ -222,6 +223,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
                         break
                     att.cube = again
         att.cycle_time_s = world.sim_time - t0
+    cell.objects_done(len(attempts), len(attempts))
     try:
         cell.reach_posture("home", np.array(settings.robot.home))
     except StageFailed as e:
