@@ -26,7 +26,7 @@ import argparse
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -35,6 +35,7 @@ import numpy as np
 from twin.compare import compare_spec_from_dict, run_comparison
 from twin.problems import ProblemSet, load_problem_set, save_problem_set
 from twin.problems.mbm import SCENES, mbm_problem_set, mbm_spherized_urdf
+from twin.progress import ProgressClock
 
 # VAMP's README (0.6.4): UR5, its vectorised RRT-Connect, AMD Ryzen 9 7950X; and what its 0.6.4 sphere model
 # says is valid (VAMP's own C++ check compiled from the sdist, issue 30's note)
@@ -127,6 +128,38 @@ def subset_sets(sets: dict[str, Path], n: int | None, folder: Path) -> dict[str,
     return out
 
 
+class SceneProgress:
+    """Progress of the sweep on stderr while it runs (the table comes at the end): a line when a scene's runs are
+    all in, and one at every tenth of all the runs, each with the elapsed time and an estimate of the time left,
+    '[300/700 01:23 eta 01:51] cage done: 97/100 solved'. `expected`: runs per scene (problems x planners)."""
+
+    def __init__(
+        self,
+        expected: dict[str, int],
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        write: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True),
+    ):
+        self.expected = expected
+        self.watch = ProgressClock(clock=clock)
+        self.write = write
+        self.runs: dict[str, int] = dict.fromkeys(expected, 0)
+        self.solved: dict[str, int] = dict.fromkeys(expected, 0)
+        self._tenth = 0
+
+    def __call__(self, row: dict[str, Any], done: int, total: int) -> None:
+        """`run_comparison`'s `on_row`."""
+        scene = row["scenario"]
+        self.runs[scene] = self.runs.get(scene, 0) + 1
+        self.solved[scene] = self.solved.get(scene, 0) + bool(row.get("success"))
+        stamp = self.watch.stamp(done, total)
+        if self.runs[scene] == self.expected.get(scene):
+            self.write(f"[{stamp}] {scene} done: {self.solved[scene]}/{self.runs[scene]} solved")
+        elif done * 10 // max(1, total) > self._tenth:
+            self.write(f"[{stamp}] {scene}: {self.runs[scene]}/{self.expected.get(scene, '?')} runs")
+        self._tenth = done * 10 // max(1, total)
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:  # one line, not the usage too
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -161,7 +194,11 @@ def main() -> int:
     overrides = ["robot.model=ur5"]
     if args.robot_urdf == "spherized":
         overrides.append(f"robot.urdf={mbm_spherized_urdf()}")
-    sets = {scene: mbm_problem_set(f"ur5/{scene}") for scene in scenes}  # fetched and imported on first use
+    sets = {}
+    watch = ProgressClock()
+    for i, scene in enumerate(scenes):  # fetched and imported on first use (minutes), then read from the cache
+        sets[scene] = mbm_problem_set(f"ur5/{scene}")
+        print(f"[import {watch.stamp(i + 1, len(scenes))}] {scene}", file=sys.stderr, flush=True)
     sets = subset_sets(sets, args.problems, out / "problems")
     numbers = {s: [int(p.id.rpartition("#")[2]) for p in load_problem_set(sets[s]).problems] for s in scenes}
     scenarios = [
@@ -184,7 +221,10 @@ def main() -> int:
         "scenarios": scenarios,
     }
     t1 = time.perf_counter()
-    result = run_comparison(compare_spec_from_dict(spec), out_dir=out, workers=args.workers, plots=False)
+    progress = SceneProgress({s: len(numbers[s]) * len(planners) for s in scenes})
+    result = run_comparison(
+        compare_spec_from_dict(spec), out_dir=out, workers=args.workers, plots=False, on_row=progress
+    )
     plan_s = time.perf_counter() - t1
 
     model = "MBM's ur5_spherized.urdf" if args.robot_urdf == "spherized" else "twin's urdf/ur5.urdf"
