@@ -256,7 +256,7 @@ def test_unreadable_configs_are_one_line_errors(tmp_path, content, needle):
         ("seed=1" + "0" * 40, "too large"),
         ("world.fixtures={a: 1}", "world.fixtures"),
         ("robot.home=" + "[" * 60 + "]" * 60, "robot.home"),
-        ("planners.newgroup.params.x=1", "planners.newgroup.name"),
+        ("planners.newgroup.params.x=1", "unknown key 'planners.newgroup'"),
         ('camera.mount="fix\\ned"', "camera.mount"),
     ],
     ids=["nan", "inf", "huge", "mapping-for-list", "deep", "no-name", "newline-value"],

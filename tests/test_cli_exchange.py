@@ -11,14 +11,15 @@ import pytest
 
 from tests.cli_runner import twin
 
-# one fast deterministic planner on seeded problems: the rerun's rows equal the first sweep's
+# one fast deterministic planner on seeded problems: the rerun's rows equal the first sweep's; 23 runs per
+# planner, so the gate judges p95s (it needs 20: twin.compare.gate.MIN_P95_RUNS)
 SWEEP = """
 name: gate
 seeds: [0]
 execute: false
 planners: [ruckig.movej, seed.quintic_movej]
 scenarios:
-  - {name: free, scene: warehouse, random: {count: 4, straight: free}}
+  - {name: free, scene: warehouse, random: {count: 20, straight: free}}
   - {name: from-file, problems: PROBLEMS}
 """
 
@@ -50,7 +51,7 @@ def test_an_identical_rerun_passes_the_gate(sweep: dict[str, Path]) -> None:
         str(sweep["first"] / "results.jsonl"),
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "regression gate: passed" in r.stdout and "14 in both sweeps" in r.stdout  # 2 planners x 7 problems
+    assert "regression gate: passed" in r.stdout and "46 in both sweeps" in r.stdout  # 2 planners x 23 problems
 
 
 def test_a_doctored_baseline_fails_the_gate_with_a_table(sweep: dict[str, Path]) -> None:
@@ -100,7 +101,7 @@ def test_the_planner_arena_export_has_one_experiment_per_scenario(sweep: dict[st
         names = [n for (n,) in db.execute("SELECT name FROM experiments ORDER BY id")]
         runs = db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
         cols = {c[1] for c in db.execute("PRAGMA table_info(runs)")}
-    assert names == ["gate.free", "gate.from-file"] and runs == 14
+    assert names == ["gate.free", "gate.from-file"] and runs == 46
     assert {"time", "solved", "status", "solution_length", "solution_clearance", "solution_smoothness"} <= cols
     # `twin export` writes the same from the results file
     r = twin("export", str(sweep["first"]), "--out", str(sweep["dir"] / "arena2"), "--name", "gate")
