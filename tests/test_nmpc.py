@@ -506,6 +506,19 @@ def test_segments_declare_the_backward_differences_of_their_knots_from_the_measu
     assert np.all(np.abs(qdd_end) <= lim.max_joint_jerk * dt + 1e-9)  # so it may stand still from there
 
 
+def test_a_solve_ends_by_its_iteration_count_not_by_the_clock(ctx):
+    """Whether a solve's plan is accepted (and so whether the next one starts warm) may not depend on the machine:
+    IPOPT stops at its iteration limit; a CPU-time cap is there only when a config asks for one."""
+    planner = make_planner(PlannerBlock(name="nmpc", params={"prebuild_boxes": []}), ctx)
+    for cold, iterations in ((True, 300), (False, 100)):
+        opts = planner._ipopt_options(cold=cold)
+        assert opts["ipopt.max_iter"] == iterations and "ipopt.max_cpu_time" not in opts
+    caps = {"solve_time_limit_s": 0.5, "cold_solve_time_limit_s": 2}
+    capped = make_planner(PlannerBlock(name="nmpc", params={"prebuild_boxes": [], **caps}), ctx)
+    assert capped._ipopt_options(cold=False)["ipopt.max_cpu_time"] == 0.5
+    assert capped._ipopt_options(cold=True)["ipopt.max_cpu_time"] == 2
+
+
 def test_jerk_limited_is_declared_by_its_parameter(ctx):
     from twin.planning import jerk_limited
 

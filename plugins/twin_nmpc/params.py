@@ -127,13 +127,20 @@ class NMPCParams(RecedingParams):
         1e-3, gt=0, description="IPOPT tol of warm-started solves (the shifted plan is usually 1-5 iterations away)"
     )
     ipopt_max_iter: int = Field(100, ge=1, description="IPOPT iteration limit of warm-started solves")
-    solve_time_limit_s: float = Field(1.0, gt=0, description="CPU-time limit of a warm-started solve")
+    solve_time_limit_s: float | None = Field(
+        None,
+        gt=0,
+        description="CPU-time cap of a warm-started solve; None (default): none, its iteration limit bounds it, so"
+        " it ends, and its plan is accepted or not, alike on every machine",
+    )
     cold_ipopt_tol: float = Field(
         1e-3, gt=0, description="IPOPT tol of a cold solve (looser left the first warm solve with more to do)"
     )
     cold_mu_init: float = Field(1e-3, gt=0, description="IPOPT mu_init of a cold solve (the guess is good)")
     cold_max_iter: int = Field(300, ge=1)
-    cold_solve_time_limit_s: float = Field(5.0, gt=0, description="CPU-time limit of a cold solve")
+    cold_solve_time_limit_s: float | None = Field(
+        None, gt=0, description="CPU-time cap of a cold solve; None (default): none, `cold_max_iter` bounds it"
+    )
     ipopt_options: dict[str, float | int | str] = Field(
         default_factory=dict, description="extra IPOPT options for every solve, e.g. {linear_solver: mumps}"
     )
