@@ -223,6 +223,25 @@ def test_work_budget_is_validated_and_ends_the_search(robocup: Cell) -> None:
     assert "budget_spent" not in res.info
 
 
+def test_a_search_that_stops_at_its_first_path_ends_there_not_at_its_time_limit(robocup: Cell) -> None:
+    """`stop_at_first_solution` (and the repair of a grazing segment, which stops at its first path too): an
+    anytime planner ends at its first path, the same one whatever time it is given. BIT*, RRT* and Informed
+    RRT* used to search on until the time limit (BIT* repairing a segment of the contract check's blocked
+    query: ~80k state checks in 0.9 s of a 1 s limit, where a slower machine got less far), because they
+    hand their path to OMPL only when solve() returns."""
+    start, goal = _blocked_query(robocup, seed=21)
+    first_only = {"stop_at_first_solution": True, "max_state_checks": None, "max_iterations": None, "max_repairs": 0}
+    for name in ANYTIME:
+        planner = robocup.ctx.registry.planner(name, first_only, robocup.ctx)
+        runs = []
+        for limit in (2.0, 4.0):  # caps: each of these first paths takes <= 0.15 s here
+            req = MotionRequest(start, goal, robocup.limits, time_limit_s=limit, seed=1)
+            res = plan_with(planner, req, robocup.scene, robocup.ctx)
+            assert res.success, (name, res.reason)
+            runs.append((res.info["states_checked"] + res.info["configs_checked"], result_digest(res)))
+        assert runs[0] == runs[1], (name, runs)
+
+
 def test_jerk_limit_is_declared_by_the_retimer_in_use(robocup: Cell) -> None:
     """TOPP-RA (the default retimer) bounds velocity and acceleration only: an OMPL planner timed by it
     declares `jerk_limited = False`; timed by Ruckig (params or the config block's retimer), True."""

@@ -82,7 +82,7 @@ from twin.plugin import (
     jerk_limited,
     make_context,
 )
-from twin_ompl.budget import Budget, search_roadmap
+from twin_ompl.budget import Budget, search_roadmap, stop_at_first_path
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, OptimizingOmplParams, PlannerSpec, params_model
 from twin_ompl.postprocess import add_time, path_length, simplify, timed_and_checked
 from twin_ompl.problem import geometric_path, repair_bounds, sampling_bounds, simple_setup, space_information, states
@@ -457,6 +457,7 @@ class OmplPlanner(PathPlanner):
                     if first_only:
                         exact = ob.exactSolnPlannerTerminationCondition(ss.getProblemDefinition())
                         ptc = ob.plannerOrTerminationCondition(ptc, exact)
+                        stop_at_first_path(ss)  # an anytime planner: its path, not the clock, ends the search
                     if work is not None:
                         ptc = ob.plannerOrTerminationCondition(ptc, work.condition())
                     status = ss.solve(ptc)
