@@ -150,6 +150,24 @@ class Unseeded(StraightLine):
         )
 
 
+class ClockBound(StraightLine):
+    """An anytime search that the clock ends: it works on its motion until 90 % of the time limit has passed,
+    and what it returns differs from call to call (as where such a search stops differs from run to run)."""
+
+    calls = 0
+
+    def motion(self, request, goal):
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 0.9 * request.time_limit_s:
+            pass
+        self.calls += 1
+        f = 0.95 - 0.3 / self.calls
+        lim = request.limits
+        return ruckig_line(
+            np.array(request.start), goal, Limits(f * lim.max_joint_vel, f * lim.max_joint_acc, f * lim.max_joint_jerk)
+        )
+
+
 class IgnoresTheStart(StraightLine):
     def plan(self, request, scene):  # no start check: from a start in collision it plans anyway
         if scene.in_collision(request.start):
@@ -188,6 +206,17 @@ BROKEN = [  # (planner, the one rule it breaks, whether CheckedPlanner keeps the
     (IgnoresTheStart, "invalid_start", True, {}),
     (ThroughTheTable, "collision_free", True, {}),
 ]
+
+
+def test_a_determinism_failure_says_when_the_clock_ended_the_search(robocup):
+    """Two answers that differ because the time limit ended the search say so, and what to do about it; an
+    answer that differs without running into its limit (Unseeded) does not."""
+    clocked = check_planner(ClockBound, settings=robocup, time_limit_s=0.2).result("determinism")
+    assert not clocked.passed and "ran until its time limit of 0.2 s" in clocked.detail, clocked.detail
+    assert "work budget" in clocked.detail
+    # a limit its calls (~0.05 s) are far from, however busy the machine
+    unseeded = check_planner(Unseeded, settings=robocup, time_limit_s=10.0).result("determinism")
+    assert not unseeded.passed and "time limit" not in unseeded.detail, unseeded.detail
 
 
 def test_a_conformant_planner_passes_every_rule(robocup):

@@ -327,11 +327,12 @@ class _Checker:
                 why = f"{len(a)} then {len(b)} segments"
             if why is None:
                 why = next((w for w in (_same_traj(x, y) for x, y in zip(a, b, strict=True)) if w is not None), None)
+            note = _clock_note(first, again)
             if why is not None:
-                v.fail("raw", f"{first.label}: {why}")
+                v.fail("raw", f"{first.label}: {why}{note}")
             why = _same(first.result, again.result)
             if why is not None:
-                v.fail("checked", f"{first.label}: {why}")
+                v.fail("checked", f"{first.label}: {why}{note}")
         status = "no result" if first.result is None else first.result.status.value
         return v.result("determinism", f"{first.label}: the same {status} twice (seed {first.request.seed})")
 
@@ -367,6 +368,24 @@ class _Checker:
             return None
         qs = densify(traj, self.kin, max_step_rad=self.res_rad, max_step_m=self.res_m)
         return colliding_pair(self.scene, qs[hit])
+
+
+# a planning call that took this share of its time limit ran until the limit ended it
+_LIMIT_USED = 0.9
+
+
+def _clock_note(*outcomes: _Outcome) -> str:
+    """Why two answers to one request may differ when a planning call of either ran until its time limit: a
+    search that the clock ends stops wherever the machine has got by then (a slower or busier machine gets
+    less far). Said beside a determinism failure, so its fix is plain: end the search by a count."""
+    limit = outcomes[0].request.time_limit_s
+    used = [max((c.elapsed_s for c in o.calls), default=0.0) for o in outcomes]
+    if max(used) < _LIMIT_USED * limit:
+        return ""
+    return (
+        f" (a call ran until its time limit of {limit:g} s: a search the clock ends stops where the machine has "
+        "got; end it by a count, e.g. iterations or a work budget)"
+    )
 
 
 def _limits(settings: Settings) -> Limits:
