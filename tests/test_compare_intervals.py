@@ -158,7 +158,7 @@ def test_the_box_plots_show_n_beside_each_median(tmp_path: Path) -> None:
     figs = comparison_figures(rows, planners=["sure", "shaky"])
     try:
         ticks = [t.get_text() for t in figs["duration"].axes[0].get_yticklabels()]
-        assert ticks == ["sure  n=2", "shaky  n=3"]  # shortest median first
+        assert ticks == ["sure  100% ok  n=2", "shaky  75% ok  n=3"]  # most successful first, each with its n
         assert "Wilson" in figs["success"].axes[0].get_xlabel()
     finally:
         for fig in figs.values():

@@ -6,6 +6,7 @@ Every clock here is a fake one: no assertion depends on how fast the machine is.
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,12 @@ def test_quiet_leaves_the_result_and_drops_the_warning(acme_plugin):
     warning = [line for line in loud.stderr.splitlines() if line.startswith("WARNING")]
     assert len(warning) == 1 and "acme.hasty returned a trajectory beyond the joint limits" in warning[0], loud.stderr
     assert "velocity joint 1 reaches" in warning[0] and " at t=" in warning[0], warning
-    assert quiet.stderr == "" and quiet.stdout == loud.stdout
+    assert quiet.stderr == ""
+
+    def untimed(text: str) -> str:  # the planning time is wall-clock time: it differs between the two runs
+        return re.sub(r" in [0-9.]+ ms", " in - ms", text)
+
+    assert untimed(quiet.stdout) == untimed(loud.stdout) and "acme.hasty: limit_violation in" in quiet.stdout
 
 
 # ---- banners ---------------------------------------------------------------------------------------------
