@@ -464,6 +464,20 @@ def test_clearance_ignores_the_shoulder_and_follows_the_arm():
     np.testing.assert_allclose(scene.clearance_batch(np.stack([home, lower])), [c_home.distance, c_low.distance])
 
 
+def test_clearance_is_not_capped_by_a_shape_the_shoulder_lift_turns_in_place():
+    """The upper arm's cylinder around the shoulder-lift axis is 0.1025 m from the robocup table in every
+    configuration (the lift turns it about its own axis): it once capped every clearance at that value. Left
+    out like the shoulder, the clearance of an arm raised clear of everything is larger and follows the arm."""
+    from twin.config import load_config
+
+    scene = PlanningScene.from_settings(load_config(PROJECT_ROOT / "configs/robocup.yaml"))
+    home = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    raised = [home + np.array([0.0, dq, 0.0, 0.0, 0.0, 0.0]) for dq in (0.0, -0.2, -0.4)]
+    c = scene.clearance_batch(np.stack(raised))
+    assert c.max() > 0.1025 + 0.005, c
+    assert len(set(np.round(c, 6))) == len(c), c  # every posture its own clearance
+
+
 # ---- padded copies --------------------------------------------------------------------------------
 def _padded_pair(settings, extra=0.02):
     """A scene with a run-time box, a held box and a half-open gripper, and its padded copy."""

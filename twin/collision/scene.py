@@ -52,7 +52,7 @@ from twin.collision.spheres import EnvPrimitives, cover, env_primitives, primiti
 from twin.errors import ConfigError, InvalidRequestError
 from twin.timing import stage
 from twin.types import BoxBounds
-from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
+from twin.urdf_model import RobotModel, Shape, pose_from_xyz_rpy, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.config import Settings
@@ -373,11 +373,14 @@ class PlanningScene:
         self._moving_manager = fcl.DynamicAABBTreeCollisionManager()
         self._moving_manager.registerObjects(self._moving_objects)
         self._moving_manager.setup()
-        # clearance leaves out the shoulder: it only turns about the base axis, so its distance to the
-        # cell is the same in every configuration and would hide what the arm does
+        # clearance leaves out what only the base joint moves: the shoulder, and a shape of the next link that is
+        # round about that link's own joint axis (the upper arm's cylinder around the shoulder-lift axis): they
+        # only turn about the base axis, so their distance to the cell is the same in every configuration, and
+        # it would cap every clearance at theirs (robocup: 0.1025 m, upper arm to table, whatever the path)
         m = self.model
         turning = {ln for ln in m.link_names if m.rigid_parent(ln) in (m.root, m.joints[m.arm_joints[0]].child)}
-        self._clear_objects = [objects[i] for i in self._moving if nodes[i] not in turning]
+        in_place = {i for i, sh in enumerate(self._shapes) if _round_about_its_joint(m, sh, turning)}
+        self._clear_objects = [objects[i] for i in self._moving if nodes[i] not in turning and i not in in_place]
         self._clear_manager = fcl.DynamicAABBTreeCollisionManager()
         self._clear_manager.registerObjects(self._clear_objects)
         self._clear_manager.setup()
@@ -921,6 +924,21 @@ class PlanningScene:
         """Robot links the held object is checked against (all but the tcp's rigid body and fingers)."""
         m = self.model
         return [ln for ln in m.link_names if m.links[ln].shapes and ln not in self._held_excluded]
+
+
+def _round_about_its_joint(model: RobotModel, shape: Shape, turning: set[str]) -> bool:
+    """Whether `shape` is round about the axis of its link's own revolute joint (a sphere centred on it, a
+    cylinder or capsule along it) and that joint hangs from a link in `turning`: then the joint turns the
+    shape in place, and only what moves `turning` moves it."""
+    joint = model.parent_joint.get(shape.link)
+    if joint is None or joint.type not in ("revolute", "continuous") or model.rigid_parent(joint.parent) not in turning:
+        return False
+    axis, centre = joint.axis, shape.origin[:3, 3]
+    on_axis = float(np.linalg.norm(centre - (centre @ axis) * axis)) < 1e-9
+    if shape.kind == "sphere":
+        return on_axis
+    along = float(np.linalg.norm(np.cross(shape.origin[:3, 2], axis))) < 1e-9
+    return shape.kind in ("cylinder", "capsule") and on_axis and along
 
 
 def _check_padding(padding_m: float) -> float:
