@@ -245,3 +245,15 @@ def test_bench_mbm_says_each_scene_as_it_ends_with_elapsed_and_eta():
         "[3/4 00:30 eta 00:10] cage: 1/2 runs",
         "[4/4 00:40 eta 00:00] cage done: 2/2 solved",
     ]
+
+
+def test_quiet_check_planner_shows_no_spinner(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`twin check-planner NAME -q`: the verdict table on stdout, nothing on stderr, not even the spinner that
+    rich draws where stderr is a terminal (FORCE_COLOR and TTY_COMPATIBLE make it draw one here too)."""
+    monkeypatch.setenv("FORCE_COLOR", "1")
+    monkeypatch.setenv("TTY_COMPATIBLE", "1")
+    loud = twin("check-planner", "seed.quintic_movej")
+    assert loud.returncode == 0 and loud.stderr, loud.stderr[-2000:]  # the spinner is drawn without -q
+    r = twin("check-planner", "seed.quintic_movej", "-q")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stderr == "" and "keeps every rule" in r.stdout

@@ -855,7 +855,7 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
         for item in args.params:
             apply_override(params, item)
         planner = {"name": args.name, "params": params}
-    console = Console(stderr=True)
+    console = Console(stderr=True, quiet=args.quiet)  # -q: no spinner either
     with console.status(f"checking {args.name}") as status:
         report = check_planner(
             planner,
