@@ -596,8 +596,9 @@ class SlowToStart:
 
 
 def test_a_workers_start_up_is_no_part_of_a_runs_timeout():
-    """Each worker takes 3 s to start and each run has 1 s: the timeout counts from when the worker starts the
-    run, so every run succeeds (counted from when it was sent, every run was stopped before its worker started)."""
+    """Each worker takes 8 s to start and each run has 5 s (for a run that returns at once: generous on any
+    machine): the timeout counts from when the worker starts the run, so every run succeeds (counted from when
+    it was sent, every run was stopped before its worker started)."""
     from dataclasses import replace
 
     from twin.compare.runner import _run_local
@@ -605,7 +606,7 @@ def test_a_workers_start_up_is_no_part_of_a_runs_timeout():
     spec = compare_spec_from_dict(
         dict(SWEEP, seeds=[0], planners=["ruckig.movej"], scenarios=[dict(SWEEP["scenarios"][0], random={"count": 2})])
     )
-    tasks = [replace(t, timeout_s=1.0) for t in expand_runs(spec)]
-    rows = list(_run_local(tasks, 2, run=SlowToStart(3.0)))
+    tasks = [replace(t, timeout_s=5.0) for t in expand_runs(spec)]
+    rows = list(_run_local(tasks, 2, run=SlowToStart(8.0)))
     assert sorted(r["run_id"] for r in rows) == sorted(t.run_id for t in tasks)
     assert [r["status"] for r in rows] == ["success", "success"], rows

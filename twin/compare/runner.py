@@ -44,7 +44,7 @@ from twin.compare.spec import (
     load_compare_config,
     run_key,
 )
-from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, quiet_imports, worker_init
+from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, worker_init
 from twin.environment import environment
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
 
@@ -130,9 +130,7 @@ def tasks_available() -> bool:
 def _check_physics_robot(settings: Settings) -> None:
     """ConfigError when the runs execute in physics and the robot URDF cannot (a planning-only model)."""
     from twin.urdf_model import RobotModel
-
-    quiet_imports()  # twin.world imports PyBullet, whose banner is no output of ours
-    from twin.world import physics_parts_missing
+    from twin.world import physics_parts_missing  # it imports PyBullet with its banner silenced
 
     missing = physics_parts_missing(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
     if missing:
@@ -326,7 +324,6 @@ def _mp_context() -> Any:
 
 
 def _run_inline(todo: Sequence[RunTask]) -> Iterator[dict[str, Any]]:
-    quiet_imports()
     for t in todo:
         yield execute_run(t)
 

@@ -50,7 +50,6 @@ __all__ = [
     "cell_for",
     "error_row",
     "execute_run",
-    "quiet_imports",
     "sample_query",
     "straight_free",
     "worker_init",
@@ -108,25 +107,6 @@ def worker_init(threads: int | None = None) -> None:
         sys.stderr = os.fdopen(saved, "w", buffering=1)
     except OSError:  # pragma: no cover - nothing to silence then
         pass
-
-
-def quiet_imports() -> None:
-    """Import PyBullet with fd 2 silenced (for in-process runs): its banner is no output of ours."""
-    if "pybullet" in sys.modules:
-        return
-    sys.stderr.flush()
-    try:
-        saved = os.dup(2)
-        devnull = os.open(os.devnull, os.O_WRONLY)
-    except OSError:  # pragma: no cover
-        return
-    try:
-        os.dup2(devnull, 2)
-        import twin.world  # noqa: F401
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
 
 
 def _problem_set(path: str) -> ProblemSet:
