@@ -168,6 +168,7 @@ def marker_quad_size_m(marker_size_m: float) -> float:
 # ---- object layout -------------------------------------------------------------------------------
 LAYOUT_ATTEMPTS = 50  # whole-scene restarts before giving up
 TRIES_PER_OBJECT = 300  # position draws per object within one attempt
+UNMODELLED_NEARBY_M = 0.15  # how far beside the objects' region an unmodelled box may stand (no region of its own)
 KEEPOUT_MIN_TOP_M = 0.002  # bodies whose top is above this are obstacles for spawning (the table is not)
 
 Aabb = tuple[Sequence[float], Sequence[float]]  # (min xyz, max xyz), base frame, m
@@ -220,12 +221,16 @@ def place_unmodelled_obstacle(
     keepouts = keepout_rects(obstacles, gap)
     circles = [(p.position[0], p.position[1], p.template.footprint_radius(p.lying)) for p in placements]
     rng = np.random.default_rng([seed, 0x0B57])
-    for _ in range(TRIES_PER_OBJECT * LAYOUT_ATTEMPTS):
-        x, y = float(rng.uniform(x0, x1)), float(rng.uniform(y0, y1))
-        if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
-            continue
-        if all(math.hypot(x - px, y - py) >= r + pr + gap for px, py, pr in circles):
-            return (x, y, cfg.size_m[2] / 2.0)
+    # no region given and the objects leave no room in theirs (the warehouse's cubes fill a 11 x 24 cm
+    # region): the box stands beside them, within UNMODELLED_NEARBY_M of their region
+    grow = (0.0,) if cfg.region_x or cfg.region_y else (0.0, UNMODELLED_NEARBY_M)
+    for g in grow:
+        for _ in range(TRIES_PER_OBJECT * LAYOUT_ATTEMPTS):
+            x, y = float(rng.uniform(x0 - g, x1 + g)), float(rng.uniform(y0 - g, y1 + g))
+            if any(_circle_hits_rect(x, y, r, k) for k in keepouts):
+                continue
+            if all(math.hypot(x - px, y - py) >= r + pr + gap for px, py, pr in circles):
+                return (x, y, cfg.size_m[2] / 2.0)
     raise WorldError(
         f"cannot place world.unmodelled_obstacle (size {list(cfg.size_m)}) clear of the objects in region "
         f"x={[x0, x1]} y={[y0, y1]} with a gap of {gap} m; make it smaller or give it a region"
