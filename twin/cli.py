@@ -150,6 +150,12 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--seed", type=_seed, default=None, help="scene seed, a non-negative integer (default: the config's seed)"
     )
+    p.add_argument(
+        "--faults",
+        default=None,
+        metavar="NAME",
+        help="a named fault set on top of the config (twin.faults: nominal, stress), before any --set",
+    )
 
 
 _AFTER = "_after_command"  # where -v/-q given after the command land, until `_MainParser` adds them in
@@ -388,10 +394,11 @@ def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) 
     whole `planners.transfer` block before them, so `--set planners.transfer.params.K=V` reaches it and is
     validated by its own model (twin.config.planner_overrides)."""
     from twin.config import load_config, planner_overrides
+    from twin.faults import fault_overrides
 
-    overrides = (
-        args.overrides if transfer_planner is None else planner_overrides("transfer", transfer_planner, args.overrides)
-    )
+    overrides = [*(fault_overrides(args.faults) if args.faults else ()), *args.overrides]
+    if transfer_planner is not None:
+        overrides = planner_overrides("transfer", transfer_planner, overrides)
     settings = load_config(args.config, overrides)
     if args.seed is not None:
         settings = settings.model_copy(update={"seed": args.seed})
@@ -604,7 +611,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _run_overrides(args: argparse.Namespace) -> list[str]:
     """The changes a command line made to its config, as typed: `--planner NAME` and every `--set`."""
     planner = [f"--planner {args.planner}"] if getattr(args, "planner", None) else []
-    return planner + [f"--set {o}" for o in args.overrides]
+    faults = [f"--faults {args.faults}"] if getattr(args, "faults", None) else []
+    return planner + faults + [f"--set {o}" for o in args.overrides]
 
 
 def _ran_title(args: argparse.Namespace, settings: Any, seed: int) -> str:
