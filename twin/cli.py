@@ -602,6 +602,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         f" ({summary.sim_time_s / total:.1f}x real time over the whole command, {total:.1f} s)"
     )
     print(f"time: {format_breakdown(timings, total)}")
+    cal = summary.calibration
+    if cal is not None and cal.status != "measured":  # a camera pose the run did not measure: say how good it is
+        bound = "" if cal.error_bound_m is None else f", good to {cal.error_bound_m * 1e3:.0f} mm"
+        print(f"calibration: {cal.status} ({cal.views} views{bound}): {cal.reason}")
     if summary.plugin_errors:  # a bug in a plugin, even one the task recovered from, is not a pass
         print(f"plugin errors: {len(summary.plugin_errors)}, the first: {summary.plugin_errors[0]}")
         return EXIT_PLUGIN_ERROR

@@ -22,6 +22,7 @@ __all__ = [
     "EXACT_ORIENTATION_TOLERANCE_RAD",
     "EXACT_POSITION_TOLERANCE_M",
     "BoxBounds",
+    "CalibrationOutcome",
     "Goal",
     "JointGoal",
     "Landmark",
@@ -333,6 +334,35 @@ class ObjectOutcome:
 
 
 @dataclass(frozen=True)
+class CalibrationOutcome:
+    """How a run knew where its camera was: the run summary's `calibration` entry.
+
+    `status`: "measured" (the base marker calibrated it), "fallback" (a calibration was asked for and the
+    marker was not found in any view: the configured transform was used, possibly refined by the table
+    plane), "failed" (asked for, not found, and the task could not go on without it: the warehouse) or
+    "configured" (none asked for: the configured pose is the model). `views`: marker views taken.
+    `reprojection_px`: the used estimate's marker reprojection RMS. `error_bound_m`: what a point on the
+    table, seen from the capture pose, may be misplaced by through the camera pose used (fallback: from
+    the mount tolerance, see `twin.tasks.robocup.calibration`). `reason`: why it is not "measured".
+    """
+
+    status: str  # "measured" | "fallback" | "failed" | "configured"
+    views: int = 0
+    reprojection_px: float | None = None
+    error_bound_m: float | None = None
+    reason: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "views": self.views,
+            "reprojection_px": self.reprojection_px,
+            "error_bound_m": self.error_bound_m,
+            "reason": self.reason,
+        }
+
+
+@dataclass(frozen=True)
 class RunSummary:
     """One `twin run`: per-object outcomes and totals; `to_json()` is the --json file's content."""
 
@@ -351,6 +381,8 @@ class RunSummary:
     planners: dict[str, dict[str, Any]] = field(default_factory=dict)
     # every exception a planner plugin raised ("stage: plugin raised ..."), the stage failing with it
     plugin_errors: tuple[str, ...] = ()
+    # how the run knew its camera pose (None: the task did not say; `run_task` fills "configured" then)
+    calibration: CalibrationOutcome | None = None
 
     @property
     def success_rate(self) -> float:
@@ -384,4 +416,5 @@ class RunSummary:
             "wall_time_s": self.wall_time_s,
             "timings": self.timings,
             "metrics": self.metrics,
+            "calibration": None if self.calibration is None else self.calibration.to_json(),
         }

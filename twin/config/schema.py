@@ -286,6 +286,16 @@ class ExtrinsicErrorSettings(ConfigModel):
     rotation_deg: float = Field(0.0, ge=0, le=20.0)
 
 
+class MountToleranceSettings(ConfigModel):
+    """How far the configured camera pose (a fixed camera's `position`/`target`, a wrist camera's
+    `wrist_offset_m`) is trusted to be from the real mount, as a mechanical tolerance: a translation of at most
+    `translation_m` and a rotation of at most `rotation_deg`. Not a fault model (nothing is moved by it): it is
+    the error bound a run reports when it cannot measure the mount (the marker not seen in any view)."""
+
+    translation_m: float = Field(0.01, ge=0, le=0.2)
+    rotation_deg: float = Field(1.0, ge=0, le=20.0)
+
+
 class CameraSettings(ConfigModel):
     """RGB-D camera: D435i-like intrinsics at 640x480.
 
@@ -305,6 +315,7 @@ class CameraSettings(ConfigModel):
     wrist_offset_m: Vec3 = (0.0, 0.075, 0.02)
     noise: DepthNoiseSettings = Field(default_factory=DepthNoiseSettings)
     extrinsic_error: ExtrinsicErrorSettings = Field(default_factory=ExtrinsicErrorSettings)
+    mount_tolerance: MountToleranceSettings = Field(default_factory=MountToleranceSettings)
     # wrist mount: joint angles where the camera looks straight down from ~0.72 m above the table centre
     # (image x along base +y), and the settling pause before a frame is taken there (seed 002: 3 s)
     capture_pose: Q6 = (-0.2518, -1.2366, 0.4574, -0.7916, -1.5708, -0.2518)

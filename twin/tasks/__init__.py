@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from pydantic import BaseModel
 
 from twin.timing import collect_timings, stage
-from twin.types import Landmark, RunSummary
+from twin.types import CalibrationOutcome, Landmark, RunSummary
 
 if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
     from twin.config import PlannerBlock, Settings
@@ -156,6 +156,7 @@ def run_task(
         timings=clock.breakdown(wall),
         planners={group: ran_block(cell.block(group), p) for group, p in sorted(planners.items())},
         plugin_errors=tuple(cell.plugin_errors),
+        calibration=cell.calibration or CalibrationOutcome("configured", reason="the task did not calibrate"),
     )
 
 

@@ -23,7 +23,7 @@ from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
 from twin.limit_check import RATIO_METRICS
 from twin.planning import CheckedPlanner, describe_goal_kinds, limits_from_settings, make_context, make_planner
-from twin.types import JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
+from twin.types import CalibrationOutcome, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 from twin.urdf_model import primitive_half_extents
 
 __all__ = [
@@ -232,6 +232,8 @@ class Cell:
 
     planners: dict[str, CheckedPlanner] = field(default_factory=dict)  # built ahead by `stage_planners`, else here
     on_objects: Callable[[int, int], None] | None = None  # told (done, known) objects: `objects_done`
+    # how the task knew its camera pose (set by the task; the run summary's `calibration`)
+    calibration: CalibrationOutcome | None = None
 
     def __post_init__(self) -> None:
         if not self.planners:

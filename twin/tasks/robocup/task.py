@@ -24,11 +24,12 @@ from twin.config import Settings
 from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
 from twin.perception.capture import capture_frame, prefetch_next_capture
-from twin.perception.pipeline import camera_extrinsics, make_detector
+from twin.perception.pipeline import make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
+from twin.tasks.robocup.calibration import calibrate_hand_eye
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
@@ -430,7 +431,8 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     most_seen = 0  # the most objects perception saw on the table in one capture: sizes the budget
     captures = 0
     stopped: str | None = None
-    hand_eye = _calibrate_hand_eye(cell)
+    hand_eye = calibrate_hand_eye(cell, _reach_capture_pose)
+    cell.calibration = hand_eye.outcome
     fixture_boxes = _fixture_boxes(cell)
     while True:
         budget = min(task.max_captures, (task.retries + 2) * most_seen + 3)
@@ -451,12 +453,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             break
         cap = capture_frame(world, settings, move=False)
         captures += 1
-        if hand_eye is not None:
-            T_bc = camera_extrinsics(settings, cap, *hand_eye)
-        elif cap.mount == "wrist":  # forward kinematics and the configured hand-eye transform
-            T_bc = cap.T_base_camera_nominal
-        else:
-            T_bc = camera_extrinsics(settings, cap, None)
+        T_bc = hand_eye.camera_pose(settings, cap)
         # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
         unknown = [(f"unknown_{i}", lo, hi) for i, (lo, hi) in enumerate(seen.unknown)]
@@ -494,31 +491,6 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             log.info("robocup: could not return home: %s", e)
     cell.settle(1.0)
     return referee.outcomes(targets, stopped=stopped)
-
-
-def _calibrate_hand_eye(cell: Cell) -> tuple[np.ndarray, np.ndarray] | None:
-    """With `perception.extrinsics: aruco` and a wrist camera: view the base marker from
-    `camera.calibration_pose` once, at the start of the run, and return (T_base_camera there, the joints
-    there), from which every capture's camera pose follows by forward kinematics. A camera knocked off its
-    configured hand-eye transform is then measured instead of trusted. None when not asked for; when the
-    marker is not seen the run goes on with the configured hand-eye transform and says so."""
-    from twin.perception.aruco import MarkerNotFound, calibrate
-
-    settings = cell.settings
-    cam = settings.camera
-    if settings.perception.extrinsics != "aruco" or cam.mount != "wrist":
-        return None
-    cell.current = "hand-eye"
-    q = np.asarray(cam.calibration_pose if cam.calibration_pose is not None else cam.capture_pose, dtype=float)
-    try:
-        _reach_capture_pose(cell, q)
-        cap = capture_frame(cell.world, settings, pose="calibration", move=False)
-        cal = calibrate(cap.frame, settings)
-        prefetch_next_capture(cell.world, settings)
-    except (StageFailed, MarkerNotFound) as e:
-        log.warning("robocup: no hand-eye calibration (%s); using the configured camera.wrist_offset_m", e)
-        return None
-    return cal.T_base_camera, cap.q
 
 
 def _reach_capture_pose(cell: Cell, q: np.ndarray) -> None:

@@ -21,7 +21,7 @@ from twin.tasks.cell import Cell, GraspCheck, StageFailed, clear_failure, note_f
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import WarehouseReferee
 from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
-from twin.types import Landmark, ObjectOutcome
+from twin.types import CalibrationOutcome, Landmark, ObjectOutcome
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
@@ -145,6 +145,8 @@ def _perceive(cell: Cell) -> WarehouseResult:
     settings, world = cell.settings, cell.world
     capture = capture_frame(world, settings)
     calib = calibrate(capture.frame, settings)
+    views = 0 if cell.calibration is None else cell.calibration.views
+    cell.calibration = CalibrationOutcome("measured", views=views + 1, reprojection_px=calib.marker.reprojection_px)
     seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
     boxes = [] if seen.obstacle is None else [("obstacle", seen.obstacle.lo, seen.obstacle.hi)]
     cell.perceived(
@@ -186,6 +188,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
             log.warning("warehouse: no obstacle seen; planning without one")
     except MarkerNotFound as e:
         global_error = f"calibration: the ArUco marker was not found: {e}"
+        cell.calibration = CalibrationOutcome("failed", views=1, reason=global_error)
     attempts = [_Attempt(cube, referee.match(cube.centroid)) for cube in cubes]
     order = list(task.drop_zones)
     attempts.sort(
