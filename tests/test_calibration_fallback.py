@@ -15,10 +15,11 @@ from twin.config import Settings, load_config
 from twin.faults import fault_overrides
 from twin.kinematics import UR5e
 from twin.perception.aruco import transform_error
-from twin.perception.capture import capture_frame
+from twin.perception.capture import Capture, capture_frame
 from twin.tasks import run_task
 from twin.tasks.cell import Cell
-from twin.tasks.robocup.calibration import calibrate_hand_eye, error_bound_m, view_candidates
+from twin.tasks.robocup.calibration import HandEye, calibrate_hand_eye, error_bound_m, relook_target, view_candidates
+from twin.tasks.robocup.perception import ObjectEstimate
 from twin.tasks.robocup.task import _reach_capture_pose
 from twin.types import CalibrationOutcome, RunSummary
 
@@ -116,3 +117,55 @@ def test_summary_json_and_defaults() -> None:
         "reason": "the marker was not found",
     }
     assert RunSummary("robocup", 1, "ruckig.movej", (), 1.0, 1.0).to_json()["calibration"] is None
+
+
+def _estimate(label: str, xy: tuple[float, float]) -> ObjectEstimate:
+    p = np.array([xy[0], xy[1], 0.04])
+    return ObjectEstimate(
+        "can",
+        None,
+        label,
+        0.9,
+        "vertical",
+        "vertical",
+        p,
+        0.0,
+        np.r_[p, 0.0, np.pi, 0.0, 0.07],
+        "icp",
+        None,
+        500,
+        0.117,
+        None,
+    )
+
+
+def test_a_wrong_width_grasp_with_an_uncalibrated_camera_looks_again_from_above() -> None:
+    """`relook_target`: the object whose grasp found the wrong width is seen again from straight above it (the
+    camera over its first estimate, at the capture height) and the re-look's estimate replaces it; the others
+    stay as the full view saw them; another object is not re-looked at."""
+    from twin.world import World
+
+    s = _plate_moved(_without_objects(load_config("robocup", HAND_EYE_ERROR)), (-2.5, 0.0, 0.0))
+    q_capture = np.array(s.camera.capture_pose)
+    first, other = _estimate("can", (-0.40, 0.20)), _estimate("bottle", (-0.50, -0.10))
+    hand_eye = HandEye(CalibrationOutcome("fallback", views=1, error_bound_m=0.018, reason="not found"))
+    looks: list[np.ndarray] = []
+
+    def perceive(cap: Capture, T_bc: np.ndarray) -> list[ObjectEstimate]:
+        looks.append(T_bc)
+        return [_estimate("can", (-0.412, 0.207)), _estimate("bottle", (-0.50, -0.10))]
+
+    with World(s, SEED) as world:
+        cell = Cell(s, world)
+        est, objects = relook_target(
+            cell, hand_eye, other, (first, other), first.position[:2], q_capture, _reach_capture_pose, perceive
+        )
+        assert est is other and not looks  # not the object that failed: no re-look
+        est, objects = relook_target(
+            cell, hand_eye, first, (first, other), first.position[:2], q_capture, _reach_capture_pose, perceive
+        )
+    assert len(looks) == 1
+    assert np.linalg.norm(looks[0][:2, 3] - first.position[:2]) < 0.03  # the camera straight above it
+    assert looks[0][2, 2] < -0.99 and abs(looks[0][2, 3] - 0.72) < 0.05  # looking down, at the capture height
+    assert est is not first and est.position[0] == pytest.approx(-0.412)
+    assert objects == (est, other)

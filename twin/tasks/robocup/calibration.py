@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -39,8 +39,18 @@ from twin.types import CalibrationOutcome
 
 if TYPE_CHECKING:
     from twin.kinematics import UR5e
+    from twin.tasks.robocup.perception import ObjectEstimate
 
-__all__ = ["HandEye", "calibrate_hand_eye", "error_bound_m", "table_disagreement", "view_candidates"]
+__all__ = [
+    "HandEye",
+    "calibrate_hand_eye",
+    "error_bound_m",
+    "relook",
+    "relook_joints",
+    "relook_target",
+    "table_disagreement",
+    "view_candidates",
+]
 
 log = logging.getLogger("twin")
 
@@ -54,6 +64,7 @@ _SAME_T_M = 0.005
 _SAME_R_DEG = 0.5
 _GOOD_VIEWS = 2  # after a failed first view, stop looking once this many views measured it
 _PLANE_MIN_INLIERS = 0.3  # the table is the dominant plane when it holds this share of the depth points
+_SAME_PLACE_M = 0.04  # an estimate this near where a failed grasp's object was seen is that object
 _PLANE_STRIDE = 4  # every 4th pixel in each direction: ~19 000 points from 640 x 480, plenty for a plane
 
 
@@ -330,3 +341,75 @@ def error_bound_m(settings: Settings, *, levelled: bool = False) -> float:
         far = max(far, float(np.linalg.norm(p - T[:3, 3])))
         rho = max(rho, float(np.linalg.norm(p[:2] - T[:2, 3])))
     return t + (rho if levelled else far) * r
+
+
+# ---- a re-look at an object a grasp found the wrong width ---------------------------------------------------
+def relook_joints(cell: Cell, xy: np.ndarray, q_capture: np.ndarray) -> np.ndarray | None:
+    """Joints that put the camera straight above base-frame point `xy` (2,), at the capture pose's height and
+    with its image orientation: the object then sits at the image centre, where a turn of the mount about
+    the vertical misplaces nothing (levelled, only the level shift is left). The IK branch nearest the
+    capture pose; None when out of reach."""
+    offset = wrist_camera_offset(cell.settings)
+    T = cell.kin.fk(q_capture, "flange") @ offset
+    T[:2, 3] = np.asarray(xy, dtype=float)[:2]
+    sols = cell.kin.ik(T @ np.linalg.inv(offset), "flange")
+    if len(sols) == 0:
+        return None
+    return np.asarray(sols[int(np.argmin(np.abs(sols - q_capture).sum(axis=1)))])
+
+
+def relook(
+    cell: Cell,
+    hand_eye: HandEye,
+    xy: np.ndarray,
+    q_capture: np.ndarray,
+    reach: Callable[[Cell, np.ndarray], None],
+) -> tuple[Capture, np.ndarray] | None:
+    """After a grasp found the wrong width (or nothing) with an uncalibrated camera: a fresh capture from
+    straight above where the object was seen (`relook_joints`), and the camera pose to perceive it with;
+    None when that view is out of reach or not reached (the next capture is the usual one)."""
+    q = relook_joints(cell, xy, q_capture)
+    if q is None:
+        return None
+    try:
+        reach(cell, q)
+    except StageFailed as e:
+        log.info("robocup: no re-look from above (%s)", e)
+        return None
+    cap = capture_frame(cell.world, cell.settings, move=False)
+    prefetch_next_capture(cell.world, cell.settings)
+    return cap, hand_eye.camera_pose(cell.settings, cap)
+
+
+def relook_target(
+    cell: Cell,
+    hand_eye: HandEye,
+    est: ObjectEstimate,
+    objects: tuple[ObjectEstimate, ...],
+    seen_at: np.ndarray,
+    q_capture: np.ndarray,
+    reach: Callable[[Cell, np.ndarray], None],
+    perceive: Callable[[Capture, np.ndarray], Sequence[ObjectEstimate]],
+) -> tuple[ObjectEstimate, tuple[ObjectEstimate, ...]]:
+    """The target and the scene's objects to plan with after a re-look: when `est` is the object whose grasp
+    found the wrong width (seen at `seen_at` (2,) then), the same class's estimate from straight above that
+    is nearest it, within the error bound, replaces it (the other objects stay as the full view saw them);
+    otherwise, or when the re-look sees no such estimate, unchanged."""
+    if float(np.linalg.norm(est.position[:2] - np.asarray(seen_at)[:2])) > _SAME_PLACE_M:
+        return est, objects
+    looked = relook(cell, hand_eye, est.position[:2], q_capture, reach)
+    if looked is None:
+        return est, objects
+    near = max(_SAME_PLACE_M, 2.0 * (hand_eye.outcome.error_bound_m or 0.0))
+    same = [o for o in perceive(*looked) if o.label == est.label]
+    same = [o for o in same if float(np.linalg.norm(o.position[:2] - est.position[:2])) <= near]
+    if not same:
+        log.info("robocup: the re-look from above did not see %s again; keeping the first estimate", est.label)
+        return est, objects
+    better = min(same, key=lambda o: float(np.linalg.norm(o.position[:2] - est.position[:2])))
+    log.info(
+        "robocup: %s re-looked from above: %.1f mm from the first estimate",
+        est.label,
+        1e3 * float(np.linalg.norm(better.position[:2] - est.position[:2])),
+    )
+    return better, tuple(better if o is est else o for o in objects)

@@ -23,13 +23,13 @@ import numpy as np
 from twin.config import Settings
 from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
-from twin.perception.capture import capture_frame, prefetch_next_capture
+from twin.perception.capture import Capture, capture_frame, prefetch_next_capture
 from twin.perception.pipeline import make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
-from twin.tasks.robocup.calibration import calibrate_hand_eye
+from twin.tasks.robocup.calibration import calibrate_hand_eye, relook_target
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
@@ -434,6 +434,11 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     hand_eye = calibrate_hand_eye(cell, _reach_capture_pose)
     cell.calibration = hand_eye.outcome
     fixture_boxes = _fixture_boxes(cell)
+    relook_at: np.ndarray | None = None  # where an object whose grasp found the wrong width was seen
+
+    def perceive_from(cap: Capture, T_bc: np.ndarray) -> tuple[ObjectEstimate, ...]:
+        return perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes).objects
+
     while True:
         budget = min(task.max_captures, (task.retries + 2) * most_seen + 3)
         if captures >= budget:
@@ -464,7 +469,13 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
         if est is None:
             break
         prefetch_next_capture(world, settings)  # there will be another look
-        _update_obstacles(cell, seen.objects, est, bins, seen.unknown)
+        objects = seen.objects
+        if relook_at is not None:  # a grasp found the wrong width with an uncalibrated camera: look from above
+            est, objects = relook_target(
+                cell, hand_eye, est, objects, relook_at, capture_q, _reach_capture_pose, perceive_from
+            )
+            relook_at = None
+        _update_obstacles(cell, objects, est, bins, seen.unknown)
         tgt = _target_for(est, targets)
         tgt.attempts += 1
         tgt.true_ids |= referee.match(est.position)  # metrics only: which true object this was
@@ -483,6 +494,8 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
             _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
             cell.recover()
+            if hand_eye.uncalibrated and e.stage == "grasp":
+                relook_at = est.position[:2].copy()
         tgt.cycle_time_s += world.sim_time - t0
         cell.objects_done(*_counts(seen.objects, targets, bins, task.retries))
         try:
