@@ -12,10 +12,10 @@ from twin.camera import true_camera_pose
 from twin.config import load_config
 from twin.perception.aruco import transform_error
 from twin.perception.capture import capture_frame
-from twin.perception.pipeline import camera_extrinsics
 from twin.tasks.cell import Cell, StageFailed, top_down
+from twin.tasks.robocup.calibration import calibrate_hand_eye
 from twin.tasks.robocup.perception import ObjectEstimate
-from twin.tasks.robocup.task import _calibrate_hand_eye, _clear_grasp_yaw
+from twin.tasks.robocup.task import _clear_grasp_yaw, _reach_capture_pose
 from twin.world import World
 
 pytest.importorskip("open3d")
@@ -32,19 +32,20 @@ def test_the_robocup_task_measures_a_knocked_wrist_camera_from_the_base_marker()
     assert s.perception.extrinsics == "aruco"
     with World(s, seed=3, renderer=RENDERER) as world:
         cell = Cell(s, world)
-        hand_eye = _calibrate_hand_eye(cell)
-        assert hand_eye is not None
+        hand_eye = calibrate_hand_eye(cell, _reach_capture_pose)
+        assert hand_eye.outcome.status == "measured" and hand_eye.outcome.views == 1
         cell.move_joints("capture", np.asarray(s.camera.capture_pose))
         cap = capture_frame(world, s, move=False)
         T_true = true_camera_pose(s.camera, world.seed, world.link_matrix("tool0"))
-        dt_used, dr_used = transform_error(camera_extrinsics(s, cap, *hand_eye), T_true)
+        dt_used, dr_used = transform_error(hand_eye.camera_pose(s, cap), T_true)
         dt_config, _ = transform_error(cap.T_base_camera_nominal, T_true)
     assert dt_config > 0.0099  # its 1 cm (to round-off: 10.000008 mm at 240 Hz, 9.999989 at 480)
     assert dt_used < 0.003 and dr_used < 0.2, (dt_used, dr_used)
     with World(
         load_config("robocup", overrides=["perception.extrinsics=kinematics"]), seed=3, renderer=RENDERER
     ) as world:
-        assert _calibrate_hand_eye(Cell(world.settings, world)) is None  # not asked for: no marker view
+        not_asked = calibrate_hand_eye(Cell(world.settings, world), _reach_capture_pose)
+        assert not_asked.outcome.status == "configured" and not_asked.outcome.views == 0  # no marker view
 
 
 def _estimate(cls: str, orientation: str, xy: tuple[float, float], z_grasp: float) -> ObjectEstimate:
