@@ -19,7 +19,10 @@ table is removed (points less than `table_threshold_m` above the fitted plane), 
   footprint's centre and half the observed height (the camera sees the top, so the plain centroid sits
   high; PCA axes of a square are noise).
 - Accept when RMSE < 0.025 m: vertical -> centroid + yaw from ICP; horizontal cylinder -> centroid from
-  ICP, yaw from PCA; otherwise (ICP rejected, skipped, or a lying box) the PCA centroid and yaw.
+  ICP, yaw from PCA; a lying box (not in the seed) -> the centre and short-side direction of its footprint
+  rectangle, whatever ICP says (its top face spans the footprint; the PCA centroid leans towards the side
+  faces the camera sees, 2-9 mm on lying spam, more than the 1 mm a side its 83 mm grasp leaves in the
+  85 mm stroke); otherwise (ICP rejected or skipped) the PCA centroid and yaw.
 - Grasp vector g = [x, y, z_grasp, yaw, pi, 0, w_grip]; z_grasp (tcp height above the table) and
   w_grip (gripper opening, m - the seed used the Robotiq joint angle) from the `<class>_<orientation>`
   lookup. The yaw is wrapped to [-pi/2, pi/2): the parallel gripper is symmetric under a half turn.
@@ -197,7 +200,8 @@ class ObjectEstimate:
     `position` (3,): object centre; `yaw`: grasp yaw (rad, [-pi/2, pi/2)); `grasp` (7,): [x, y, z_grasp,
     yaw, pi, 0, w_grip]; `orientation` the final vertical/horizontal, `orientation_pca` the seed's PCA rule
     result before the height check; `source`: "icp" (centroid and yaw), "icp_centroid" (yaw from PCA),
-    "pca" (fallback); `icp_rmse` None when ICP was skipped. `top_m`: observed top height above the table.
+    "footprint" (a lying box: its footprint rectangle's centre and short side), "pca" (fallback); `icp_rmse`
+    None when ICP was skipped. `top_m`: observed top height above the table.
     """
 
     cls: str
@@ -314,6 +318,13 @@ def _estimate(
                     position, yaw, source = T_obj[:3, 3], _grasp_yaw_from_rotation(T_obj[:3, :3], det.cls), "icp"
                 elif det.cls in CYLINDERS:
                     position, source = T_obj[:3, 3], "icp_centroid"
+            if orient == "horizontal" and OBJECT_TEMPLATES[det.cls].shape == "box":
+                # a lying box: its top face, seen whole from above, spans its footprint, so the footprint
+                # rectangle's centre and sides are the box's (0.1-0.6 mm, < 0.3 deg on lying spam); the PCA
+                # centroid leans towards the side faces the camera also sees (2-9 mm) and PC2 turns with it
+                # (up to 7 deg). Gripped across its 83 mm side with the 85 mm stroke, 1 mm clears each side.
+                position = np.array([fp.center[0], fp.center[1], centroid_pca[2]])
+                yaw, source = fp.angle + math.pi / 2, "footprint"
     timings["icp"] = icp_stage.seconds
 
     yaw = wrap_half_turn(yaw)
