@@ -12,11 +12,13 @@ estimate was and whether it ended in its bin is for the judge (twin.tasks.judge)
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -39,11 +41,16 @@ if TYPE_CHECKING:
     from twin.registry import PluginContext
 
 __all__ = [
+    "STROKE_MARGIN_M",
     "BinGeometry",
+    "GraspChoice",
+    "GraspSlipped",
     "RobocupTask",
     "bin_for",
     "bin_geometries",
+    "choose_grasp",
     "feasible_cube_yaw",
+    "grasp_sides",
     "grasp_yaw_symmetry",
     "grip_width",
     "read_bin_geometry",
@@ -60,6 +67,28 @@ _WALL_MARGIN_M = 0.005  # a placed object's footprint keeps this from the inner 
 _SPOT_STEP_M = 0.005  # the grid of candidate release points in a bin
 _SAME_OBJECT_M = 0.04  # a later estimate this close to a failed one (same label) is the same object
 _UNKNOWN_PAD_M = 0.01  # an unnamed thing on the table is planned around this much wider than it was seen
+
+# The stroke a top-down grasp leaves around the object (both sides together) before it counts as needing the
+# stroke's last millimetres: what the opened fingers must straddle grows with the error of the grasp centre
+# along the closing direction (~2 mm a side on a calibrated camera, tracking included: 4 mm) and of its yaw
+# (1 deg across a box's ~100 mm long side: 1.8 mm). With less, a finger comes down on the object's top edge,
+# tilts it, and it is held across its edges and slips out on the ascent (a lying spam: 83 mm in the 85 mm
+# stroke, 2 mm). Such a side is gripped only when no other side of the object fits (`choose_grasp`).
+STROKE_MARGIN_M: Final = 0.006
+# A grasp tried again after a slip goes as deep as the gripper allows: its fingertips this far above the table
+# (the fitted table plane and the arm's tracking are good to a few mm) and its palm this far above the object's
+# top, so the pads hold more of the object, nearer its centre of mass.
+_TIP_CLEARANCE_M = 0.008
+_PALM_CLEARANCE_M = 0.005
+# ... squeezes with the 2F-85's most (its 20..235 N), unless its class has a force of its own (the marker's
+# gentle 20 N: harder, the pads sink through it, task.grip_force_n) ...
+_GRIPPER_MAX_FORCE_N = 235.0
+# ... and lifts at this fraction of the arm's speed (the same path, the time stretched: the inertial load on
+# the grip falls with its square).
+_SLOW_LIFT = 0.5
+# a grasp yaw this close (modulo a half turn) to one that slipped grips the same faces: half the 45 deg between
+# a cube's face and its diagonal
+_SAME_YAW_RAD = math.pi / 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,6 +185,7 @@ class _Target:
     planner: str | None = None
     cycle_time_s: float = 0.0
     first_estimate: np.ndarray | None = None
+    slipped: list[tuple[GraspChoice, float]] = field(default_factory=list)  # grasps (and base yaws) that slipped
     true_ids: set[int] = field(default_factory=set)  # metrics only (the referee's), never decided on
 
 
@@ -171,13 +201,96 @@ def _in_any_bin(p: np.ndarray, bins: dict[str, BinGeometry]) -> bool:
     return any(b.over(p) for b in bins.values())
 
 
+@dataclass(frozen=True)
+class GraspChoice:
+    """One top-down grasp of an object: across which of its sides, and how.
+
+    `side`: "short"/"long" (a box's or a lying cylinder's footprint sides), "diagonal"/"face" (a cube's),
+    "round" (a standing cylinder's). `yaw_offset_rad`: the closing direction's turn from the perceived grasp
+    yaw (which closes across the footprint's short side; a cube's across its diagonal). `width_m`: what should
+    lie between the fingers. `margin_m`: the stroke left around it (max opening - width; < 0: it does not
+    fit). `lower_m`: how far below the grasp lookup's height the tcp goes; `force_n`: the squeeze (None: the
+    class's or the gripper's); `lift_speed`: the ascent's share of the arm's speed."""
+
+    side: str
+    yaw_offset_rad: float
+    width_m: float
+    margin_m: float
+    lower_m: float = 0.0
+    force_n: float | None = None
+    lift_speed: float = 1.0
+
+    @property
+    def tight(self) -> bool:
+        """The grasp needs the stroke's last millimetres (`STROKE_MARGIN_M`)."""
+        return self.margin_m < STROKE_MARGIN_M
+
+    def same_side(self, other: GraspChoice) -> bool:
+        return self.side == other.side
+
+
+class GraspSlipped(StageFailed):
+    """The object left the fingers after a grasp that held (the ascent, the transfer): `grasp` and the base-frame
+    `yaw` were what slipped, so the next attempt grips it otherwise."""
+
+    def __init__(self, stage: str, reason: str, *, grasp: GraspChoice, yaw: float, planner: str | None = None):
+        super().__init__(stage, reason, planner=planner)
+        self.grasp = grasp
+        self.yaw = yaw
+
+
+def grasp_sides(est: ObjectEstimate, max_opening_m: float) -> list[GraspChoice]:
+    """Every top-down grasp of the perceived class and orientation, in the order the task prefers them, with
+    the stroke each leaves (negative: wider than the stroke). A parallel gripper from above closes across a
+    side of the object's footprint, never across its height: a lying spam (102 x 83 footprint, 60 high) has
+    its 83 mm side only (102 mm is wider than the 85 mm stroke), a standing one (102 x 60) its 60 mm side; a
+    cube its 106 mm diagonal (the seed's self-locking grip) or a 75 mm face; a lying cylinder its diameter (its
+    length is far wider), a standing one its diameter at any yaw."""
+    t = OBJECT_TEMPLATES[est.cls]
+    lying = est.orientation == "horizontal"
+    ex, ey, _ = t.extents(lying)
+    short, long_ = sorted((float(ex), float(ey)))
+    if est.cls == "cube":  # perception's cube yaw closes across the diagonal
+        sides = [("diagonal", 0.0, short * math.sqrt(2.0)), ("face", -math.pi / 4, short)]
+    elif t.shape == "cylinder" and not lying:
+        sides = [("round", 0.0, short)]
+    else:
+        sides = [("short", 0.0, short), ("long", math.pi / 2, long_)]
+    return [GraspChoice(name, off, w, max_opening_m - w) for name, off, w in sides]
+
+
+def choose_grasp(
+    est: ObjectEstimate,
+    max_opening_m: float,
+    *,
+    slipped: tuple[GraspChoice, ...] = (),
+    lower_max_m: float = 0.0,
+    force_max_n: float | None = None,
+) -> GraspChoice:
+    """The grasp to use on a perceived object. The first of its sides (`grasp_sides`, in order) that leaves
+    `STROKE_MARGIN_M` of the stroke; when none does, the one that leaves the most (a lying spam: its 83 mm
+    side, 2 mm; it is gripped at its footprint's centre, twin.tasks.robocup.perception, and the fingers must
+    then close on its faces, `_pick_and_place`). When grasps of the object slipped (`slipped`: the earlier
+    attempts', which the task keeps), a side that fits and has not slipped is taken instead; with none left
+    the same side is gripped otherwise: `lower_max_m` deeper (the most the gripper allows, `_lowest_tcp`),
+    with `force_max_n` (None: the usual force) and lifted at `_SLOW_LIFT` of the arm's speed."""
+    sides = grasp_sides(est, max_opening_m)
+    fits = [g for g in sides if g.margin_m >= 0.0]
+    comfortable = [g for g in fits if not g.tight]
+    best = comfortable[0] if comfortable else max(sides, key=lambda g: g.margin_m)
+    if not slipped:
+        return best
+    fresh = [g for g in (comfortable or fits) if not any(g.same_side(s) for s in slipped)]
+    if fresh:
+        return fresh[0]
+    return replace(best, lower_m=max(0.0, lower_max_m), force_n=force_max_n, lift_speed=_SLOW_LIFT)
+
+
 def feasible_cube_yaw(est: ObjectEstimate, yaw: float, max_opening_m: float) -> float:
-    """The seed grips cubes diagonally (+45 deg, edge-to-edge self-locking), but across a 75 mm cube's
-    diagonal that spans 106 mm, more than the 85 mm stroke: fall back to a face grip where it cannot fit."""
-    if est.cls != "cube":
-        return yaw
-    side = OBJECT_TEMPLATES["cube"].size[0]
-    return yaw - math.pi / 4 if side * math.sqrt(2.0) > max_opening_m else yaw
+    """The grasp yaw of `choose_grasp`'s side: the seed grips cubes diagonally (+45 deg, edge-to-edge
+    self-locking), but across a 75 mm cube's diagonal that spans 106 mm, more than the 85 mm stroke: a face
+    grip there."""
+    return yaw + choose_grasp(est, max_opening_m).yaw_offset_rad
 
 
 def grasp_yaw_symmetry(est: ObjectEstimate) -> float | None:
@@ -193,13 +306,17 @@ def grasp_yaw_symmetry(est: ObjectEstimate) -> float | None:
     return math.pi / 2 if abs(ex - ey) < 1e-6 else None  # a square footprint: the cube
 
 
-def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, float], yaw: float) -> float:
+def _clear_grasp_yaw(
+    cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, float], yaw: float, *, avoid: tuple[float, ...] = ()
+) -> float:
     """The grasp yaw to use. An object that can be gripped at other yaws too (`grasp_yaw_symmetry`) is
     gripped at the one of them the wrist reaches with the least turn after the base-first alignment (a
     standing cylinder's perceived yaw says nothing: any yaw grips it), unless the gripper there or on its
     way down from the hover comes closer than `CHOOSE_CLEARANCE_M` to something in the planning scene;
     then at the next one that does not, or the one with the most clearance (a standing can beside a
-    standing marker is gripped with the fingers turned away from it; `Cell.choose_top_down_yaw`)."""
+    standing marker is gripped with the fingers turned away from it; `Cell.choose_top_down_yaw`). Yaws within
+    `_SAME_YAW_RAD` of one in `avoid` (grasps of this object that slipped) come after all the others: a cube
+    that slipped from one pair of faces is gripped across the other pair."""
     turn = grasp_yaw_symmetry(est)
     if turn is None:
         return yaw
@@ -214,7 +331,7 @@ def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, f
         base = yaw + round((yaw_ref - yaw) / turn) * turn
     candidates = sorted(
         (yaw_ref + wrap_half_turn(base + k * step - yaw_ref) for k in range(n)),
-        key=lambda a: abs(a - yaw_ref),
+        key=lambda a: (any(abs(wrap_half_turn(a - b)) < _SAME_YAW_RAD for b in avoid), abs(a - yaw_ref)),
     )
     x, y, z = xyz
     hover_m = cell.settings.task.robocup.hover_m
@@ -231,13 +348,43 @@ def _clear_grasp_yaw(cell: Cell, est: ObjectEstimate, xyz: tuple[float, float, f
 
 
 def grip_width(est: ObjectEstimate, max_opening_m: float) -> float:
-    """The width the fingers should stop at on this object, from its perceived class and orientation: the
-    grasp closes across the short side of its footprint (cubes: a face, or the diagonal where it fits)."""
-    ext = OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal")
-    short = min(float(ext[0]), float(ext[1]))
-    if est.cls == "cube" and short * math.sqrt(2.0) <= max_opening_m:
-        return short * math.sqrt(2.0)
-    return short
+    """The width the fingers should stop at on this object, from its perceived class and orientation: across
+    the side `choose_grasp` grips (the short side of its footprint; cubes: a face, or the diagonal where it
+    fits with `STROKE_MARGIN_M` to spare)."""
+    return choose_grasp(est, max_opening_m).width_m
+
+
+def _lowest_tcp(settings: Settings, est: ObjectEstimate, z_grasp: float, opening_m: float) -> float:
+    """The lowest tcp height (base z) for a top-down grasp of `est`: the fingertips `_TIP_CLEARANCE_M` above
+    the table and the gripper's palm `_PALM_CLEARANCE_M` above the object's top, from the gripper's URDF
+    shapes; the table's height is where the grasp lookup put `z_grasp` from."""
+    entry = settings.perception.robocup.grasp.get(f"{est.cls}_{est.orientation}")
+    table_z = z_grasp - (entry.z_grasp_m if entry is not None else est.top_m / 2.0)
+    top = table_z + OBJECT_TEMPLATES[est.cls].height(est.orientation == "horizontal")
+    tip = max(hi[2] for lo, hi in gripper_boxes(settings, opening_m))  # tcp z points down: larger is lower
+    # the palm: the shapes across the axis between the fingers, where the object's top would meet the gripper
+    palm = max(hi[2] for lo, hi in gripper_boxes(settings, opening_m) if lo[0] < 0.0 < hi[0])
+    return max(table_z + _TIP_CLEARANCE_M + tip, top + _PALM_CLEARANCE_M + palm)
+
+
+@contextlib.contextmanager
+def _lift_speed(cell: Cell, share: float) -> Iterator[None]:
+    """Moves inside run at `share` of the arm's speed: the same paths, time stretched (velocity x share,
+    acceleration x share^2, jerk x share^3)."""
+    if share >= 1.0:
+        yield
+        return
+    limits = cell.limits
+    cell.limits = replace(
+        limits,
+        max_joint_vel=limits.max_joint_vel * share,
+        max_joint_acc=limits.max_joint_acc * share**2,
+        max_joint_jerk=limits.max_joint_jerk * share**3,
+    )
+    try:
+        yield
+    finally:
+        cell.limits = limits
 
 
 @functools.lru_cache(maxsize=4)
@@ -339,12 +486,54 @@ def _at_pose(cell: Cell, T: np.ndarray, tol_m: float = 1e-3, tol_rad: float = 1e
     return float(np.linalg.norm(M[:3, 3] - T[:3, 3])) <= tol_m and turn <= tol_rad
 
 
-def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: list[_Footprint]) -> None:
+def _grasp_for(cell: Cell, est: ObjectEstimate, slipped: list[tuple[GraspChoice, float]]) -> GraspChoice:
+    """`choose_grasp` for `est`, knowing which of the object's grasps slipped before, with this gripper's
+    deepest grasp and most force for a grasp tried again."""
+    settings = cell.settings
+    max_opening = settings.gripper.max_opening_m
+    if not slipped:
+        return choose_grasp(est, max_opening)
+    z_grasp, w_grip = float(est.grasp[2]), float(est.grasp[6])
+    lower = z_grasp - _lowest_tcp(settings, est, z_grasp, min(w_grip, max_opening))
+    own = settings.task.robocup.grip_force_n.get(est.cls)  # a class's own force is its most
+    return choose_grasp(
+        est,
+        max_opening,
+        slipped=tuple(g for g, _ in slipped),
+        lower_max_m=lower,
+        force_max_n=own if own is not None else _GRIPPER_MAX_FORCE_N,
+    )
+
+
+def _pick_and_place(
+    cell: Cell,
+    est: ObjectEstimate,
+    bin_: BinGeometry,
+    placed: list[_Footprint],
+    grasp: GraspChoice | None = None,
+    avoid_yaws: tuple[float, ...] = (),
+) -> None:
+    """Pick `est` with `grasp` (default: `choose_grasp`'s) and place it in `bin_`; StageFailed (GraspSlipped
+    when it slipped out of a grasp that held) when a stage fails. `avoid_yaws`: base-frame yaws whose grasps
+    slipped, taken last where the object's symmetry offers another."""
     task = cell.settings.task.robocup
     max_opening = cell.settings.gripper.max_opening_m
+    if grasp is None:
+        grasp = choose_grasp(est, max_opening)
     x, y, z_grasp, yaw, _, _, w_grip = (float(v) for v in est.grasp)
-    yaw = feasible_cube_yaw(est, yaw, max_opening)
-    yaw = _clear_grasp_yaw(cell, est, (x, y, z_grasp), yaw)
+    yaw = yaw + grasp.yaw_offset_rad
+    z_grasp -= grasp.lower_m
+    yaw = _clear_grasp_yaw(cell, est, (x, y, z_grasp), yaw, avoid=avoid_yaws)
+    if grasp.lower_m > 0 or grasp.force_n is not None or grasp.lift_speed < 1.0:
+        log.info(
+            "robocup: %s gripped again across its %s side (%.0f mm), %.0f mm deeper, at %s, lifted at %.0f %%",
+            est.label,
+            grasp.side,
+            1e3 * grasp.width_m,
+            1e3 * grasp.lower_m,
+            "the usual force" if grasp.force_n is None else f"{grasp.force_n:.0f} N",
+            100 * grasp.lift_speed,
+        )
     # (1) base-first alignment
     cell.move_joints("align", _aligned(cell.world.joint_positions(), x, y))
     # (2) pre-grasp hover, gripper opened to the lookup width
@@ -354,17 +543,26 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     # (3) descent
     cell.move_pose("descent", top_down((x, y, z_grasp), yaw))
     # (4) close and settle: the finger position says whether the object is between the fingers
-    w = grip_width(est, max_opening)
-    grasp = cell.close_gripper(
-        (w, w), force_n=task.grip_force_n.get(est.cls), speed_m_s=task.grip_speed_m_s.get(est.cls)
-    )
-    if not grasp.holding:
-        raise StageFailed("grasp", f"{grasp.reason} ({est.label}, {est.orientation})")
+    w = grasp.width_m
+    opened = cell.read_gripper(wait_s=0.0).opening_m
+    force = grasp.force_n if grasp.force_n is not None else task.grip_force_n.get(est.cls)
+    check = cell.close_gripper((w, w), force_n=force, speed_m_s=task.grip_speed_m_s.get(est.cls))
+    if not check.holding:
+        raise StageFailed("grasp", f"{check.reason} ({est.label}, {est.orientation})")
+    if grasp.tight and check.opening_m > (opened + w) / 2.0:
+        # a side in the stroke's last millimetres: fingers that closed less than half the way to its faces
+        # (or were pushed wider) stand on its top edge or hold it tilted across its edges; it would slip out
+        raise StageFailed(
+            "grasp",
+            f"the fingers stopped at {1e3 * check.opening_m:.1f} mm from {1e3 * opened:.1f} mm, not on the "
+            f"{1e3 * w:.0f} mm faces: a finger came down on its top ({est.label}, {est.orientation})",
+        )
     # (5) ascent
-    cell.move_pose("ascent", hover)
+    with _lift_speed(cell, grasp.lift_speed):
+        cell.move_pose("ascent", hover)
     held = cell.check_holding()
     if not held.holding:
-        raise StageFailed("ascent", f"the object slipped out of the gripper: {held.reason}")
+        raise GraspSlipped("ascent", f"the object slipped out of the gripper: {held.reason}", grasp=grasp, yaw=yaw)
     ext = np.array(OBJECT_TEMPLATES[est.cls].extents(est.orientation == "horizontal"))
     short, long_ = sorted((float(ext[0]), float(ext[1])))
     # the fingers close along the tcp's x axis, across the object's short side
@@ -372,7 +570,7 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     # what goes below the rims at the release: the object and the parts of the opened gripper that reach
     # that low, as half extents along the tcp's x (the closing direction) and y. The fingers open a little
     # wider than the object (not the sensed opening: pads can sink into a light object), not fully.
-    release_w = min(max(grasp.opening_m, w) + _RELEASE_OPEN_M, max_opening)
+    release_w = min(max(check.opening_m, w) + _RELEASE_OPEN_M, max_opening)
     rim_z = bin_.world(bin_.inner_hi)[2]
     floor_z = bin_.world(bin_.inner_lo)[2]
     tcp_z = floor_z + _RELEASE_GAP_M + z_grasp
@@ -381,6 +579,7 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     for lo, hi in gripper_boxes(cell.settings, release_w):
         if tcp_z - hi[2] < rim_z + _WALL_MARGIN_M:
             reach_half = np.maximum(reach_half, np.maximum(np.abs(lo[:2]), np.abs(hi[:2])))
+    yaw_grasp = yaw
     spot, yaw, footprint = _release_spot(bin_, placed, obj_half, reach_half, yaw)
     xy = bin_.world(np.array([spot[0], spot[1], 0.0]))[:2]
     # (6) transfer above the release point, the object's bottom `place_clearance_m` above the rims
@@ -388,8 +587,12 @@ def _pick_and_place(cell: Cell, est: ObjectEstimate, bin_: BinGeometry, placed: 
     cell.move_pose("transfer", above)
     held = cell.check_holding()
     if not held.holding:
-        raise StageFailed(  # physics during the transfer's motion: its planner's
-            "transfer", f"the object was dropped while carrying it: {held.reason}", planner=cell.block("transfer").name
+        raise GraspSlipped(  # physics during the transfer's motion: its planner's
+            "transfer",
+            f"the object was dropped while carrying it: {held.reason}",
+            grasp=grasp,
+            yaw=yaw_grasp,
+            planner=cell.block("transfer").name,
         )
     # a transfer asks for a position within `transfer_tolerance_m`, orientation free: a planner that stops
     # there (nmpc) leaves the object up to 3 cm off and turned. Lowering it straight from there would cut
@@ -486,10 +689,14 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             tgt.done, tgt.error, tgt.failure = True, f"bin: no bin named {bin_name!r} among the fixtures", "error"
             continue
         try:
-            _pick_and_place(cell, est, bins[bin_name], placed_in.setdefault(bin_name, []))
+            grasp = _grasp_for(cell, est, tgt.slipped)
+            avoid = tuple(yaw for _, yaw in tgt.slipped)
+            _pick_and_place(cell, est, bins[bin_name], placed_in.setdefault(bin_name, []), grasp, avoid)
             tgt.done = True
             clear_failure(tgt)
         except StageFailed as e:
+            if isinstance(e, GraspSlipped):  # the next attempt grips it otherwise (`choose_grasp`)
+                tgt.slipped.append((e.grasp, e.yaw))
             note_failure(tgt, e, tgt.attempts)
             log.info("robocup: %s attempt %d failed: %s", est.label, tgt.attempts, e)
             _clear_seen(cell)  # the failure may have moved them: the next capture says where they are
