@@ -133,7 +133,8 @@ class CrocParams(RecedingParams):
         0.03,
         gt=0,
         le=1.0,
-        description="a pair of the arm's own spheres gets a row at a knot only within this distance there",
+        description="a pair of the arm's own spheres gets a row at a knot only within this distance there (the"
+        " loop's check judges every pair)",
     )
 
     @model_validator(mode="after")

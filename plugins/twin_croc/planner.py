@@ -19,6 +19,10 @@ Modes:
   swung the gripper into the forearm; the loop's FCL check stopped them, the goal was lost. The rows are
   there only while a pair of the arm's spheres comes near (`self_screen_m`), so most solves are the seeds'
   formulation exactly.
+  A pair is kept twice the box margin apart (each sphere covers its link only to within one margin), and the
+  loop's check of a plan (`_violation`) judges every pair between the knots too: the rows are a few slots per
+  knot chosen on the plan a round starts from, and a warm solve is one iteration (warehouse seeds 105-111
+  folded the gripper base into the forearm until both held).
 
 Why these choices:
 * One problem per count of held-object spheres, built on first use (without: when the planner is
@@ -52,10 +56,10 @@ import numpy as np
 from twin_croc.ocp import HorizonProblem
 from twin_croc.params import CrocParams
 from twin_croc.rows import Pairs, close_pairs, sphere_bounds
-from twin_croc.selfrows import SelfRows, self_pairs, self_rows
+from twin_croc.selfrows import SelfRows, pair_gaps, self_pairs, self_rows, self_violation
 from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.spheres import Box, robot_spheres, sphere_positions, with_object
+from twin_nmpc.spheres import CHECK_TOL_M, Box, robot_spheres, sphere_positions, subdivide, with_object
 
 if TYPE_CHECKING:
     from twin.plugin import MotionRequest, PlanningScene, PluginContext
@@ -150,8 +154,33 @@ class CrocPlanner(RecedingHorizonMPC):
             pairs,
             slots=P.self_slots,
             within=P.self_screen_m,
-            extra=P.box_margin_m + P.row_tightening_m,
+            extra=self._self_bound() + P.row_tightening_m,
         )
+
+    def _self_bound(self) -> float:
+        """How far apart two of the arm's own spheres must stay, m: each covers its link only to within the box
+        margin (`twin_croc.params`), so twice that (one let the gripper base into the forearm)."""
+        return 2 * self.params.box_margin_m
+
+    def _self_set(self, sph: np.ndarray) -> np.ndarray:
+        """The spheres kept apart pairwise (the self set, then the held object's) for the loop's spheres `sph`
+        (the robot's, then the held object's)."""
+        return np.vstack([self._self_sph, sph[self._robot_sph.shape[0] :]])
+
+    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
+        """The loop's check of the hard constraints (`RecedingHorizonMPC._violation`) and of the self rows: every
+        pair of the self set, at the knots and between them (`constraint_substeps` points per step, joint-linear),
+        stays `_self_bound` apart or no closer than it starts (`twin_croc.selfrows.self_violation`)."""
+        why = super()._violation(knots, sph, boxes)
+        if why is not None or not self.params.self_slots or knots.shape[0] < 2:
+            return why
+        own = self._self_set(sph)
+        pairs = self._self_pairs.get(own.shape[0] - self._self_sph.shape[0])
+        if pairs is None:
+            pairs = self._self_pairs[own.shape[0] - self._self_sph.shape[0]] = self_pairs(own)
+        qs = np.vstack([knots[:1], subdivide(knots, self.params.constraint_substeps)])
+        gaps = pair_gaps(sphere_positions(self.kin, qs, own), own[:, 4], pairs)
+        return self_violation(gaps, bound=self._self_bound(), tol=CHECK_TOL_M)
 
     def _refuses_sphere_overlap(self) -> bool:
         """whole_arm: no. Its spheres cover the links only with the box margin, so one can overlap a box the link

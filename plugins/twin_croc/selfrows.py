@@ -9,10 +9,18 @@ the tool) apart pairwise, for pairs on links that are not neighbours (neighbours
 
 The distance of two points is not a row crocoddyl has: it is a Python residual, ~35 us per knot and row per
 SQP iteration, so a knot gets at most `slots` rows, for its nearest pairs, and only pairs that come within
-`within` on the plan a round starts from get one (a horizon with no pair near carries no self rows at all: the
-planner then solves a problem without them). A pair must stay `extra` beyond touching (the planner: the box
-margin and the row tightening; the spheres cover their links with the margin, so a pair just touching left the
-gripper 2 mm into the upper arm in a test); a pair that starts closer may not come closer than it started.
+`within` of touching on the plan a round starts from get one (a horizon with no pair near carries no self
+rows at all: the planner then solves a problem without them). A pair must stay `extra` beyond touching: each
+sphere covers its link only to within the box margin (`twin_croc.params`), so two links are kept apart by
+twice the margin, plus the row tightening (one margin let the gripper base 0.5 mm into the forearm with their
+spheres 12 mm apart: warehouse seed 105); a pair that starts closer may not come closer than it started.
+
+The rows are a few slots per knot, chosen on the plan a round starts from, and a warm solve is one SQP
+iteration: a plan can still bring a pair without a row together, or one with a row closer than its bound
+(warehouse seed 108 under the stress faults: a cold plan, with no pair near on its guess, folded the gripper
+to 7 mm of the forearm, and the next warm iteration 6 mm into it). So `self_violation` judges every pair of a
+plan, between its knots too, as the loop judges the sphere rows against the boxes: a plan that fails is not
+executed.
 """
 
 from __future__ import annotations
@@ -25,7 +33,7 @@ from numba import njit
 
 from twin_nmpc.model import TCP_FRAME
 
-__all__ = ["SelfRows", "link_groups", "self_pairs", "self_rows"]
+__all__ = ["SelfRows", "link_groups", "pair_gaps", "self_pairs", "self_rows", "self_violation"]
 
 _TOOL_GROUP = 6  # the tool's spheres (wrist 3, gripper, fingers, held object) after DH frames 1..5
 _SHORT_M = 1e-3  # a start nearer its bound than this is not relaxed (the QP holds bounds to ~its tolerance)
@@ -73,6 +81,27 @@ def _pair_gaps(centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray, out: n
             out[k, p] = math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j]
 
 
+def pair_gaps(centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """(m, P) how far apart the spheres (centres (m, n, 3), radii (n,)) of each pair (P, 2) are (< 0: overlapping)."""
+    gap = np.empty((centres.shape[0], pairs.shape[0]))
+    _pair_gaps(np.ascontiguousarray(centres), np.ascontiguousarray(radii, dtype=float), pairs, gap)
+    return gap
+
+
+def self_violation(gaps: np.ndarray, *, bound: float, tol: float) -> str | None:
+    """Why a path's pair gaps (m, P) (row 0: the measured state, then points along the path) break the self rows'
+    rule, or None: every pair stays `bound` m apart (the covers' shortfall: the rows hold it plus their
+    tightening), or, when it starts closer, no closer than it started; `tol` m below is accepted (the QP's slack)."""
+    if gaps.shape[1] == 0 or gaps.shape[0] < 2:
+        return None
+    need = np.minimum(bound, gaps[0]) - tol
+    short = need[None] - gaps[1:]
+    worst = float(short.max())
+    if worst <= 0.0:
+        return None
+    return f"two of the arm's own spheres come {worst:.4f} m closer than their bound of {bound:.3f} m apart"
+
+
 def self_rows(
     centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray, *, slots: int, within: float, extra: float
 ) -> SelfRows | None:
@@ -81,8 +110,7 @@ def self_rows(
     `extra` m beyond touching (or, if the start is closer, as close as it started); None if no knot has one."""
     if slots <= 0 or pairs.shape[0] == 0:
         return None
-    gap = np.empty((centres.shape[0], pairs.shape[0]))
-    _pair_gaps(np.ascontiguousarray(centres), np.ascontiguousarray(radii, dtype=float), pairs, gap)
+    gap = pair_gaps(centres, radii, pairs)
     near = gap < within
     near[0] = False
     if not near.any():
