@@ -16,9 +16,16 @@ What the loop does the same for every solver:
   `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
   knots, as far as the arm needs to stop, coarsely). When either collides the arm brakes, as a real
   controller's protective stop does: a shortest stop within the step, acceleration and jerk bounds
-  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair; with no
-  free stop, COLLISION at once. A start in collision is refused with INVALID_START naming the pair. Every
-  other end while the arm moves (no plan left, `max_solves` solves) brakes the same way before its status.
+  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair. A start
+  in collision is refused with INVALID_START naming the pair. Every other end while the arm moves (no plan
+  left, `max_solves` solves) brakes the same way before its status.
+* A way to stop is planned clear before it is needed: a moving segment is commanded only when a stop from
+  its end (the shortest stop, or the last plan up to where it may stop) is free in the FCL scene, and that
+  stop is kept (`_safe_stop`). So every state the loop reaches has a checked way to rest: a brake, or the
+  stop at the goal, that would collide from there takes the kept stop instead (from a measured state off the
+  commanded one, its steps from there, checked again). Without the rule a RoboCup position query reached its
+  goal tolerance moving towards the table, and both its stops collided (left_finger with table): "no free
+  way to brake".
 * A segment's samples are the knots, dt apart, and their derivatives are the knots' backward differences:
   qd_i = (q_i - q_{i-1}) / dt, qdd_i = (qd_i - qd_{i-1}) / dt, the first sample's from the steps that
   brought the arm to the measured state (zero at rest). So a segment starts with the state the previous
@@ -194,6 +201,7 @@ class RecedingHorizonMPC:
         self._guess_kind = ""  # what the last cold solve started from (twin_nmpc.guess)
         self._done: MotionResult | None = None
         self._pending: MotionResult | None = None
+        self._safe_stop: np.ndarray | None = None  # a checked-free stop (knots) from the last segment's end
         self._goal_candidates = np.zeros((0, 6))  # goal configurations, for a joint-space initial guess
         self._track = np.zeros(3)  # the point that goes to the goal, TCP frame
         self._target = np.zeros(3)  # the goal position, base frame
@@ -384,7 +392,15 @@ class RecedingHorizonMPC:
         elif hit is not None:
             kind = "braking segment" if braking else ("fallback segment" if info.get("fallback") else "segment")
             return self._end(Status.COLLISION, f"the next {kind} would collide ({hit})", knots[0], hit=True)
+        stop: np.ndarray | None = None
+        if not braking:
+            stop, blocked = self._stop_after(knots)
+            if stop is None:
+                kind = "fallback segment" if info.get("fallback") else "segment"
+                why = f"the next {kind} would leave no free way to stop at its end ({blocked})"
+                return self._end(Status.COLLISION, why, knots[0], hit=True)
         self._commit(knots)
+        self._safe_stop = stop
         if braking:
             self._braking_steps += knots.shape[0] - 1
         return Segment(traj, solve_time_s, dict(info, position_error_m=err), fallback=bool(info.get("fallback", False)))
@@ -398,28 +414,69 @@ class RecedingHorizonMPC:
         self._ws_offset += m
 
     def _end(self, status: Status, reason: str, q: np.ndarray, *, hit: bool = False) -> Segment | MotionResult:
-        """End the goal with `status`: a moving arm first brakes to rest (a braking segment, if its stop is
-        free; the status follows at the next step), else the status now. `hit`: the reason is a collision
-        ahead (the braking segment is what avoids it)."""
+        """End the goal with `status`: a moving arm first brakes to rest (a braking segment: the shortest stop, or
+        else the stop kept free from the last segment's end; the status follows at the next step), else the
+        status now. `hit`: the reason is a collision ahead (the braking segment is what avoids it)."""
         if self._moving():
-            knots = self._brake_knots(q)
+            knots, pair = self._free_stop(q, [self._brake_knots(q), *self._kept_stop(q)])
             if knots is not None:
                 traj = self._segment(knots)
-                pair = self._collision(traj)
-                if pair is None:
-                    self._commit(knots)
-                    self._braking_steps += knots.shape[0] - 1
-                    what = "braked to a stop" if hit else "braked to a stop first"
-                    self._pending = self._final(status, f"{reason}; {what}", knots[-1])
-                    info = {"solve": self._solves, "braking": True, "fallback": False, "stopping": status.value}
-                    err = float(np.linalg.norm(self._tracked(q) - self._target))
-                    return Segment(traj, 0.0, dict(info, position_error_m=err))
-                reason += f"; no free way to brake ({pair}): stopped at once"
-            else:
-                reason += "; no stop within the limits: stopped at once"
+                self._commit(knots)
+                self._safe_stop = None
+                self._braking_steps += knots.shape[0] - 1
+                what = "braked to a stop" if hit else "braked to a stop first"
+                self._pending = self._final(status, f"{reason}; {what}", knots[-1])
+                info = {"solve": self._solves, "braking": True, "fallback": False, "stopping": status.value}
+                err = float(np.linalg.norm(self._tracked(q) - self._target))
+                return Segment(traj, 0.0, dict(info, position_error_m=err))
+            reason += f"; no free way to brake ({pair}): stopped at once"
             log.warning("%s: %s", self.name, reason)
         self._done = self._final(status, reason, q)
         return self._done
+
+    # ---- ways to stop, checked before they are needed ------------------------------------------------
+    def _free_stop(
+        self, q: np.ndarray, stops: list[np.ndarray | None], hist: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray | None, str]:
+        """The first of `stops` (knots from `q`, None: none) that is free in the FCL scene, with the step history
+        `hist` (d2, d1) before it (default: the executed steps); else None and why not (the first pair hit)."""
+        why = "no stop within the limits"
+        for i, knots in enumerate(stops):
+            if knots is None:
+                continue
+            pair = self._collision(self._segment(knots, hist))
+            if pair is None:
+                return knots, ""
+            if i == 0 or why.startswith("no stop"):
+                why = pair
+        return None, why
+
+    def _stop_after(self, knots: np.ndarray) -> tuple[np.ndarray | None, str]:
+        """A free stop from the end of the segment `knots` (m+1, 6), with the steps it ends with: at rest there,
+        the end itself; else the shortest stop (`braking.stopping_steps`) or the last plan up to where it may
+        stop, the shorter first, whichever the FCL scene passes. None and the pair hit when neither is free."""
+        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
+        d2, d1 = hist[-2], hist[-1]
+        _, dstep, jstep = self._step_bounds()
+        end = knots[-1]
+        if can_stop_now(d2, d1, dstep, jstep):
+            return np.vstack([end[None], end[None]]), ""
+        along = None
+        i = self._plan_idx + knots.shape[0] - 1
+        if self._plan is not None and i < self._plan.shape[0] and np.array_equal(self._plan[i], end):
+            along = self._along(end, self._plan[i + 1 :], d2, d1)
+        stops = sorted((s for s in (self._brake_knots(end, (d2, d1)), along) if s is not None), key=len)
+        return self._free_stop(end, list(stops) or [None], (d2, d1))
+
+    def _kept_stop(self, q: np.ndarray) -> list[np.ndarray]:
+        """The stop kept free from the last segment's end (`_stop_after`), from the measured state `q`: as it is
+        when `q` is that end, else its steps taken from `q` (the arm tracks to within its controller's error)."""
+        stop = self._safe_stop
+        if stop is None:
+            return []
+        if np.array_equal(stop[0], q):
+            return [stop]
+        return [np.vstack([q[None], q[None] + np.cumsum(np.diff(stop, axis=0), axis=0)])]
 
     def _collision(self, traj: Trajectory) -> str | None:
         """The colliding pair of the first colliding sample of `traj` (FCL, whole scene, configured resolution)."""
@@ -517,44 +574,51 @@ class RecedingHorizonMPC:
         """The last plan's next knots up to the first one the arm may stop at (`braking.can_stop_now`), then a
         zero step, from the measured state, if they pass the constraint check; None without such a plan."""
         _, dstep, jstep = self._step_bounds()
-        d2, d1 = self._dq_prev2, self._dq_prev
-        if can_stop_now(d2, d1, dstep, jstep):
+        if can_stop_now(self._dq_prev2, self._dq_prev, dstep, jstep):
             return np.vstack([q[None], q[None]])
         if self._plan is None:
             return None
+        knots = self._along(q, self._plan[self._plan_idx + 1 :], self._dq_prev2, self._dq_prev)
+        return knots if knots is not None and self._violation(knots, sph, boxes) is None else None
+
+    def _along(self, q: np.ndarray, rest: np.ndarray, d2: np.ndarray, d1: np.ndarray) -> np.ndarray | None:
+        """From `q`, reached by the steps `d2` then `d1`, the knots `rest` (k, 6) up to the first one the arm may
+        stop at (`braking.can_stop_now`), then a zero step; None when it may stop at none of them."""
+        _, dstep, jstep = self._step_bounds()
         path = [q]
-        for nxt in self._plan[self._plan_idx + 1 :]:
+        for nxt in rest:
             d2, d1 = d1, nxt - path[-1]
             path.append(nxt)
             if can_stop_now(d2, d1, dstep, jstep):
-                knots = np.vstack([*path, path[-1]])
-                return knots if self._violation(knots, sph, boxes) is None else None
+                return np.vstack([*path, path[-1]])
         return None
 
     def _stop_at_goal(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
-        """How a moving arm within the goal tolerance comes to rest: the shorter of the stop along the last plan
-        (`_stop_along_plan`) and the shortest stop (`_brake_knots`) among those that end within the tolerance
-        and pass the constraint check, as the seed stops as soon as it is within the tolerance; when neither
-        ends there, the shortest stop anyway (the loop then solves again from rest); None without any."""
+        """How a moving arm within the goal tolerance comes to rest: of the stop along the last plan
+        (`_stop_along_plan`), the shortest stop (`_brake_knots`) and the stop kept free from the last segment's
+        end (`_kept_stop`), those free in the FCL scene (and passing the constraint check, when any does); the
+        shortest that ends within the tolerance, as the seed stops as soon as it is within it, else the shortest
+        (the loop then solves again from rest). With none free, the shortest stop or the plan's (the segment's
+        check then brakes as it can); None without any."""
         along, brake = self._stop_along_plan(q, sph, boxes), self._brake_knots(q)
-        ok = [
+        free = [
             k
-            for k in (along, brake)
-            if k is not None
-            and np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance
-            and self._violation(k, sph, boxes) is None
+            for k in (along, brake, *self._kept_stop(q))
+            if k is not None and self._collision(self._segment(k)) is None
         ]
-        if ok:
-            return min(ok, key=len)
-        if brake is not None and self._violation(brake, sph, boxes) is None:
-            return brake
-        return along
+        if not free:
+            return brake if brake is not None else along
+        checked = [k for k in free if self._violation(k, sph, boxes) is None] or free
+        there = [k for k in checked if np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance]
+        return min(there or checked, key=len)
 
-    def _brake_knots(self, q: np.ndarray) -> np.ndarray | None:
-        """The shortest stop from the measured state `q` and the last two steps (`braking.stopping_steps`),
-        ending in a zero step, within the joint limits; None when there is none."""
+    def _brake_knots(self, q: np.ndarray, hist: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+        """The shortest stop from `q` and the two steps `hist` (d2, d1) that brought the arm there (default: the
+        executed ones; `braking.stopping_steps`), ending in a zero step, within the joint limits; None when there
+        is none."""
         step, dstep, jstep = self._step_bounds()
-        steps = stopping_steps(self._dq_prev2, self._dq_prev, step, dstep, jstep)
+        d2, d1 = hist if hist is not None else (self._dq_prev2, self._dq_prev)
+        steps = stopping_steps(d2, d1, step, dstep, jstep)
         if steps is None:
             return None
         knots = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
@@ -564,13 +628,15 @@ class RecedingHorizonMPC:
             return None
         return knots
 
-    def _segment(self, knots: np.ndarray) -> Trajectory:
+    def _segment(self, knots: np.ndarray, before: tuple[np.ndarray, np.ndarray] | None = None) -> Trajectory:
         """The knots (m+1, 6) as a trajectory at dt, with the knots' backward differences as its derivatives:
-        qd_i = (q_i - q_{i-1}) / dt and qdd_i = (qd_i - qd_{i-1}) / dt, for the first sample from the last two
-        executed steps (the state the arm was brought to; zero at rest). Declared and measured agree exactly,
-        and a segment starts with the velocity and acceleration the previous one ended with."""
+        qd_i = (q_i - q_{i-1}) / dt and qdd_i = (qd_i - qd_{i-1}) / dt, for the first sample from the two steps
+        `before` (d2, d1) that brought the arm to knots[0] (default: the last two executed; zero at rest).
+        Declared and measured agree exactly, and a segment starts with the velocity and acceleration the
+        previous one ended with."""
         dt = self.params.dt
-        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
+        d2, d1 = before if before is not None else (self._dq_prev2, self._dq_prev)
+        hist = np.vstack([d2[None], d1[None], np.diff(knots, axis=0)])
         qd = hist[1:] / dt
         qdd = np.diff(hist, axis=0) / dt**2
         t = dt * np.arange(knots.shape[0])
