@@ -22,7 +22,14 @@ from twin.errors import ConfigError, PluginCrashed
 from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
 from twin.limit_check import RATIO_METRICS
-from twin.planning import CheckedPlanner, describe_goal_kinds, limits_from_settings, make_context, make_planner
+from twin.planning import (
+    CheckedPlanner,
+    colliding_pair,
+    describe_goal_kinds,
+    limits_from_settings,
+    make_context,
+    make_planner,
+)
 from twin.types import CalibrationOutcome, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 from twin.urdf_model import primitive_half_extents
 
@@ -34,6 +41,7 @@ __all__ = [
     "GripStatus",
     "GripperReading",
     "StageFailed",
+    "WayDown",
     "clear_failure",
     "note_failure",
     "stage_block",
@@ -66,6 +74,10 @@ CHOOSE_CLEARANCE_M = 0.01
 # over the top: the tcp's path across passes this far above the highest thing in the planning scene
 OVER_MARGIN_M = 0.05
 _TURN_MARGIN_RAD = 0.05  # a posture's joints are turned only to angles this far inside their limits
+# a straight way down is followed through IK waypoints this far apart (a movel planner's own first spacing);
+# a joint turning more than `_LINE_MAX_STEP_RAD` between two of them is a branch change or a singularity
+_LINE_STEP_M = 0.02
+_LINE_MAX_STEP_RAD = 0.3
 # refusals that say the direct way runs into something (another way may not)
 _PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
 
@@ -204,6 +216,22 @@ class Sighting:
     T_base_camera: np.ndarray
     objects: Sequence[tuple[str, np.ndarray]]
     boxes: Sequence[tuple[str, np.ndarray, np.ndarray]] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class WayDown:
+    """A straight way down to a top-down tcp pose, chosen before anything moves (`Cell.choose_way_down`):
+    the yaw; the tcp at the hover and at the bottom, (4, 4) each; the arm at the hover `q_hover` (6,) in the
+    IK branch whose way down is clear for the whole arm; the joint path of that way down `path` (k, 6),
+    hover first, as the movel stage follows it; and whether it keeps `CHOOSE_CLEARANCE_M` from the
+    planning scene all along (`roomy`) or is merely clear."""
+
+    yaw: float
+    hover: np.ndarray
+    target: np.ndarray
+    q_hover: np.ndarray
+    path: np.ndarray
+    roomy: bool
 
 
 class RunTrace(Protocol):
@@ -414,6 +442,148 @@ class Cell:
             1e3 * best_c,
         )
         return best, best_c
+
+    def line_paths(self, starts: Sequence[np.ndarray], T0: np.ndarray, T1: np.ndarray) -> list[np.ndarray | None]:
+        """The joint path (k, 6) that a straight tcp move from `T0` to `T1` (4, 4, the same orientation: a way
+        straight down or up) follows from each of `starts` (the arm at `T0`, (6,) each): IK waypoints
+        `_LINE_STEP_M` apart, each the solution nearest the one before (at its nearest turn), as the movel
+        stages' planners keep the start's IK branch. None for a start from which the line leaves reach or
+        the joint limits, or a joint jumps (a branch change, a singularity): ways those planners refuse.
+        One IK per waypoint serves every start."""
+        T0, T1 = np.asarray(T0, dtype=float), np.asarray(T1, dtype=float)
+        if np.abs(T0[:3, :3] - T1[:3, :3]).max() > 1e-6:
+            raise ValueError("line_paths follows a straight move of one orientation; T0 and T1 turn")
+        n = max(1, math.ceil(float(np.linalg.norm(T1[:3, 3] - T0[:3, 3])) / _LINE_STEP_M))
+        lo, hi = self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1]
+        paths: list[list[np.ndarray] | None] = [[np.asarray(q, dtype=float)] for q in starts]
+        for i in range(1, n + 1):
+            T = T0.copy()
+            T[:3, 3] = T0[:3, 3] + (i / n) * (T1[:3, 3] - T0[:3, 3])
+            sols = self.kin.ik(T, all_wraps=False)
+            for k, path in enumerate(paths):
+                if path is None:
+                    continue
+                if len(sols) == 0:
+                    paths[k] = None
+                    continue
+                prev = path[-1]
+                near = sols + 2.0 * math.pi * np.round((prev - sols) / (2.0 * math.pi))
+                step = np.abs(near - prev).max(axis=1)
+                j = int(np.argmin(step))
+                q = near[j]
+                if step[j] > _LINE_MAX_STEP_RAD or np.any(q < lo) or np.any(q > hi):
+                    paths[k] = None
+                else:
+                    path.append(q)
+        return [None if p is None else np.array(p) for p in paths]
+
+    def choose_way_down(
+        self,
+        target: np.ndarray | tuple[float, float, float],
+        hover: np.ndarray | tuple[float, float, float],
+        yaws: Sequence[float],
+        *,
+        stage: str = "descent",
+    ) -> WayDown:
+        """The way down to a top-down tcp at `target` from the hover above it at `hover` (xyz each, base frame),
+        chosen before anything moves by checking the whole robot (every link, and what it holds) in the
+        planning scene along the whole motion: for each of `yaws` (in order of preference) and each IK branch
+        of the hover (nearest the measured joints first), the joint path the movel stage follows down
+        (`line_paths`) and the straight joint move the hover stage makes from here, every
+        `collision.check_resolution_rad`. The first way whose move there and way down keep
+        `CHOOSE_CLEARANCE_M` from the scene; else whose way down does; else the same merely clear. The way
+        down chosen is planned by the stage's own planner (without moving) before it is returned; a refused
+        one passes to the next.
+
+        The gripper alone may be clear where the arm is not: a cube far behind a wall is reached with the
+        upper arm low over it, in some branches into it (`Cell.choose_top_down_yaw` checks the gripper).
+        None clear: StageFailed (planned, not moved) naming what runs into what."""
+        q0 = self.world.joint_positions()
+        res = float(self.settings.collision.check_resolution_rad)
+        planner = self.planner(STAGE_GROUPS[stage])
+        tried: dict[float, list[tuple[np.ndarray, np.ndarray]]] = {}
+
+        def ways(yaw: float) -> list[tuple[np.ndarray, np.ndarray]]:
+            """(q at the hover, path down) of every branch whose way down is within reach, nearest first."""
+            if yaw not in tried:
+                Th, Tt = top_down(hover, yaw), top_down(target, yaw)
+                sols = [q for q in self._branches(Th) if self.kin.within_limits(q)]
+                paths = self.line_paths(sols, Th, Tt)
+                tried[yaw] = [(q, p) for q, p in zip(sols, paths, strict=True) if p is not None]
+            return tried[yaw]
+
+        refused: dict[int, str] = {}  # the planner's refusals, by id of the way's q_hover: not planned twice
+        padded = self.scene.padded(CHOOSE_CLEARANCE_M)
+        for scene, there in ((padded, True), (padded, False), (self.scene, True), (self.scene, False)):
+            for yaw in yaws:
+                for q_hover, path in ways(yaw):
+                    if id(q_hover) in refused:
+                        continue
+                    if there and not scene.check_path(np.array([q0, q_hover]), resolution_rad=res).free:
+                        continue
+                    if not scene.check_path(path, resolution_rad=res).free:
+                        continue
+                    way = WayDown(
+                        float(yaw), top_down(hover, yaw), top_down(target, yaw), q_hover, path, scene is padded
+                    )
+                    goal = PoseGoal(Pose.from_matrix(way.target))
+                    plan = planner.plan(MotionRequest(q_hover, goal, self.limits, seed=self.world.seed), self.scene)
+                    if plan.status is Status.SUCCESS:
+                        return way
+                    refused[id(q_hover)] = f"{plan.status.value}: {plan.reason}"
+        raise self._no_way_down(stage, target, yaws, tried, list(refused.values()))
+
+    def _no_way_down(
+        self,
+        stage: str,
+        target: np.ndarray | tuple[float, float, float],
+        yaws: Sequence[float],
+        tried: dict[float, list[tuple[np.ndarray, np.ndarray]]],
+        refused: list[str],
+    ) -> StageFailed:
+        """Why `choose_way_down` found no way: what runs into what, counted over the ways it tried."""
+        pairs: dict[str, int] = {}
+        for ways in tried.values():
+            for _, path in ways:
+                hit = self.scene.check_path(path, resolution_rad=float(self.settings.collision.check_resolution_rad))
+                if hit.q is not None:
+                    pair = colliding_pair(self.scene, hit.q)
+                    pairs[pair] = pairs.get(pair, 0) + 1
+        n = sum(len(w) for w in tried.values())
+        what = ", ".join(f"{p} in {k}" for p, k in sorted(pairs.items(), key=lambda kv: -kv[1]))
+        if refused:
+            what = ", ".join(filter(None, [what, f"{len(refused)} refused by the planner ({refused[0]})"]))
+        xyz = ", ".join(f"{float(v):.3f}" for v in target)
+        if n == 0:  # no branch of any yaw follows the line: out of reach, past a joint limit or a singularity
+            reason = f"no way down to ({xyz}) is within reach: in no IK branch of {len(yaws)} yaws"
+            failure = "ik_failure"
+        else:
+            reason = (
+                f"no way down to ({xyz}) is clear for the whole arm: {n} ways tried ({len(yaws)} yaws x their "
+                f"IK branches within reach)" + (f"; {what}" if what else "")
+            )
+            failure = "collision"
+        log.info("%s: %s", stage, reason)
+        return StageFailed(stage, reason, failure=failure, planner=self.block(STAGE_GROUPS[stage]).name, moved=False)
+
+    def reach_hover(self, way: WayDown, *, stage: str = "hover") -> MotionResult:
+        """Move to `way`'s hover in the IK branch it was chosen in (a joint goal: its way down was checked
+        in that branch, not in the one a pose goal may land in), by `move_joints_over`; when that finds no
+        clear way there (planned, not moved), over the top in the same branch: straight up to
+        `safe_height`, across to the arm above the hover (the IK solution nearest `q_hover`), straight down."""
+        done = _or_refusal(lambda: self.move_joints_over(stage, way.q_hover))
+        if isinstance(done, MotionResult):
+            return done
+        above = np.array(way.hover, dtype=float)
+        above[2, 3] = max(above[2, 3], self.safe_height())
+        sols = [self.nearest_turn(q) for q in self.kin.ik(above, all_wraps=False)]
+        if above[2, 3] <= way.hover[2, 3] or not sols:
+            raise done
+        q_above = min(sols, key=lambda q: float(np.abs(q - way.q_hover).max()))
+        log.info("%s: no clear way to the chosen hover (%s); over the top", stage, done.reason)
+        self._rise_to_safe_height()
+        self.move_joints_over(stage, q_above)
+        return self.move_pose("descent", way.hover)
 
     def safe_height(self) -> float:
         """A tcp height from which the gripper, and what it holds, passes over everything in the planning

@@ -66,13 +66,13 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
     c = cube.centroid
     cell.open_gripper()
     hover = (float(c[0]), float(c[1]), float(c[2] + task.hover_m))
-    # the seed grips at one yaw; beside the obstacle that yaw can put a finger into it: the opened gripper
-    # descends at the yaw nearest the seed's that keeps it clear of the planning scene on the way down
-    mid = (float(c[0]), float(c[1]), float(c[2] + task.hover_m / 2))
-    yaw, _ = cell.choose_top_down_yaw([c, mid, hover], _yaws_from(_GRASP_YAW))
-    cell.move_pose_over("hover", top_down(hover, yaw))
-    cell.move_pose("descent", top_down(c, yaw))
-    grasp, yaw = _square_grasp(cell, c, yaw)
+    # the seed grips at one yaw; beside the obstacle that yaw can put a finger into it, and far behind it the
+    # upper arm reaches low over it, in some IK branches into it: the opened gripper descends at the yaw
+    # nearest the seed's, in the branch, whose way down is clear for the whole arm (chosen before moving)
+    way = cell.choose_way_down(c, hover, _yaws_from(_GRASP_YAW))
+    cell.reach_hover(way)
+    cell.move_pose("descent", way.target)
+    grasp, yaw = _square_grasp(cell, c, way.yaw)
     if not grasp.holding:
         raise StageFailed("grasp", grasp.reason)
     cell.move_pose("ascent", top_down(hover, yaw))
