@@ -34,6 +34,7 @@ from twin.types import BoxBounds
 __all__ = ["LabeledCube", "WarehouseResult", "perceive_warehouse"]
 
 log = logging.getLogger("twin")
+_SLACK_M = 0.01  # a cluster this far past the obstacle's box (a noisy face of it) still lies within it
 
 
 @dataclass(frozen=True)
@@ -53,7 +54,9 @@ class WarehouseResult:
 
     `obstacle`: smallest AABB around the obstacle cluster (None when no obstacle was seen);
     `obstacle_extended`: the same box grown by `box_extension_y_m` in +y and -y; `cubes`: every other
-    cluster; `rejected`: clusters that were neither (too small, too large, wrong colour);
+    cluster; `rejected`: clusters that were neither (too small, too large, wrong colour); `unknown`: the
+    AABB (down to the table) of each rejected cluster of a cube's points or more that is too large for a
+    cube: something stands there that no one named, which the planner must go around all the same;
     `timings_s`: seconds per stage.
     """
 
@@ -64,6 +67,7 @@ class WarehouseResult:
     rejected: int
     table_plane_base: Plane
     timings_s: dict[str, float] = field(default_factory=dict)
+    unknown: tuple[BoxBounds, ...] = ()
 
 
 def _table_plane(pts: np.ndarray, params: WarehousePerceptionSettings, seed: int, o3d: Any) -> tuple[Plane, np.ndarray]:
@@ -124,6 +128,7 @@ def perceive_warehouse(
         obstacle: BoxBounds | None = None
         obstacle_n = 0
         cubes: list[LabeledCube] = []
+        unknown: list[BoxBounds] = []
         rejected = 0
         table_z = _table_height(plane_base)
         T_camera_base = np.linalg.inv(T_base_camera)
@@ -142,6 +147,10 @@ def perceive_warehouse(
                 log.debug(
                     "warehouse: rejected a %s cluster of %d points, extent %s", label, cl.n_points, np.round(extent, 3)
                 )
+                if cl.n_points >= params.cube_min_points:  # not noise: something too large for a cube stands there
+                    lo, hi = cl.points.min(axis=0), cl.points.max(axis=0)
+                    lo[2] = min(lo[2], table_z)
+                    unknown.append(BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]))
                 continue
             centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
             cubes.append(
@@ -151,8 +160,17 @@ def perceive_warehouse(
             )
     timings["label"] = label_stage.seconds
     extended = obstacle.extended_y(params.box_extension_y_m) if obstacle is not None else None
+    if extended is not None:  # a face of the obstacle seen apart from the rest (shaded otherwise) is the obstacle
+        unknown = [b for b in unknown if not _within(b, extended, _SLACK_M)]
     log.debug("warehouse: %d cubes, obstacle %s (%d points), %d rejected", len(cubes), obstacle, obstacle_n, rejected)
-    return WarehouseResult(obstacle, extended, tuple(cubes), obstacle_n, rejected, plane_base, timings)
+    return WarehouseResult(
+        obstacle, extended, tuple(cubes), obstacle_n, rejected, plane_base, timings, unknown=tuple(unknown)
+    )
+
+
+def _within(inner: BoxBounds, outer: BoxBounds, slack_m: float) -> bool:
+    """Whether `inner` lies inside `outer` grown by `slack_m` on every side."""
+    return bool(np.all(inner.lo >= outer.lo - slack_m) and np.all(inner.hi <= outer.hi + slack_m))
 
 
 def _rows(idx: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -149,6 +149,7 @@ def _perceive(cell: Cell) -> WarehouseResult:
     cell.calibration = CalibrationOutcome("measured", views=views + 1, reprojection_px=calib.marker.reprojection_px)
     seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
     boxes = [] if seen.obstacle is None else [("obstacle", seen.obstacle.lo, seen.obstacle.hi)]
+    boxes += [(f"unknown_{i}", b.lo, b.hi) for i, b in enumerate(seen.unknown)]
     cell.perceived(
         capture.frame, calib.T_base_camera, [(f"{c.color_label} cube", c.centroid) for c in seen.cubes], boxes
     )
@@ -186,6 +187,8 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
             cell.scene.add_box_bounds("obstacle", b.lo, b.hi)
         else:
             log.warning("warehouse: no obstacle seen; planning without one")
+        for i, b in enumerate(seen.unknown):  # what stands on the table unexplained is planned around
+            cell.scene.add_box_bounds(f"unknown_{i}", b.lo, b.hi)
     except MarkerNotFound as e:
         global_error = f"calibration: the ArUco marker was not found: {e}"
         cell.calibration = CalibrationOutcome("failed", views=1, reason=global_error)
