@@ -9,8 +9,11 @@ goal tolerance (SUCCESS) or after `max_solves` solves (NO_SOLUTION).
 What the loop does the same for every solver:
 * A solve that fails, or whose steps do not pass an independent numpy check of the hard constraints, is
   never executed: the remaining steps of the last feasible plan are (after the same check; when the very
-  first solve of a goal fails, its checked initial guess is that plan), else the planner stops with a
-  typed failure and a reason. The solve after a failure starts cold, from a fresh guess.
+  first solve of a goal fails, its checked initial guess is that plan), else a moving arm brakes to rest on a
+  free stop and the loop solves again from there (`_recover`: from a measured state off the commanded one, a
+  controller's lag, the rows near a box can leave no plan within the bounds, while from rest there is one),
+  and an arm at rest stops with a typed failure and a reason. The solve after a failure starts cold, from a
+  fresh guess.
 * The model knows the boxes and the table height, not necessarily the cell's fixtures (bins) nor the arm's
   own links: every segment is checked against the whole FCL scene it was given (at the configured
   `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
@@ -190,6 +193,7 @@ class RecedingHorizonMPC:
         self._solves = 0
         self._fallbacks = 0
         self._braking_steps = 0
+        self._recoveries = 0  # failed solves with nothing to follow, braked to rest and solved again (`_recover`)
         self._solve_log: list[dict[str, Any]] = []
         self._plan: np.ndarray | None = None  # (N+1, 6) knots of the last feasible plan
         self._plan_idx = 0  # index of the knot the robot should be at now
@@ -267,6 +271,7 @@ class RecedingHorizonMPC:
             "nmpc_solves": self._solves,
             "nmpc_fallbacks": self._fallbacks,
             "nmpc_braking_steps": self._braking_steps,
+            "nmpc_recoveries": self._recoveries,
             "nmpc_solve_log": list(self._solve_log),
             "initial_guess": self._guess_kind,
         }
@@ -360,6 +365,10 @@ class RecedingHorizonMPC:
             knots, fallback = self._fallback_knots(q, sph, boxes, k), True
             if knots is None:
                 why = f"solve {self._solves} failed ({problem}) and no feasible plan is left to follow"
+                if self._moving() and self._solves < P.max_solves:
+                    recovered = self._recover(q, why, err, sph, boxes)
+                    if recovered is not None:
+                        return recovered
                 return self._end(Status.NO_SOLUTION, why, q)
             self._fallbacks += 1
         knots[0] = q
@@ -404,6 +413,29 @@ class RecedingHorizonMPC:
         if braking:
             self._braking_steps += knots.shape[0] - 1
         return Segment(traj, solve_time_s, dict(info, position_error_m=err), fallback=bool(info.get("fallback", False)))
+
+    def _recover(self, q: np.ndarray, why: str, err: float, sph: np.ndarray, boxes: list[Box]) -> Segment | None:
+        """A moving arm whose solve failed with no plan left to follow brakes to rest (a free stop: the shortest, or
+        the one kept from the last segment's end) and the loop solves again from there, cold; None without a free
+        stop. From a measured state off the commanded one (a controller lagging 50 ms: ~0.07 rad behind at
+        speed), with the step it was commanded, the rows near a box can leave no plan within the step and
+        acceleration bounds, and the last plan's next steps do not pass from there either; from rest they can.
+        The stop must also pass the constraint check (the proxy spheres out of the boxes), or the solve from rest
+        would refuse its start (a stop FCL passed left a proxy sphere 1 cm inside the obstacle's box: "invalid_start").
+        Counted in `nmpc_recoveries`; `max_solves` bounds how often."""
+        stops = [k for k in (self._brake_knots(q), *self._kept_stop(q)) if k is not None]
+        knots, _ = self._free_stop(q, [k for k in stops if self._violation(k, sph, boxes) is None] or [None])
+        if knots is None:
+            return None
+        log.info("%s: %s; braking to solve again from rest", self.name, why)
+        traj = self._segment(knots)
+        self._commit(knots)
+        self._safe_stop = None
+        self._plan, self._plan_idx = None, 0
+        self._braking_steps += knots.shape[0] - 1
+        self._recoveries += 1
+        info = {"solve": self._solves, "braking": True, "fallback": False, "recovering": why}
+        return Segment(traj, 0.0, dict(info, position_error_m=err))
 
     def _commit(self, knots: np.ndarray) -> None:
         """The arm is commanded along `knots`: advance the plan and the step history."""
