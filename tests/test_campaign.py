@@ -85,6 +85,18 @@ CASES = [
         "jam",
     ),
     (_obj("place: released, but it lies outside the bin", stage="place"), "other"),
+    (
+        _obj(
+            "perception: never seen on the table (the run stopped: cannot reach the capture pose: capture: "
+            "ruckig.movej: execution_stopped: unexpected contact: gripper_base with spam_0)",
+            stage="perception",
+        ),
+        "fixed_stage",
+    ),
+    (
+        _obj("perception: never seen on the table (the run stopped: run time limit reached)", stage="perception"),
+        "other",
+    ),
 ]
 
 

@@ -11,12 +11,14 @@ its configured pose loses to `calibration`; then the words and stage of the fail
 
 from __future__ import annotations
 
+import re
 import statistics
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
 from twin.compare.spec import ComparePlanner, CompareSpec, TaskScenario
+from twin.failures import failure_of_task
 from twin.faults import fault_overrides
 
 __all__ = [
@@ -36,10 +38,13 @@ LOSS_CLASSES: dict[str, str] = {
     "planner": "the compared (transfer) planner's stage found no way, a colliding one, or knocked something",
     "fixed_stage": "a fixed stage (align, hover, descent, ascent, place, home, capture) found no way or collided",
     "jam": "stuck between the opened fingers after the release",
-    "other": "anything else: the run's time or capture budget, released outside its bin, an error",
+    "other": "anything else: the run's time or capture budget ran out, released outside its bin, an error",
 }
 # the stages the compared planner plans (twin.tasks.cell.STAGE_GROUPS' `transfer` group)
 _COMPARED_STAGES = frozenset({"transfer"})
+# "never seen on the table (the run stopped: <why>)" (twin.tasks.judge), and the why of a capture move that failed
+_STOPPED = re.compile(r"\(the run stopped: (.*)\)$")
+_NO_CAPTURE = "cannot reach the capture pose: "
 # failure names (twin.failures.FAILURES) a motion's planning or execution gives
 _MOTION_FAILURES = frozenset(
     {
@@ -94,6 +99,12 @@ def classify_loss(obj: dict[str, Any], run: dict[str, Any] | None = None) -> str
     first = str(obj.get("error") or "").split("; then: ")[0]
     stage = obj.get("stage") or first.partition(":")[0]
     failure = obj.get("failure")
+    stopped = _STOPPED.search(first)
+    if stopped:  # never seen because the run ended early: the loss is what ended it
+        why = stopped.group(1).removeprefix(_NO_CAPTURE)
+        if failure_of_task([why]) in _MOTION_FAILURES:
+            return "planner" if why.partition(":")[0] in _COMPARED_STAGES else "fixed_stage"
+        return "other"
     if stage == "perception" or "never seen" in first:
         return "perception"
     if "stuck between the opened fingers" in first:
