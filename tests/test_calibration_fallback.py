@@ -169,3 +169,18 @@ def test_a_wrong_width_grasp_with_an_uncalibrated_camera_looks_again_from_above(
     assert looks[0][2, 2] < -0.99 and abs(looks[0][2, 3] - 0.72) < 0.05  # looking down, at the capture height
     assert est is not first and est.position[0] == pytest.approx(-0.412)
     assert objects == (est, other)
+
+
+def test_warehouse_without_its_marker_goes_on_from_the_configured_pose_and_says_so() -> None:
+    """The fixed camera has one view: with the marker out of it (the plate behind the robot), the run no
+    longer ends with every cube lost; it perceives from the configured pose, levelled on the table, reports
+    `fallback` with the bound that implies, and (the mount exactly where configured) places every cube."""
+    from twin.perception.mount import error_bound_m as bound_of
+
+    s = _plate_moved(load_config("warehouse", ["planners.transfer={name: ompl.rrtconnect}"]), (0.40, 0.0, 0.0))
+    summary = run_task(s, seed=3)
+    cal = summary.calibration
+    assert cal is not None and cal.status == "fallback" and "not found" in cal.reason
+    assert cal.error_bound_m == pytest.approx(bound_of(s, levelled=True))
+    assert 0.015 < cal.error_bound_m < 0.03  # 1 cm + 1 deg over the 0.8 m to the region's far corner
+    assert summary.success_rate == 1.0

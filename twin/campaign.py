@@ -31,7 +31,7 @@ __all__ = [
 ]
 
 LOSS_CLASSES: dict[str, str] = {
-    "calibration": "the camera's calibration fell back to its configured pose, or failed (no marker in any view)",
+    "calibration": "the camera's calibration fell back to its configured pose (the marker not found)",
     "perception": "never seen on the table, or seen somewhere it was not",
     "grasp_width": "the fingers stopped at a width the object cannot be (on something else, or on nothing)",
     "slip": "held at the grasp, then slipped out or was dropped on the way",
@@ -94,7 +94,7 @@ def classify_loss(obj: dict[str, Any], run: dict[str, Any] | None = None) -> str
     """The LOSS_CLASSES key of one object not placed: `obj` an outcome of a run's --json file (`objects`),
     `run` that file (its `calibration`, where the run reports one)."""
     calibration = (run or {}).get("calibration") or {}
-    if calibration.get("status") in ("fallback", "failed"):  # no marker in any view (twin.types.CalibrationOutcome)
+    if calibration.get("status") == "fallback":  # no marker in a view perception used (twin.types.CalibrationOutcome)
         return "calibration"
     first = str(obj.get("error") or "").split("; then: ")[0]
     stage = obj.get("stage") or first.partition(":")[0]

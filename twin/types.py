@@ -338,15 +338,15 @@ class CalibrationOutcome:
     """How a run knew where its camera was: the run summary's `calibration` entry.
 
     `status`: "measured" (the base marker calibrated it), "fallback" (a calibration was asked for and the
-    marker was not found in any view: the configured transform was used, possibly refined by the table
-    plane), "failed" (asked for, not found, and the task could not go on without it: the warehouse) or
-    "configured" (none asked for: the configured pose is the model). `views`: marker views taken.
+    marker was not found in any view, or in one of a fixed camera's captures: the configured pose was used,
+    levelled on the table plane where one is seen) or "configured" (none asked for: the configured pose is the
+    model). `views`: marker views taken.
     `reprojection_px`: the used estimate's marker reprojection RMS. `error_bound_m`: what a point on the
     table, seen from the capture pose, may be misplaced by through the camera pose used (fallback: from
-    the mount tolerance, see `twin.tasks.robocup.calibration`). `reason`: why it is not "measured".
+    the mount tolerance, see `twin.perception.mount`). `reason`: why it is not "measured".
     """
 
-    status: str  # "measured" | "fallback" | "failed" | "configured"
+    status: str  # "measured" | "fallback" | "configured"
     views: int = 0
     reprojection_px: float | None = None
     error_bound_m: float | None = None

@@ -33,6 +33,7 @@ import numpy as np
 from twin.config import Settings
 from twin.perception.aruco import MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture, wrist_camera_offset
+from twin.perception.mount import error_bound_m, level_on_table, table_disagreement, table_plane
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, marker_pose_in_base
 from twin.tasks.cell import OVER_MARGIN_M, Cell, StageFailed
 from twin.types import CalibrationOutcome
@@ -63,9 +64,7 @@ _AGREE_HEIGHT_M = 0.005
 _SAME_T_M = 0.005
 _SAME_R_DEG = 0.5
 _GOOD_VIEWS = 2  # after a failed first view, stop looking once this many views measured it
-_PLANE_MIN_INLIERS = 0.3  # the table is the dominant plane when it holds this share of the depth points
 _SAME_PLACE_M = 0.04  # an estimate this near where a failed grasp's object was seen is that object
-_PLANE_STRIDE = 4  # every 4th pixel in each direction: ~19 000 points from 640 x 480, plenty for a plane
 
 
 @dataclass(frozen=True)
@@ -159,7 +158,7 @@ def _measure(cell: Cell, cap: Capture) -> tuple[tuple[np.ndarray, float] | None,
     try:
         cal = calibrate(cap.frame, cell.settings)
     except MarkerNotFound as e:
-        return None, str(e), _table_plane(cap) is not None
+        return None, str(e), table_plane(cap) is not None
     off = table_disagreement(cap, cal.T_base_camera)
     if off is None:
         return None, "the marker was found, but no table plane to check it against", False
@@ -264,85 +263,6 @@ def _look_at(eye: np.ndarray, target: np.ndarray, roll: float) -> np.ndarray:
 
 
 # ---- the table plane ----------------------------------------------------------------------------------
-def _table_plane(cap: Capture) -> tuple[np.ndarray, float] | None:
-    """The dominant plane of the depth image in the camera frame: (unit normal towards the camera, the
-    camera's distance from it m); None when no plane holds `_PLANE_MIN_INLIERS` of the points."""
-    from twin.camera import point_cloud
-    from twin.perception.geometry import fit_plane_ransac
-
-    pts, _ = point_cloud(cap.frame, stride=_PLANE_STRIDE)
-    if len(pts) < 500:
-        return None
-    plane = fit_plane_ransac(pts, 0.01, iterations=200, rng=np.random.default_rng(0)).oriented(np.zeros(3))
-    if plane.inliers.sum() < _PLANE_MIN_INLIERS * len(pts):
-        return None
-    return plane.normal, -plane.offset
-
-
-def table_disagreement(cap: Capture, T_base_camera: np.ndarray) -> tuple[float, float] | None:
-    """(tilt deg, height m) by which camera pose `T_base_camera` disagrees with the table plane in `cap`'s
-    depth image: the angle between the plane's normal carried to the base frame and +z, and the camera's
-    height over z = 0 less its distance from the plane. None when no table plane is seen."""
-    plane = _table_plane(cap)
-    if plane is None:
-        return None
-    n, dist = plane
-    up = T_base_camera[:3, :3] @ n
-    tilt = math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0))))
-    return tilt, float(T_base_camera[2, 3] - dist)
-
-
-def level_on_table(cap: Capture, settings: Settings) -> np.ndarray:
-    """The nominal camera pose of `cap` turned (about a level axis through the camera) and lifted so that
-    the table plane of its depth image is level at z = 0: a mount error's tilt and height measured, its turn
-    about the vertical and level shift not. The nominal pose where no table plane is seen, or where levelling
-    would turn it more than twice `camera.mount_tolerance` (then the plane is not the table)."""
-    from scipy.spatial.transform import Rotation
-
-    T = np.array(cap.T_base_camera_nominal, dtype=float)
-    plane = _table_plane(cap)
-    if plane is None:
-        return T
-    n, dist = plane
-    up = T[:3, :3] @ n
-    axis = np.cross(up, [0.0, 0.0, 1.0])
-    angle = math.atan2(float(np.linalg.norm(axis)), float(up[2]))
-    if angle > 2.0 * math.radians(settings.camera.mount_tolerance.rotation_deg):
-        return T
-    if angle > 1e-9:
-        T[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix() @ T[:3, :3]
-    T[2, 3] = dist
-    return T
-
-
-def error_bound_m(settings: Settings, *, levelled: bool = False) -> float:
-    """How far (m) a table point seen from the capture pose may be misplaced by a camera pose off its mount by
-    `camera.mount_tolerance` (t, r): t + d r, d the range to the farthest table point in the image (small
-    angles). Levelled on the table plane (tilt and height measured): t + rho r, rho that point's level
-    distance from the camera (a turn about the vertical and a level shift are what is left)."""
-    from twin.camera import Intrinsics, camera_pose
-    from twin.kinematics import UR5e
-
-    cam = settings.camera
-    t, r = cam.mount_tolerance.translation_m, math.radians(cam.mount_tolerance.rotation_deg)
-    if cam.mount == "wrist":
-        T = UR5e.from_settings(settings).fk(np.asarray(cam.capture_pose, dtype=float), "flange")
-        T = T @ wrist_camera_offset(settings)
-    else:
-        T = camera_pose(cam)
-    K_inv = np.linalg.inv(Intrinsics.from_settings(cam).matrix())
-    far = rho = 0.0
-    for u, v in ((0, 0), (cam.width, 0), (0, cam.height), (cam.width, cam.height)):
-        ray = T[:3, :3] @ (K_inv @ np.array([u, v, 1.0]))
-        if ray[2] >= -1e-6:  # the corner looks above the horizon: the far limit of the depth range
-            p = T[:3, 3] + ray / np.linalg.norm(ray) * cam.far_m
-        else:
-            p = T[:3, 3] + ray * (-T[2, 3] / ray[2])
-        far = max(far, float(np.linalg.norm(p - T[:3, 3])))
-        rho = max(rho, float(np.linalg.norm(p[:2] - T[:2, 3])))
-    return t + (rho if levelled else far) * r
-
-
 # ---- a re-look at an object a grasp found the wrong width ---------------------------------------------------
 def relook_joints(cell: Cell, xy: np.ndarray, q_capture: np.ndarray) -> np.ndarray | None:
     """Joints that put the camera straight above base-frame point `xy` (2,), at the capture pose's height and

@@ -536,12 +536,14 @@ def _pick_and_place(
         )
     # (1) base-first alignment
     cell.move_joints("align", _aligned(cell.world.joint_positions(), x, y))
-    # (2) pre-grasp hover, gripper opened to the lookup width
+    # (2) pre-grasp hover, gripper opened to the lookup width, in the IK branch whose way down (3) is clear for
+    # the whole arm, checked before moving (`Cell.choose_way_down`; none clear: refused here, not in the descent)
     cell.open_gripper(min(w_grip, max_opening))
-    hover = top_down((x, y, z_grasp + task.hover_m), yaw)
-    cell.move_pose_over("hover", hover)
+    way = cell.choose_way_down((x, y, z_grasp), (x, y, z_grasp + task.hover_m), [yaw])
+    hover = way.hover
+    cell.reach_hover(way)
     # (3) descent
-    cell.move_pose("descent", top_down((x, y, z_grasp), yaw))
+    cell.move_pose("descent", way.target)
     # (4) close and settle: the finger position says whether the object is between the fingers
     w = grasp.width_m
     opened = cell.read_gripper(wait_s=0.0).opening_m

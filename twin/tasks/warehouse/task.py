@@ -10,13 +10,14 @@ zone is for the judge (twin.tasks.judge) alone.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.perception.aruco import MarkerNotFound, calibrate
 from twin.perception.capture import capture_frame, prefetch_next_capture
+from twin.perception.mount import error_bound_m, level_on_table, table_plane
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, clear_failure, note_failure, top_down
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import WarehouseReferee
@@ -144,15 +145,28 @@ def _perceive(cell: Cell) -> WarehouseResult:
     """Capture a frame from the fixed camera, calibrate it on the base marker, perceive the table."""
     settings, world = cell.settings, cell.world
     capture = capture_frame(world, settings)
-    calib = calibrate(capture.frame, settings)
     views = 0 if cell.calibration is None else cell.calibration.views
-    cell.calibration = CalibrationOutcome("measured", views=views + 1, reprojection_px=calib.marker.reprojection_px)
-    seen = perceive_warehouse(capture.frame, calib.T_base_camera, settings.perception.warehouse, seed=world.seed)
+    try:
+        calib = calibrate(capture.frame, settings)
+        T_base_camera = calib.T_base_camera
+        if cell.calibration is not None and cell.calibration.status == "fallback":  # an earlier look's stays said
+            cell.calibration = replace(cell.calibration, views=views + 1)
+        else:
+            px = calib.marker.reprojection_px
+            cell.calibration = CalibrationOutcome("measured", views=views + 1, reprojection_px=px)
+    except MarkerNotFound as e:
+        # a fixed camera has no other view: the configured pose, levelled on the table plane it sees (its tilt and
+        # height measured), trusted to `camera.mount_tolerance` for the rest, and the run says so
+        T_base_camera = level_on_table(capture, settings)
+        bound = error_bound_m(settings, levelled=table_plane(capture) is not None)
+        reason = f"the ArUco marker was not found ({e}); the configured camera pose, levelled on the table"
+        if cell.calibration is None or cell.calibration.status != "fallback":
+            log.warning("warehouse: %s: objects may be misplaced by up to %.0f mm", reason, 1e3 * bound)
+        cell.calibration = CalibrationOutcome("fallback", views=views + 1, error_bound_m=bound, reason=reason)
+    seen = perceive_warehouse(capture.frame, T_base_camera, settings.perception.warehouse, seed=world.seed)
     boxes = [] if seen.obstacle is None else [("obstacle", seen.obstacle.lo, seen.obstacle.hi)]
     boxes += [(f"unknown_{i}", b.lo, b.hi) for i, b in enumerate(seen.unknown)]
-    cell.perceived(
-        capture.frame, calib.T_base_camera, [(f"{c.color_label} cube", c.centroid) for c in seen.cubes], boxes
-    )
+    cell.perceived(capture.frame, T_base_camera, [(f"{c.color_label} cube", c.centroid) for c in seen.cubes], boxes)
     prefetch_next_capture(world, settings)
     return seen
 
@@ -163,7 +177,7 @@ def _perceive_again(cell: Cell, cube: LabeledCube) -> LabeledCube | None:
     try:
         cell.reach_posture("home", np.array(cell.settings.robot.home))
         seen = _perceive(cell)
-    except (StageFailed, MarkerNotFound) as e:
+    except StageFailed as e:
         log.info("warehouse: could not look again: %s", e)
         return None
     same = [c for c in seen.cubes if c.color_label == cube.color_label]
@@ -177,21 +191,15 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     settings, world = cell.settings, cell.world
     task = settings.task.warehouse
     referee = WarehouseReferee(world, settings, cell.watch)  # ground truth: metrics, verdicts at the end
-    cubes: tuple[LabeledCube, ...] = ()
-    global_error: str | None = None
-    try:
-        seen = _perceive(cell)
-        cubes = seen.cubes
-        if seen.obstacle_extended is not None:
-            b = seen.obstacle_extended
-            cell.scene.add_box_bounds("obstacle", b.lo, b.hi)
-        else:
-            log.warning("warehouse: no obstacle seen; planning without one")
-        for i, b in enumerate(seen.unknown):  # what stands on the table unexplained is planned around
-            cell.scene.add_box_bounds(f"unknown_{i}", b.lo, b.hi)
-    except MarkerNotFound as e:
-        global_error = f"calibration: the ArUco marker was not found: {e}"
-        cell.calibration = CalibrationOutcome("failed", views=1, reason=global_error)
+    seen = _perceive(cell)
+    cubes = seen.cubes
+    if seen.obstacle_extended is not None:
+        b = seen.obstacle_extended
+        cell.scene.add_box_bounds("obstacle", b.lo, b.hi)
+    else:
+        log.warning("warehouse: no obstacle seen; planning without one")
+    for i, b in enumerate(seen.unknown):  # what stands on the table unexplained is planned around
+        cell.scene.add_box_bounds(f"unknown_{i}", b.lo, b.hi)
     attempts = [_Attempt(cube, referee.match(cube.centroid)) for cube in cubes]
     order = list(task.drop_zones)
     attempts.sort(
@@ -235,7 +243,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
     except StageFailed as e:
         log.info("warehouse: could not return home: %s", e)
     cell.settle(1.0)
-    return referee.outcomes(attempts, global_error=global_error)
+    return referee.outcomes(attempts)
 
 
 class WarehouseTask:
