@@ -113,7 +113,7 @@ class OCPForm:
             lbg.append(np.zeros(18))
             ubg.append(np.zeros(18))
             w = P.position_weight * (P.terminal_weight_factor if k == N - 1 else 1.0)
-            rows, r, R9 = prob.stage_function(q, q1, s, pp, w)
+            rows, r, R9 = prob.stage_function(q, q1, s, pp, w, ca.SX.zeros(0, 1))
             path = [f + jstep, jstep - f, e1 + dstep, dstep - e1, d1 + step, step - d1, q1 - lo, hi - q1, s, rows]
             lo_path = [np.zeros(49), row_lb]
             hi_path = [np.full(49 + n_rows, np.inf)]

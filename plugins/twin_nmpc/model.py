@@ -99,7 +99,7 @@ def fk_tcp_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> tuple[ca.SX, c
 
 
 def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, ca.SX]:
-    """Symbolic DH frames 4, 5 and 6 (wrist_2 joint, wrist_3 joint, flange) and the TCP (key TCP_FRAME),
+    """Symbolic DH frames 2 to 6 (elbow, wrist_1, wrist_2, wrist_3 joints, flange) and the TCP (key TCP_FRAME),
     (4, 4) each in the base frame, for the standard DH parameters `dh` (`UR5e.dh`)."""
     T = ca.SX.eye(4)
     out: dict[int, ca.SX] = {}
@@ -113,7 +113,7 @@ def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, c
         A[2, 1], A[2, 2], A[2, 3] = sal, cal, d[i]
         A[3, 3] = 1.0
         T = ca.mtimes(T, A)
-        if i + 1 >= 4:
+        if i + 1 >= 2:
             out[i + 1] = T
     tool = ca.SX.eye(4)
     tool[2, 3] = tcp_offset_m
@@ -164,6 +164,7 @@ class ProblemShape:
     n_boxes: int
     n_object_spheres: int
     substeps: int
+    self_slots: int = 0  # self rows per stage (`twin_nmpc.selfrows`): a tool sphere from an arm sphere
 
 
 @dataclass(frozen=True)
@@ -229,6 +230,7 @@ class NMPCProblem:
         self.block_x = 7
         self.nx = N * self.block_x + 1
         n0 = N_FIXED_PARAMS
+        self.n_self = shape.self_slots
         self.n_params = n0 + 6 * nb + 4 * no
 
         # ---- one stage as an SX function, mapped over the horizon (built once: ~N times cheaper to build and
@@ -245,16 +247,20 @@ class NMPCProblem:
             (int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres
         ]
         spheres_local += [(TCP_FRAME, off, r) for off, r in obj]
-        used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME})
+        used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME} | ({2, 3} if self.n_self else set()))
 
         qs = ca.SX.sym("q", 6)
         frames = fk_frames_sx(qs, tcp_offset_m, dh)
         fk = ca.Function("fk", [qs], [frames[f] for f in used])
 
+        last_frames: dict[int, ca.SX] = {}
+
         def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, float | ca.SX]], ca.SX, ca.SX]:
             # `call` returns a list even for one output; `fk(q)` would return the bare matrix when `used`
             # is only the TCP frame (no wrist spheres), and a CasADi matrix is not iterable
             Fs = dict(zip(used, fk.call([q]), strict=True))
+            last_frames.clear()
+            last_frames.update(Fs)
             pts = [(Fs[f][:3, 3] + ca.mtimes(Fs[f][:3, :3], off), r) for f, off, r in spheres_local]
             T = Fs[TCP_FRAME]
             return pts, T[:3, 3], T[:3, :3]
@@ -280,18 +286,30 @@ class NMPCProblem:
         n_box_rows = len(rows)
         for p_, r in seq[-1]:
             rows.append(p_[2] - r + sb - table_z)
+        # self rows at q_j (`twin_nmpc.selfrows`): per slot a tool sphere (offset in the TCP frame: the gripper's
+        # or the held object's) and an arm sphere (offset in DH frame 2 if `sel` is 1, else in frame 3), their
+        # centres' distance in units of 5 cm; which pair a slot holds and its bound are set per solve
+        pself = ca.SX.sym("pself", 7 * self.n_self)
+        for k in range(self.n_self):
+            a_off, b_off, sel = pself[7 * k : 7 * k + 3], pself[7 * k + 3 : 7 * k + 6], pself[7 * k + 6]
+            Ft, F2, F3 = last_frames[TCP_FRAME], last_frames[2], last_frames[3]
+            pa = Ft[:3, 3] + ca.mtimes(Ft[:3, :3], a_off)
+            p2 = F2[:3, 3] + ca.mtimes(F2[:3, :3], b_off)
+            pb = sel * p2 + (1 - sel) * (F3[:3, 3] + ca.mtimes(F3[:3, :3], b_off))
+            rows.append(ca.sqrt(ca.sumsqr(pa - pb) + _EPS2) * _PAIR_SCALE)
         e = pj + ca.mtimes(Rj, track) - goal
         # the cost is a sum of squares, sum(res^2): its Gauss-Newton Hessian 2 J_res^T J_res is cheap and positive
         res = ca.vertcat(ca.sqrt(wpos) * e, math.sqrt(weights.step) * dq, math.sqrt(weights.table_slack) * sb)
-        stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos], [ca.vertcat(*rows), res, ca.reshape(Rj, 9, 1)])
-        # (qa, qb, s, p, w) -> (box and table rows, cost residuals, R(qb) column-major): kept for other forms of
-        # the same problem (bench/nmpc_alternatives.py)
+        stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos, pself], [ca.vertcat(*rows), res, ca.reshape(Rj, 9, 1)])
+        # (qa, qb, s, p, w, self slots) -> (box, table and self rows, cost residuals, R(qb) column-major): kept for
+        # other forms of the same problem (bench/nmpc_alternatives.py)
         self.stage_function = stage
         mapped = stage.map(N, "serial")
 
         # ---- the NLP over the horizon, stage-major as before --------------------------------------
         x = ca.MX.sym("x", self.nx)
-        p = ca.MX.sym("p", self.n_params)
+        self.n_self_params = 7 * self.n_self * N  # after the fixed, box and object parameters, stage-major
+        p = ca.MX.sym("p", self.n_params + self.n_self_params)
         q0, dq_prev, dq_prev2 = p[0:6], p[6:12], p[12:18]
         body = ca.reshape(x[: N * self.block_x], self.block_x, N)  # column j = stage j's block
         Q = body[0:6, :]
@@ -299,7 +317,8 @@ class NMPCProblem:
         QA = ca.horzcat(q0, Q[:, : N - 1]) if N > 1 else q0
         wvec = np.full(N, weights.position)
         wvec[-1] *= weights.terminal_factor
-        stage_rows, stage_res, stage_R = mapped(QA, Q, S, ca.repmat(p, 1, N), ca.DM(wvec).T)
+        PS = ca.reshape(p[self.n_params :], 7 * self.n_self, N)
+        stage_rows, stage_res, stage_R = mapped(QA, Q, S, ca.repmat(p[: self.n_params], 1, N), ca.DM(wvec).T, PS)
         g: list[ca.MX] = []
         lbg: list[np.ndarray] = []
         ubg: list[np.ndarray] = []
@@ -309,8 +328,16 @@ class NMPCProblem:
             g += [d, d - d_prev, d - 2 * d_prev + d_prev2, stage_rows[:, j]]
             lbg.append(np.full(18, -np.inf))  # step, step-change and jerk bounds are set per solve
             ubg.append(np.full(18, np.inf))
-            lbg.append(np.concatenate([np.zeros(n_box_rows), np.full(len(spheres_local), table_clearance_m)]))
-            ubg.append(np.full(n_box_rows + len(spheres_local), np.inf))
+            lbg.append(
+                np.concatenate(
+                    [
+                        np.zeros(n_box_rows),
+                        np.full(len(spheres_local), table_clearance_m),
+                        np.full(self.n_self, -np.inf),
+                    ]
+                )
+            )
+            ubg.append(np.full(n_box_rows + len(spheres_local) + self.n_self, np.inf))
             d_prev, d_prev2 = d, d_prev
         s_down = x[-1]
         g.append(-stage_R[8, N - 1] + s_down)  # -R_N[2, 2] (column-major reshape: element 8 is (2, 2))
@@ -327,6 +354,8 @@ class NMPCProblem:
         self._stage_rows_dq = np.concatenate([np.arange(6) + j * self.block_g for j in range(N)])
         self._stage_rows_ddq = self._stage_rows_dq + 6
         self._stage_rows_dddq = self._stage_rows_dq + 12
+        first_self = 18 + n_box_rows + len(spheres_local)
+        self._self_rows = (np.arange(N)[:, None] * self.block_g + first_self + np.arange(self.n_self)[None]).astype(int)
         nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
         # expand: the horizon's graph turned into one SX graph, whose derivatives CasADi then generates (~1.5 s
         # with one box, ~2 s more per box) and evaluates ~2x faster than the mapped stage calls (~0.1 s to build)
@@ -354,6 +383,10 @@ class NMPCProblem:
         within = np.concatenate([18 + b * per + np.arange(per) for b in slots]) if slots else np.zeros(0, int)
         return (np.arange(N)[:, None] * self.block_g + within[None, :]).reshape(-1).astype(int)
 
+    def self_rows(self) -> np.ndarray:
+        """Indices into g of the self rows, (N, self_slots)."""
+        return self._self_rows
+
     def knots(self, x: np.ndarray) -> np.ndarray:
         """(N, 6) q_1..q_N of a decision vector."""
         return np.asarray(x[:-1]).reshape(self.shape.horizon, self.block_x)[:, :6].copy()
@@ -375,10 +408,12 @@ class NMPCProblem:
         jerk_change: np.ndarray | None = None,
         *,
         facing_down: bool = True,
+        self_lo: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """lbx, ubx (joint limits, slacks >= 0) and lbg, ubg for a solve: per-joint bounds on the step, on
         its change from one step to the next (acceleration x dt^2) and on the change of that change (jerk x
-        dt^3) (None: unbounded); the terminal facing-down row switched off when `facing_down` is False."""
+        dt^3) (None: unbounded); the terminal facing-down row switched off when `facing_down` is False; `self_lo`
+        (N, self_slots): the lower bound, m, on the centres' distance of each stage's self row (-inf: open)."""
         N = self.shape.horizon
         lbx = np.zeros(self.nx)
         ubx = np.full(self.nx, np.inf)
@@ -397,6 +432,8 @@ class NMPCProblem:
             ubg[self._stage_rows_dddq] = np.tile(jerk_change, N)
         if not facing_down:
             lbg[-1] = -np.inf
+        if self_lo is not None and self.n_self:
+            lbg[self._self_rows] = np.asarray(self_lo, dtype=float) * _PAIR_SCALE
         return lbx, ubx, lbg, ubg
 
     # ---- solving ----------------------------------------------------------------------------------

@@ -12,7 +12,14 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["DEFAULT_TOOL_SPHERES", "DEFAULT_WRIST_SPHERES", "NMPCParams", "RecedingParams"]
+__all__ = [
+    "DEFAULT_ARM_SPHERES",
+    "DEFAULT_TOOL_SPHERES",
+    "DEFAULT_WHOLE_ARM_TOOL_SPHERES",
+    "DEFAULT_WRIST_SPHERES",
+    "NMPCParams",
+    "RecedingParams",
+]
 
 # (x, y, z, radius) in the TCP frame (z along the tool, pointing out of the gripper; the flange is at
 # z = -0.135): fingertips/held object, fingers, the two halves of the 0.14 x 0.06 x 0.07 m gripper body,
@@ -33,6 +40,58 @@ DEFAULT_TOOL_SPHERES: tuple[tuple[float, float, float, float], ...] = (
 DEFAULT_WRIST_SPHERES: tuple[tuple[int, float, float, float, float], ...] = (
     (4, 0.0, -0.02, 0.0, 0.07),
     (5, 0.0, 0.005, 0.0, 0.062),
+)
+
+
+# The whole arm's spheres (croc's whole_arm mode, and the self rows of both MPCs: `twin_nmpc.selfrows`), tight
+# where the seed's are generous (its 5 cm sphere at the tcp, sized for a held cube, reached 35 mm into a bin wall
+# from starts the cell's queries keep 1 cm clear). Each covers its part of the URDF's collision geometry with the
+# 1 cm box margin (tests/test_croc_planner.py checks it): (DH frame, x, y, z, radius): the shoulder (frame 1),
+# upper arm (2), forearm (3), wrist 1 (4) and wrist 2 (5) link cylinders, each cut into slabs along its axis, one
+# sphere of the cylinder's radius or less per slab.
+DEFAULT_ARM_SPHERES: tuple[tuple[int, float, float, float, float], ...] = (
+    (1, 0.0, -0.0588, 0.0, 0.0577),
+    (1, 0.0, 0.0038, 0.0, 0.0577),
+    (2, 0.425, 0.0, 0.07, 0.0571),
+    (2, 0.425, 0.0, 0.13, 0.0571),
+    (2, 0.0304, 0.0, 0.138, 0.052),
+    (2, 0.0911, 0.0, 0.138, 0.052),
+    (2, 0.1518, 0.0, 0.138, 0.052),
+    (2, 0.2125, 0.0, 0.138, 0.052),
+    (2, 0.2732, 0.0, 0.138, 0.052),
+    (2, 0.3339, 0.0, 0.138, 0.052),
+    (2, 0.3946, 0.0, 0.138, 0.052),
+    (3, 0.3922, 0.0, 0.0383, 0.047),
+    (3, 0.3922, 0.0, 0.085, 0.047),
+    (3, 0.3922, 0.0, 0.1317, 0.047),
+    (3, 0.0282, 0.0, 0.02, 0.0389),
+    (3, 0.0842, 0.0, 0.02, 0.0389),
+    (3, 0.1402, 0.0, 0.02, 0.0389),
+    (3, 0.1962, 0.0, 0.02, 0.0389),
+    (3, 0.2522, 0.0, 0.02, 0.0389),
+    (3, 0.3082, 0.0, 0.02, 0.0389),
+    (3, 0.3642, 0.0, 0.02, 0.0389),
+    (4, 0.0, -0.0633, 0.0, 0.04),
+    (4, 0.0, -0.02, 0.0, 0.04),
+    (4, 0.0, 0.0233, 0.0, 0.04),
+    (5, 0.0, 0.0325, 0.0, 0.0428),
+    (5, 0.0, -0.0225, 0.0, 0.0428),
+)
+# (x, y, z, radius) in the tcp frame: the finger region over the whole stroke (x +-0.0545 m, the fingertips
+# 12 mm past the tcp) in a 3 x 2 grid, the gripper body (0.14 x 0.06 x 0.07 m) in 4, wrist 3 and the flange in 2
+DEFAULT_WHOLE_ARM_TOOL_SPHERES: tuple[tuple[float, float, float, float], ...] = (
+    (-0.03633, 0.0, -0.03675, 0.0168),
+    (0.0, 0.0, -0.03675, 0.0168),
+    (0.03633, 0.0, -0.03675, 0.0168),
+    (-0.03633, 0.0, -0.00425, 0.0168),
+    (0.0, 0.0, -0.00425, 0.0168),
+    (0.03633, 0.0, -0.00425, 0.0168),
+    (-0.0525, 0.0, -0.088, 0.0394),
+    (-0.0175, 0.0, -0.088, 0.0394),
+    (0.0175, 0.0, -0.088, 0.0394),
+    (0.0525, 0.0, -0.088, 0.0394),
+    (0.0, 0.0, -0.138, 0.031),
+    (0.0, 0.0, -0.168, 0.031),
 )
 
 
@@ -117,6 +176,24 @@ class NMPCParams(RecedingParams):
     """Parameters of `nmpc` (defaults: SPEC, seed 000; seed 001 is dt=0.1, execute_steps=3): the shared ones
     and IPOPT's."""
 
+    self_slots: int = Field(
+        4,
+        ge=0,
+        le=20,
+        description="self rows per step (`twin_nmpc.selfrows`): the nearest pairs of a gripper or held-object sphere"
+        " and a forearm or upper-arm sphere (`DEFAULT_WHOLE_ARM_TOOL_SPHERES`, `DEFAULT_ARM_SPHERES`); 0: the seed's"
+        " formulation, the arm not kept from itself",
+    )
+    self_screen_m: float = Field(
+        0.03, gt=0, le=1.0, description="a pair gets a self row at a step only within this distance there"
+    )
+    self_tightening_m: float = Field(
+        0.005,
+        ge=0,
+        le=0.05,
+        description="self rows hold this much beyond twice the box margin (they hold at the knots; the loop's"
+        " check judges between them too)",
+    )
     prebuild_boxes: list[int] | None = Field(
         None,
         description="obstacle-box counts whose NLPs are built when the planner is constructed; None: as many boxes as"

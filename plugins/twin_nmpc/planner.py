@@ -52,10 +52,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin_nmpc.guess import guess_slack
-from twin_nmpc.model import NMPCProblem, ProblemShape, cached_problem
-from twin_nmpc.params import NMPCParams
+from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, cached_problem
+from twin_nmpc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES, NMPCParams
 from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.spheres import Box, box_gaps
+from twin_nmpc.selfrows import SelfRows, link_groups, pair_gaps, self_pairs, self_rows, self_violation
+from twin_nmpc.spheres import CHECK_TOL_M, Box, box_gaps, robot_spheres, sphere_positions, subdivide, with_object
 
 if TYPE_CHECKING:
     from twin.plugin import PluginContext
@@ -66,6 +67,7 @@ log = logging.getLogger("twin")
 
 # what fills an NLP's unused box slots: a 2 cm box 100 m below the base, whose rows are never near active
 _FAR_BOX: Box = ("", np.array([0.0, 0.0, -100.0]), np.array([0.0, 0.0, -100.0]))
+_SELF_ROUNDS = 2  # solves again at most this often with the self rows chosen on a plan that broke them
 
 
 class NMPCPlanner(RecedingHorizonMPC):
@@ -83,8 +85,13 @@ class NMPCPlanner(RecedingHorizonMPC):
         self._expected_slots = max(expected, default=0)
         self._problems: dict[ProblemShape, NMPCProblem] = {}
         super().__init__(P, context)
+        # the self set (croc's: whole-arm spheres covering each link within the box margin) and, per count of
+        # held-object spheres, its pairs the self rows keep apart: a tool or held-object sphere and a forearm or
+        # upper-arm sphere (the wrist's links are the tool's neighbours or fold away from it)
+        self._self_sph = robot_spheres(DEFAULT_WHOLE_ARM_TOOL_SPHERES, np.asarray(DEFAULT_ARM_SPHERES, dtype=float))
+        self._self_pairs: dict[int, np.ndarray] = {}
         for nb in sorted(set(expected)):  # built here, not in the first (timed) step
-            self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps), expand=True)
+            self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps, P.self_slots), expand=True)
 
     def _start_goal(self) -> None:
         super()._start_goal()
@@ -182,22 +189,35 @@ class NMPCPlanner(RecedingHorizonMPC):
         near = self._near_boxes(np.vstack([q[None], ref]), sph, boxes, P.box_screen_m)
         lim = self.kin.joint_limits
         spent, iterations, rounds = 0.0, 0, 0
+        own, pairs = self._self_set(obj)
+        srows: SelfRows | None = None
+        self_again, self_rounds = False, 0
+        restart: SolveOutput | None = None
+        restart_shape: ProblemShape | None = None
         while True:
             rounds += 1
             slotted, moved = self._fill_slots(near, boxes)
-            shape = ProblemShape(P.horizon, len(slotted), obj.shape[0], P.constraint_substeps)
+            shape = ProblemShape(P.horizon, len(slotted), obj.shape[0], P.constraint_substeps, P.self_slots)
             if shape not in self._problems:
                 log.info("nmpc: building the NLP for %s inside a step (not prebuilt: `prebuild_boxes`)", shape)
             prob = self.problem(shape)
-            p = self._parameters(q, slotted, obj)
-            bounds = prob.bounds(lim[:, 0], lim[:, 1], step, dstep, jstep, facing_down=P.facing_down)
-            if self._ws is not None and self._ws[0] == shape:
+            if srows is None or self_again:
+                srows = self._self_rows(q, ref if restart is None else restart.q[1:], own, pairs)
+            pself, self_lo = self._self_parameters(srows, own)
+            p = np.concatenate([self._parameters(q, slotted, obj), pself])
+            bounds = prob.bounds(lim[:, 0], lim[:, 1], step, dstep, jstep, facing_down=P.facing_down, self_lo=self_lo)
+            if restart is not None and restart_shape == shape:  # again from the plan that broke the self rows
+                lam_g0 = restart.lam_g.copy()
+                lam_g0[prob.self_rows().reshape(-1)] = 0.0
+                sol = prob.solve(restart.x, p, bounds, lam_x0=restart.lam_x, lam_g0=lam_g0)
+            elif self._ws is not None and self._ws[0] == shape:
                 prev = self._ws[1]
                 k = self._ws_offset
                 x0 = prob.shift(prev.x, prob.block_x, k)
                 lam_x0 = prob.shift(prev.lam_x, prob.block_x, k)
                 lam_g0 = prob.shift(prev.lam_g, prob.block_g, k)
                 lam_g0[prob.box_rows(moved)] = 0.0  # a slot that now holds another box starts without multipliers
+                lam_g0[prob.self_rows().reshape(-1)] = 0.0  # the self slots hold other pairs now
                 sol = prob.solve(x0, p, bounds, lam_x0=lam_x0, lam_g0=lam_g0)
             else:
                 if guess is None:
@@ -209,11 +229,30 @@ class NMPCPlanner(RecedingHorizonMPC):
             # every round adds a box left out, so this ends after at most len(boxes) + 1 rounds
             left = [b for b in boxes if all(b[0] != n[0] for n in near)]
             missed = [] if P.box_screen_m is None else self._near_boxes(sol.q, sph, left, P.box_screen_m / 2)
-            if not sol.converged or not missed:
+            # a plan that brings a pair of the self set closer than the rows chosen on the plan it started from
+            # allow (a pair without a row there) is solved again, from itself, with the rows chosen on it
+            self_again = (
+                sol.converged
+                and not missed
+                and self_rounds < _SELF_ROUNDS
+                and self._self_short(sol.q, own, pairs) is not None
+            )
+            if not sol.converged or not (missed or self_again):
                 break
+            if self_again:
+                self_rounds += 1
+                restart, restart_shape = sol, shape
+                continue
+            restart = None
             names = {b[0] for b in near + missed}
             near = [b for b in boxes if b[0] in names]
-        entry = {"status": sol.status, "iterations": iterations, "boxes": len(near), "rounds": rounds}
+        entry = {
+            "status": sol.status,
+            "iterations": iterations,
+            "boxes": len(near),
+            "rounds": rounds,
+            "self_rounds": self_rounds,
+        }
         problem = None if sol.converged else f"IPOPT: {sol.status}"
         return Solved(
             sol.q if sol.converged else None,
@@ -225,6 +264,81 @@ class NMPCPlanner(RecedingHorizonMPC):
             warm_start=(shape, sol),
             warm=sol.warm,
         )
+
+    # ---- the self rows ---------------------------------------------------------------------------------
+    def _self_set(self, obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The self set with the held object's spheres `obj` (m, 4) (TCP frame) and its pairs the rows keep apart
+        (`twin_nmpc.selfrows.self_pairs`, those of a tool or held-object sphere with a forearm or upper-arm one)."""
+        own = with_object(self._self_sph, obj)
+        pairs = self._self_pairs.get(obj.shape[0])
+        if pairs is None:
+            g = link_groups(own)
+            pairs = self_pairs(own)
+            keep = (g[pairs[:, 0]] == 6) & np.isin(g[pairs[:, 1]], (2, 3)) | (g[pairs[:, 1]] == 6) & np.isin(
+                g[pairs[:, 0]], (2, 3)
+            )
+            pairs = self._self_pairs[obj.shape[0]] = np.ascontiguousarray(pairs[keep])
+        return own, pairs
+
+    def _self_bound(self) -> float:
+        """How far apart two spheres of the self set must stay, m: each covers its link only to within the box
+        margin, so twice that (croc's bound)."""
+        return 2 * self.params.box_margin_m
+
+    def _self_rows(self, q: np.ndarray, ref: np.ndarray, own: np.ndarray, pairs: np.ndarray) -> SelfRows | None:
+        """The self rows of the plan q, ref (N, 6) (`twin_nmpc.selfrows.self_rows`, croc's choice and margins)."""
+        P = self.params
+        if not P.self_slots:
+            return None
+        centres = sphere_positions(self.kin, np.vstack([q[None], ref]), own)
+        return self_rows(
+            centres,
+            own[:, 4],
+            pairs,
+            slots=P.self_slots,
+            within=P.self_screen_m,
+            extra=self._self_bound() + P.self_tightening_m,
+        )
+
+    def _self_parameters(self, rows: SelfRows | None, own: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The NLP's self-slot parameters (per stage and slot: the tool sphere's offset in the TCP frame, the arm
+        sphere's in its frame, 1 if that is frame 2) and the slots' lower bounds (N, slots) (-inf: open)."""
+        P = self.params
+        N, S = P.horizon, P.self_slots
+        par = np.zeros((N, S, 7))
+        lo = np.full((N, S), -np.inf)
+        if rows is not None and S:
+            pr, lo_rows = rows.pairs[1:], rows.lo[1:]
+            used = pr[..., 0] >= 0
+            g = link_groups(own)
+            i, j = pr[..., 0], pr[..., 1]
+            tool_first = g[i] == 6
+            a = np.where(tool_first, i, j)
+            b = np.where(tool_first, j, i)
+            par[..., 0:3] = np.where(used[..., None], own[a, 1:4], 0.0)
+            par[..., 3:6] = np.where(used[..., None], own[b, 1:4], 0.0)
+            par[..., 6] = np.where(used, (own[b, 0] == 2).astype(float), 0.0)
+            lo = np.where(used, lo_rows, -np.inf)
+        return par.reshape(-1), lo
+
+    def _self_short(self, knots: np.ndarray, own: np.ndarray, pairs: np.ndarray) -> str | None:
+        """Why the knot path (m+1, 6) brings a pair of the self set closer than the self bound, between the knots
+        too (`constraint_substeps` points per step), or None (`twin_nmpc.selfrows.self_violation`)."""
+        if not self.params.self_slots or knots.shape[0] < 2 or pairs.shape[0] == 0:
+            return None
+        qs = np.vstack([knots[:1], subdivide(knots, self.params.constraint_substeps)])
+        gaps = pair_gaps(sphere_positions(self.kin, qs, own), own[:, 4], pairs)
+        return self_violation(gaps, bound=self._self_bound(), tol=CHECK_TOL_M)
+
+    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
+        """The loop's check of the hard constraints (`RecedingHorizonMPC._violation`) and of the self rows, as
+        croc's: every pair the rows keep apart stays `_self_bound` apart, or no closer than it starts."""
+        why = super()._violation(knots, sph, boxes)
+        if why is not None:
+            return why
+        obj = sph[self._robot_sph.shape[0] :, 1:5]
+        own, pairs = self._self_set(obj)
+        return self._self_short(knots, own, pairs)
 
     def _parameters(self, q: np.ndarray, boxes: list[Box], obj: np.ndarray) -> np.ndarray:
         m = self.params.box_margin_m
