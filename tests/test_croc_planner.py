@@ -140,13 +140,16 @@ def test_a_fallback_from_a_state_off_the_plan_takes_the_plans_steps_from_there(c
     np.testing.assert_allclose(out.trajectory.q[-1], q + plan[idx + 1] - plan[idx], atol=1e-12)
 
 
-def test_the_whole_arm_mode_starts_with_a_sphere_in_a_box_the_link_is_clear_of_and_takes_it_no_deeper(ctx, settings):
-    """Its spheres cover the links only with the box margin: a small wall 4 mm from the gripper (FCL) overlaps a
-    finger sphere by 6 mm. The start is not refused (the seed mode, whose NLP cannot start inside a box, refuses
-    it); the plan reaches the goal and that sphere never goes deeper into the wall than it started."""
+@pytest.mark.parametrize("mode", ["whole_arm", "seed"])
+def test_croc_starts_with_a_sphere_in_a_box_the_link_is_clear_of_and_takes_it_no_deeper(ctx, settings, mode):
+    """whole_arm: its spheres cover the links only with the box margin: a small wall 4 mm from the gripper (FCL)
+    overlaps a finger sphere by 6 mm. seed: its spheres are generous (a stop before the warehouse wall under a
+    lagging controller left one 1 cm inside the wall's box). The start is not refused in either mode (nmpc, whose
+    NLP cannot start inside a box, refuses it); the plan reaches the goal and that sphere never goes deeper into
+    the wall than it started."""
     ts = transfer_scenes(1, 0, settings=settings)[0]
     q0 = ts.request.start
-    planner = make_planner(PlannerBlock(name="croc", params={"mode": "whole_arm"}), ctx)
+    planner = make_planner(PlannerBlock(name="croc", params={"mode": mode}), ctx)
     sph = planner.inner.spheres()
     c, r = sphere_positions(ctx.kinematics, q0, sph)[0, 0], sph[0, 4]  # a fingertip sphere
     out = ctx.kinematics.fk(q0)[:3, 0]  # the finger's outside: along the tcp's -x
@@ -166,8 +169,7 @@ def test_the_whole_arm_mode_starts_with_a_sphere_in_a_box_the_link_is_clear_of_a
     assert res.success, res.reason
     along = clearance(ctx.kinematics, densify_path(res.trajectory.q, 0.01), sph, wall, margin=0.0)
     assert along.min() >= start - 1e-3
-    seed = make_planner(PlannerBlock(name="croc"), ctx).inner
-    assert seed._refuses_sphere_overlap() and not planner.inner._refuses_sphere_overlap()
+    assert not planner.inner._refuses_sphere_overlap()
 
 
 def _surface(kind: str, size: tuple[float, ...]) -> np.ndarray:

@@ -87,6 +87,7 @@ class CrocPlanner(RecedingHorizonMPC):
 
     Params = CrocParams
     name = "croc"
+    _recovers_blocked_segments = True  # (twin_nmpc.receding): stress seed 110, a lagged fallback by the wall
     params: CrocParams
 
     def __init__(self, params: CrocParams | None, context: PluginContext):
@@ -183,10 +184,14 @@ class CrocPlanner(RecedingHorizonMPC):
         return self_violation(gaps, bound=self._self_bound(), tol=CHECK_TOL_M)
 
     def _refuses_sphere_overlap(self) -> bool:
-        """whole_arm: no. Its spheres cover the links only with the box margin, so one can overlap a box the link
-        is clear of (a fingertip sphere 7 mm into a bin wall from a start 1 cm clear of it); the rows let a sphere
-        that starts inside a margin-grown box come out but not go deeper, and FCL has judged the start."""
-        return self.params.mode == "seed"
+        """No, in both modes: the rows (`twin_croc.rows`) let a sphere that starts inside a margin-grown box come
+        out but not go deeper, and the loop's check holds it to the same, so FCL judges the start. whole_arm: its
+        spheres cover the links only with the box margin, so one can overlap a box the link is clear of (a
+        fingertip sphere 7 mm into a bin wall from a start 1 cm clear of it). seed: its spheres are generous;
+        under the stress set's lagging controller a free stop before the warehouse wall (the loop's recovery,
+        `RecedingHorizonMPC._recover`) left a proxy sphere 1 cm inside the wall's box with the gripper clear of
+        it, and refusing that start lost the cube (seeds 102, 110: "invalid_start")."""
+        return False
 
     def _boxes(self) -> list[Box]:
         """seed: the perceived boxes; whole_arm: every primitive of the scene as its axis-aligned box, but the

@@ -12,7 +12,8 @@ What the loop does the same for every solver:
   first solve of a goal fails, its checked initial guess is that plan), else a moving arm brakes to rest on a
   free stop and the loop solves again from there (`_recover`: from a measured state off the commanded one, a
   controller's lag, the rows near a box can leave no plan within the bounds, while from rest there is one),
-  and an arm at rest stops with a typed failure and a reason. The solve after a failure starts cold, from a
+  and an arm at rest stops with a typed failure and a reason (croc also recovers so from a segment that would
+  leave no free way to stop at its end). The solve after a failure starts cold, from a
   fresh guess.
 * The model knows the boxes and the table height, not necessarily the cell's fixtures (bins) nor the arm's
   own links: every segment is checked against the whole FCL scene it was given (at the configured
@@ -126,6 +127,9 @@ class RecedingHorizonMPC:
     # another `robot.model` and a comparison skips such a pair
     robot_models = frozenset({"ur5e"})
     name = "mpc"  # in log lines
+    # a segment that would leave no free way to stop at its end: brake to rest and solve again (`_recover`)
+    # rather than end the goal; croc's (its lagged fallbacks near the warehouse wall); nmpc's tests keep the end
+    _recovers_blocked_segments = False
 
     def __init__(self, params: RecedingParams | None, context: PluginContext):
         self.params = params if params is not None else self.Params()
@@ -407,6 +411,12 @@ class RecedingHorizonMPC:
             if stop is None:
                 kind = "fallback segment" if info.get("fallback") else "segment"
                 why = f"the next {kind} would leave no free way to stop at its end ({blocked})"
+                if self._recovers_blocked_segments and self._moving() and self._solves < self.params.max_solves:
+                    # a brake from here is free (checked when the last segment was commanded): to rest, solve again
+                    # (a fallback's steps from a lagged state, seed 110: "cube with obstacle" from its end)
+                    recovered = self._recover(knots[0], why, err, self.spheres(), self._boxes())
+                    if recovered is not None:
+                        return recovered
                 return self._end(Status.COLLISION, why, knots[0], hit=True)
         self._commit(knots)
         self._safe_stop = stop
@@ -420,11 +430,15 @@ class RecedingHorizonMPC:
         stop. From a measured state off the commanded one (a controller lagging 50 ms: ~0.07 rad behind at
         speed), with the step it was commanded, the rows near a box can leave no plan within the step and
         acceleration bounds, and the last plan's next steps do not pass from there either; from rest they can.
-        The stop must also pass the constraint check (the proxy spheres out of the boxes), or the solve from rest
-        would refuse its start (a stop FCL passed left a proxy sphere 1 cm inside the obstacle's box: "invalid_start").
-        Counted in `nmpc_recoveries`; `max_solves` bounds how often."""
+        Of the free stops, one that passes the constraint check is taken first; a formulation whose rows hold a
+        proxy sphere that starts inside a box no deeper (`_refuses_sphere_overlap` False: croc) then takes any
+        stop FCL passes. Near the warehouse wall no stop passed the constraint check (the shortest stop heads on
+        into the wall: a proxy sphere 1 cm inside its box, the gripper clear of it). Counted in
+        `nmpc_recoveries`; `max_solves` bounds how often."""
         stops = [k for k in (self._brake_knots(q), *self._kept_stop(q)) if k is not None]
-        knots, _ = self._free_stop(q, [k for k in stops if self._violation(k, sph, boxes) is None] or [None])
+        checked = [k for k in stops if self._violation(k, sph, boxes) is None]
+        starts = [] if self._refuses_sphere_overlap() else stops
+        knots, _ = self._free_stop(q, checked + starts or [None])
         if knots is None:
             return None
         log.info("%s: %s; braking to solve again from rest", self.name, why)
