@@ -436,9 +436,9 @@ class RecedingHorizonMPC:
         into the wall: a proxy sphere 1 cm inside its box, the gripper clear of it). Counted in
         `nmpc_recoveries`; `max_solves` bounds how often."""
         stops = [k for k in (self._brake_knots(q), *self._kept_stop(q)) if k is not None]
-        checked = [k for k in stops if self._violation(k, sph, boxes) is None]
-        starts = [] if self._refuses_sphere_overlap() else stops
-        knots, _ = self._free_stop(q, checked + starts or [None])
+        checked: list[np.ndarray | None] = [k for k in stops if self._violation(k, sph, boxes) is None]
+        starts: list[np.ndarray] = [] if self._refuses_sphere_overlap() else stops
+        knots, _ = self._free_stop(q, [*checked, *starts] or [None])
         if knots is None:
             return None
         log.info("%s: %s; braking to solve again from rest", self.name, why)
