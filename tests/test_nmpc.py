@@ -407,17 +407,21 @@ def test_a_failed_cold_solve_follows_its_checked_guess(nmpc, scenes, settings, c
     ts = scenes[5]
     segs, res = _loop(planner, ts.request, build_scene(settings, ts))
     # every solve fails: the arm follows the checked guess, one horizon (30 steps) of it, brakes to rest (the
-    # guess is cut after 30 steps, still moving) and then stops with a typed failure, because no solved plan
-    # ever existed; every step it took was clear
+    # guess is cut after 30 steps, still moving), tries once more from rest (a recovery: the solve fails again,
+    # the new guess is followed), as often as `max_solves` lets it, and then stops with a typed failure, because
+    # no solved plan ever existed; every step it took was clear
     followed = [s for s in segs if not s.info.get("braking")]
-    assert len(followed) == 30 and all(s.fallback and s.info["fallback"] for s in followed)
-    assert segs[30:] and all(s.info["braking"] and not s.fallback for s in segs[30:])
+    assert len(followed) >= 30 and all(s.fallback and s.info["fallback"] for s in followed)
+    assert all(s.info["braking"] and not s.fallback for s in segs[30 : 30 + 1])  # the brake after the first horizon
     assert segs[0].info.get("following") == "initial guess"
-    assert res.status is Status.NO_SOLUTION and "no feasible plan is left" in res.reason
-    assert res.info["fallback_steps"] == 30  # counted by the checked loop, not by the planner
+    assert res.status is Status.NO_SOLUTION and (
+        "no feasible plan is left" in res.reason or "not reached" in res.reason
+    )
+    assert res.info["fallback_steps"] == len(followed)  # counted by the checked loop, not by the planner
+    assert res.info["nmpc_recoveries"] >= 1 and res.info["nmpc_solves"] <= planner.params.max_solves
     _assert_clear(segs, ts, planner, settings, ctx)
     planned = planner.plan(ts.request, build_scene(settings, ts))  # the same through the one loop
-    assert planned.status is Status.NO_SOLUTION and planned.info["fallback_steps"] == 30
+    assert planned.status is Status.NO_SOLUTION and planned.info["fallback_steps"] == len(followed)
     assert planned.info["solves"] == len(segs)  # the checked loop counts every segment, braking too
 
 
@@ -470,10 +474,12 @@ def test_a_box_raised_around_the_arm_stops_it_with_a_reason_and_never_enters(nmp
         at_step=4,
         change=lambda sc: sc.add_box_bounds("perceived_obstacle", b.lo, b.hi + [0, 0, 0.05]),
     )
-    # the raised box cuts through the plan it was following: the next solve finds no way over from
-    # beside the wall, and the remainder of the old plan fails the check against the new box, so it stops
-    assert res.status is Status.NO_SOLUTION and "no feasible plan is left to follow" in res.reason, res
-    assert res.info["nmpc_solves"] <= 40
+    # the raised box cuts through the plan it was following: the next solve finds no way over from beside
+    # the wall, and the remainder of the old plan fails the check against the new box; the arm brakes to rest
+    # and solves again from there (a recovery): it either finds the way over the taller box or stops with a
+    # typed failure, and never enters the box
+    assert res.success or ("no feasible plan is left to follow" in res.reason and res.status is Status.NO_SOLUTION)
+    assert res.info["nmpc_recoveries"] >= 1 and res.info["nmpc_solves"] <= nmpc.params.max_solves
     _assert_clear(segs[4:], taller, nmpc, settings, ctx)
 
 
