@@ -85,6 +85,7 @@ CASES = [
         "jam",
     ),
     (_obj("place: released, but it lies outside the bin", stage="place"), "other"),
+    (_obj("calibration: the ArUco marker was not found: ArUco marker 0 not found in the image"), "calibration"),
     (
         _obj(
             "perception: never seen on the table (the run stopped: cannot reach the capture pose: capture: "

@@ -94,9 +94,10 @@ def classify_loss(obj: dict[str, Any], run: dict[str, Any] | None = None) -> str
     """The LOSS_CLASSES key of one object not placed: `obj` an outcome of a run's --json file (`objects`),
     `run` that file (its `calibration`, where the run reports one)."""
     calibration = (run or {}).get("calibration") or {}
-    if calibration.get("status") == "fallback":  # no marker in a view perception used (twin.types.CalibrationOutcome)
-        return "calibration"
     first = str(obj.get("error") or "").split("; then: ")[0]
+    # no marker in a view perception used (twin.types.CalibrationOutcome), or a run that ended for want of one
+    if calibration.get("status") == "fallback" or first.startswith("calibration:"):
+        return "calibration"
     stage = obj.get("stage") or first.partition(":")[0]
     failure = obj.get("failure")
     stopped = _STOPPED.search(first)
