@@ -69,7 +69,8 @@ def test_the_way_down_is_checked_in_the_branch_the_arm_moves_in_not_for_the_grip
     assert down.status is Status.SUCCESS
     # the path it checked is the one the movel runs: the same branch all the way to the same end
     assert np.abs(down.trajectory.q[-1] - way.path[-1]).max() < 1e-3
-    assert way.q_hover[2] > 0.0  # elbow up
+    # another way than the old choice's (another yaw in the arm's own elbow-down branch, or the elbow up)
+    assert way.yaw != yaw or np.abs(way.q_hover - q_hover_old).max() > 1e-3
     assert world.joint_positions() == pytest.approx(q0)  # chosen without moving
 
     # and it is the way the arm takes: to the hover in that branch, then straight down to the cube
@@ -128,3 +129,20 @@ def test_a_box_on_the_table_that_no_one_named_is_in_the_planning_scene_the_stage
     box = seen.unknown[0]
     assert np.all(box.lo[:2] <= truth[:2]) and np.all(truth[:2] <= box.hi[:2])
     assert box.lo[2] < 0.01 and box.hi[2] > 0.14  # from the table up to its top
+
+
+def test_the_ik_configurations_split_by_shoulder_and_elbow():
+    """The eight IK solutions of a hover are four arm configurations (shoulder in front or thrown over behind,
+    elbow either way), each with the wrist flipped: `choose_way_down` tries the arm's own configuration first,
+    however much more room another has (a campaign's marker hover took the thrown-over shoulder for its
+    centimetre of room, and the transfers after it folded the gripper into the forearm)."""
+    from twin.kinematics import UR5e
+    from twin.tasks.cell import _arm_configuration
+
+    kin = UR5e()
+    sols = kin.ik(top_down((-0.45, 0.1, 0.35), 0.3), all_wraps=False)
+    configs = [_arm_configuration(kin, q) for q in sols]
+    assert sorted(set(configs)) == [(False, False), (False, True), (True, False), (True, True)]
+    assert all(configs.count(c) == 2 for c in set(configs))
+    capture = np.array(load_config(ROOT / "configs/robocup.yaml").camera.capture_pose)
+    assert _arm_configuration(kin, capture) == (True, True)  # in front, elbow bent positive

@@ -21,6 +21,7 @@ from twin.config import PlannerBlock, Settings
 from twin.errors import ConfigError, PluginCrashed
 from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
+from twin.kinematics import URArm
 from twin.limit_check import RATIO_METRICS
 from twin.planning import (
     CheckedPlanner,
@@ -124,6 +125,14 @@ def note_failure(rec: FailureRecord, e: StageFailed, attempt: int) -> None:
 def clear_failure(rec: FailureRecord) -> None:
     """The object was placed after all: no failure is its."""
     rec.error = rec.failure = rec.stage = rec.planner = None
+
+
+def _arm_configuration(kin: URArm, q: np.ndarray) -> tuple[bool, bool]:
+    """Which of the arm's IK configurations q (6,) is, as (the tcp in front of the shoulder: along the way the pan
+    points the arm, not thrown over behind it; the elbow joint bent positive). Wrist flips do not count."""
+    pan = float(q[0])
+    reach = np.array([-math.cos(pan), -math.sin(pan)])  # with the pan at 0 the arm reaches towards -x
+    return bool(float(reach @ kin.fk(q)[:2, 3]) > 0.0), bool(q[2] > 0.0)
 
 
 def _or_refusal(move: Callable[[], MotionResult]) -> MotionResult | StageFailed:
@@ -514,10 +523,14 @@ class Cell:
 
         refused: dict[int, str] = {}  # the planner's refusals, by id of the way's q_hover: not planned twice
         padded = self.scene.padded(CHOOSE_CLEARANCE_M)
-        for scene, there in ((padded, True), (padded, False), (self.scene, True), (self.scene, False)):
+
+        def first(same_arm: bool, scene: PlanningScene, there: bool) -> WayDown | None:
+            """The first way (yaw in order, branch nearest first) among the branches in the arm's present
+            configuration (`same_arm`: `_arm_configuration`) or among the others, whose way down (and, `there`,
+            whose move there) is free in `scene`, and which the stage's planner plans."""
             for yaw in yaws:
                 for q_hover, path in ways(yaw):
-                    if id(q_hover) in refused:
+                    if (_arm_configuration(self.kin, q_hover) == arm0) is not same_arm or id(q_hover) in refused:
                         continue
                     if there and not scene.check_path(np.array([q0, q_hover]), resolution_rad=res).free:
                         continue
@@ -531,6 +544,16 @@ class Cell:
                     if plan.status is Status.SUCCESS:
                         return way
                     refused[id(q_hover)] = f"{plan.status.value}: {plan.reason}"
+            return None
+
+        arm0 = _arm_configuration(self.kin, q0)
+        # the arm as it is before the arm thrown over: a flipped shoulder or elbow 1 cm clear of a neighbour at the
+        # hover leaves the transfers after it a folded wrist to carry into the bins (its gripper into its forearm)
+        for same_arm in (True, False):
+            for scene, there in ((padded, True), (padded, False), (self.scene, True), (self.scene, False)):
+                found = first(same_arm, scene, there)
+                if found is not None:
+                    return found
         raise self._no_way_down(stage, target, yaws, tried, list(refused.values()))
 
     def _no_way_down(
