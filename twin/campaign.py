@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from twin.compare.spec import ComparePlanner, CompareSpec, TaskScenario
-from twin.failures import failure_of_task
+from twin.failures import FAILURES, failure_of_task
 from twin.faults import fault_overrides
 
 __all__ = [
@@ -46,22 +46,7 @@ _COMPARED_STAGES = frozenset({"transfer"})
 _STOPPED = re.compile(r"\(the run stopped: (.*)\)$")
 _NO_CAPTURE = "cannot reach the capture pose: "
 # failure names (twin.failures.FAILURES) a motion's planning or execution gives
-_MOTION_FAILURES = frozenset(
-    {
-        "start_in_collision",
-        "goal_in_collision",
-        "ik_failure",
-        "timeout",
-        "no_solution",
-        "collision",
-        "retiming_failed",
-        "final_check_collision",
-        "final_check_goal",
-        "limit_violation",
-        "execution_contact",
-        "plugin_error",
-    }
-)
+_MOTION_FAILURES = frozenset(FAILURES) - {"grasp_lost", "dependency_missing", "error"}
 
 
 def campaign_spec(

@@ -348,7 +348,7 @@ class WarehouseReferee:
         """Metrics: the true cube a perceived centroid (3,) was, or None."""
         return _nearest(self.truth.values(), np.asarray(centroid, dtype=float))
 
-    def outcomes(self, attempts: Sequence[WarehouseAttempt], *, global_error: str | None = None) -> list[ObjectOutcome]:
+    def outcomes(self, attempts: Sequence[WarehouseAttempt]) -> list[ObjectOutcome]:
         """One outcome per true cube; errors read "<stage>: <why>"."""
         task = self.settings.task.warehouse
         settle_until_rest(self.world)
@@ -366,7 +366,7 @@ class WarehouseReferee:
             if verdict.placed:
                 err = None
             elif att is None:
-                err = global_error or "perception: never seen on the table"
+                err = "perception: never seen on the table"
             elif att.error:
                 err, failure, stage, planner = att.error, att.failure, att.stage, att.planner
             elif knock := self.watch and self.watch.knocked(oid):
