@@ -27,6 +27,7 @@ from twin.camera import RGBDFrame, point_cloud
 from twin.config import WarehousePerceptionSettings
 from twin.perception.colors import classify_color
 from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
+from twin.perception.occlusion import fit_partly_seen_box
 from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
 from twin.timing import stage
 from twin.types import BoxBounds
@@ -34,6 +35,7 @@ from twin.types import BoxBounds
 __all__ = ["LabeledCube", "WarehouseResult", "perceive_warehouse"]
 
 log = logging.getLogger("twin")
+_PARTIAL_TOL_M = 0.008  # a footprint this much narrower than a cube's face is a cube seen only in part
 _SLACK_M = 0.01  # a cluster this far past the obstacle's box (a noisy face of it) still lies within it
 
 
@@ -107,6 +109,7 @@ def perceive_warehouse(
 
     with stage("perception.plane") as plane_stage:
         plane_cam, on_plane = _table_plane(pts, params, seed, o3d)
+        table_cam = pts[on_plane]  # free space, for a cube seen only in part
         pts, rgb = _rows(np.flatnonzero(~on_plane), pts, rgb)
     timings["plane"] = plane_stage.seconds
 
@@ -130,6 +133,7 @@ def perceive_warehouse(
         cubes: list[LabeledCube] = []
         unknown: list[BoxBounds] = []
         rejected = 0
+        table_base: np.ndarray | None = None
         table_z = _table_height(plane_base)
         T_camera_base = np.linalg.inv(T_base_camera)
         for cl in clusters:
@@ -153,6 +157,10 @@ def perceive_warehouse(
                     unknown.append(BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]))
                 continue
             centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
+            if params.partial_view_fit and _partly_seen(cl, params.cube_side_m):
+                if table_base is None:
+                    table_base = transform_points(T_base_camera, table_cam)
+                centroid = _fit_partly_seen(cl, centroid, params.cube_side_m, table_z, T_base_camera, table_base)
             cubes.append(
                 LabeledCube(
                     centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb
@@ -182,6 +190,32 @@ def _table_height(plane_base: Plane) -> float:
     """z of the table plane under the work area (the plane is nearly level in the base frame)."""
     nz = plane_base.normal[2]
     return float(plane_base.offset / nz) if abs(nz) > 1e-6 else 0.0
+
+
+def _partly_seen(cl: Cluster, side_m: float) -> bool:
+    """Whether the cluster's footprint is clearly narrower than a cube's face: the rest of the cube is
+    hidden (behind something taller, or cut off by the image's edge)."""
+    return footprint(cl.points).width < side_m - _PARTIAL_TOL_M
+
+
+def _fit_partly_seen(
+    cl: Cluster, centroid: np.ndarray, side_m: float, table_z: float, T_base_camera: np.ndarray, table: np.ndarray
+) -> np.ndarray:
+    """The centre of the cube of which `cl` is the visible part (twin.perception.occlusion): it contains
+    the visible points and blocks none of the table the camera saw."""
+    fit = fit_partly_seen_box(
+        cl.points, (side_m, side_m), side_m, table_z, T_base_camera[:3, 3], table, np.asarray(centroid[:2])
+    )
+    log.info(
+        "warehouse: a cube seen only in part (%d points, %.0f mm wide): fitted %.0f mm from the visible part's "
+        "centre (%d seen rays through it, %d points outside)",
+        cl.n_points,
+        1000 * footprint(cl.points).width,
+        1000 * fit.shift_m,
+        fit.free_rays_through,
+        fit.points_outside,
+    )
+    return np.array([fit.center_xy[0], fit.center_xy[1], table_z + side_m / 2])
 
 
 def _cube_centroid(cl: Cluster, table_z: float) -> np.ndarray:

@@ -51,6 +51,8 @@ class WarehousePerceptionSettings(ConfigModel):
     roi_max: Vec3 = (-0.10, 0.8, 0.30)
     box_extension_y_m: float = Field(0.5, ge=0)
     centroid: Literal["resting", "mean"] = "resting"
+    cube_side_m: float = Field(0.05, gt=0)
+    partial_view_fit: bool = True
 
 
 class WarehouseTaskSettings(ConfigModel):
