@@ -31,6 +31,11 @@ class WarehousePerceptionSettings(ConfigModel):
     the seed's `segment_plane` on the whole cloud, which on this machine returns different planes for the
     same seed now and then (open3d's RANSAC runs on several threads), so a run was not always repeatable.
     `voxel_m` 5 mm (the seed's pipeline used 4 mm: the same cube centroids, DBSCAN twice as fast).
+
+    `partial_view_fit` (not in the seed): a cube cluster whose footprint is clearly narrower than
+    `cube_side_m` is the visible part of a cube hidden in part behind something taller; its centre is the
+    cube pose that contains the visible points and blocks none of the table the camera saw
+    (`twin.perception.occlusion`) instead of the visible part's centre, up to half a side off.
     """
 
     min_depth_m: float = Field(0.25, ge=0)
