@@ -40,6 +40,9 @@ _GRIP_WIDTH_M = (_CUBE_M, _CUBE_M * np.sqrt(2.0))
 # A grip within this of the face width is square (under 6 deg off). Wider, the fingers hold the cube by two
 # edges, which turns and slips out under the transfer's accelerations: open, turn and grasp again.
 _SQUARE_TOL_M = 0.005
+# Narrower than the face by more than this (the pads sink 0.2-2 mm into a cube), the fingers hold a corner
+# of a cube that stands off the grasp point: such a grip slipped out on the ascent in 3 of 100 stress seeds
+_CORNER_TOL_M = 0.005
 _YAW_STEP = np.pi / 12  # the grasp and drop yaws tried, 15 deg apart
 
 
@@ -76,6 +79,12 @@ def _pick_and_place(cell: Cell, cube: LabeledCube, zone: tuple[float, float, flo
     grasp, yaw = _square_grasp(cell, c, way.yaw)
     if not grasp.holding:
         raise StageFailed("grasp", grasp.reason)
+    if grasp.opening_m < _CUBE_M - _CORNER_TOL_M:  # slips out on the ascent: let go and look again
+        raise StageFailed(
+            "grasp",
+            f"the fingers stopped at {1000 * grasp.opening_m:.1f} mm, narrower than the cube's "
+            f"{1000 * _CUBE_M:.0f} mm face: they hold it by a corner (it is not where it was seen)",
+        )
     cell.move_pose("ascent", top_down(hover, yaw))
     held = cell.check_holding()
     if not held.holding:
