@@ -498,11 +498,12 @@ class Cell:
         chosen before anything moves by checking the whole robot (every link, and what it holds) in the
         planning scene along the whole motion: for each of `yaws` (in order of preference) and each IK branch
         of the hover (nearest the measured joints first), the joint path the movel stage follows down
-        (`line_paths`) and the straight joint move the hover stage makes from here, every
-        `collision.check_resolution_rad`. The first way whose move there and way down keep
-        `CHOOSE_CLEARANCE_M` from the scene; else whose way down does; else the same merely clear. The way
-        down chosen is planned by the stage's own planner (without moving) before it is returned; a refused
-        one passes to the next.
+        (`line_paths`) and the ways `reach_hover` may take there from here (the straight joint move or one
+        of `move_joints_over`'s others), every `collision.check_resolution_rad`. In the arm's own
+        configuration first, then in another: the first way whose way down keeps `CHOOSE_CLEARANCE_M` from
+        the scene and which has a clear way there; else the same merely clear; only then a way down with no
+        clear way there. The way down chosen is planned by the stage's own planner (without moving) before
+        it is returned; a refused one passes to the next.
 
         The gripper alone may be clear where the arm is not: a cube far behind a wall is reached with the
         upper arm low over it, in some branches into it (`Cell.choose_top_down_yaw` checks the gripper).
@@ -524,6 +525,13 @@ class Cell:
         refused: dict[int, str] = {}  # the planner's refusals, by id of the way's q_hover: not planned twice
         padded = self.scene.padded(CHOOSE_CLEARANCE_M)
 
+        def reachable(q_hover: np.ndarray, scene: PlanningScene) -> bool:
+            """Whether `reach_hover` has a way from here to `q_hover` that is free in `scene`: the straight
+            joint move, or one of `move_joints_over`'s other ways."""
+            q = self.nearest_turn(q_hover)
+            legs = [[q0, q]] + [[q0, *via, q] for _, via, _ in self._other_ways(q0, q)]
+            return any(scene.check_path(np.array(way), resolution_rad=res).free for way in legs)
+
         def first(same_arm: bool, scene: PlanningScene, there: bool) -> WayDown | None:
             """The first way (yaw in order, branch nearest first) among the branches in the arm's present
             configuration (`same_arm`: `_arm_configuration`) or among the others, whose way down (and, `there`,
@@ -532,7 +540,7 @@ class Cell:
                 for q_hover, path in ways(yaw):
                     if (_arm_configuration(self.kin, q_hover) == arm0) is not same_arm or id(q_hover) in refused:
                         continue
-                    if there and not scene.check_path(np.array([q0, q_hover]), resolution_rad=res).free:
+                    if there and not reachable(q_hover, scene):
                         continue
                     if not scene.check_path(path, resolution_rad=res).free:
                         continue
@@ -549,11 +557,14 @@ class Cell:
         arm0 = _arm_configuration(self.kin, q0)
         # the arm as it is before the arm thrown over: a flipped shoulder or elbow 1 cm clear of a neighbour at the
         # hover leaves the transfers after it a folded wrist to carry into the bins (its gripper into its forearm)
-        for same_arm in (True, False):
-            for scene, there in ((padded, True), (padded, False), (self.scene, True), (self.scene, False)):
-                found = first(same_arm, scene, there)
-                if found is not None:
-                    return found
+        # a way down with no clear way there is the last resort, in either configuration: reach_hover would
+        # refuse it, after the task has committed to it
+        order = [(same, scene, True) for same in (True, False) for scene in (padded, self.scene)]
+        order += [(same, scene, False) for same in (True, False) for scene in (padded, self.scene)]
+        for same_arm, scene, there in order:
+            found = first(same_arm, scene, there)
+            if found is not None:
+                return found
         raise self._no_way_down(stage, target, yaws, tried, list(refused.values()))
 
     def _no_way_down(
@@ -711,21 +722,7 @@ class Cell:
         if isinstance(refused, MotionResult):
             return refused
         q0 = self.world.joint_positions()
-        raised = self._raised(q0)
-        # (name, the joints it passes through, whether its first leg is the rise straight up to `raised`)
-        ways: list[tuple[str, list[np.ndarray], bool]] = [
-            ("wrist first", [np.concatenate([q0[:3], q[3:]])], False),
-            ("arm first", [np.concatenate([q[:3], q0[3:]])], False),
-        ]
-        if raised is not None:
-            ways += [
-                ("up first", [raised], True),
-                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])], True),
-            ]
-        # the arm straight up (the "candle" posture): from it the elbow and wrist unfold either way, which a
-        # straight joint motion between two elbow branches cannot do without folding through itself
-        upright = np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])
-        ways.append(("through the upright posture", [upright], False))
+        ways = self._other_ways(q0, q)
         i = self._first_clear([[q0, *via, q] for _, via, _ in ways])
         if i is not None:
             name, via, rises = ways[i]
@@ -741,6 +738,26 @@ class Cell:
             np.round(q0, 3).tolist(),
         )
         raise refused
+
+    def _other_ways(self, q0: np.ndarray, q: np.ndarray) -> list[tuple[str, list[np.ndarray], bool]]:
+        """The ways `move_joints_over` tries from `q0` to `q` when the straight joint move is refused, in
+        order: (name, the joints it passes through, whether its first leg is the rise straight up to
+        `safe_height`)."""
+        raised = self._raised(q0)
+        ways: list[tuple[str, list[np.ndarray], bool]] = [
+            ("wrist first", [np.concatenate([q0[:3], q[3:]])], False),
+            ("arm first", [np.concatenate([q[:3], q0[3:]])], False),
+        ]
+        if raised is not None:
+            ways += [
+                ("up first", [raised], True),
+                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])], True),
+            ]
+        # the arm straight up (the "candle" posture): from it the elbow and wrist unfold either way, which a
+        # straight joint motion between two elbow branches cannot do without folding through itself
+        upright = np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])
+        ways.append(("through the upright posture", [upright], False))
+        return ways
 
     def reach_posture(self, stage: str, q: np.ndarray) -> MotionResult:
         """`move_joints_over` (home, the capture pose), and when a contact stops it on the way (an object
