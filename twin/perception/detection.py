@@ -126,6 +126,7 @@ class SceneCloud:
     timings_s: dict[str, float] = field(default_factory=dict)
     table_noise_m: float = 0.0
     table_threshold_m: float = 0.008
+    camera_origin: np.ndarray | None = None  # (3,) base frame: where the rays to the points start
 
     def select(self, pixels: np.ndarray) -> np.ndarray:
         """Indices into `points` of the given flat pixel indices (pixels without depth are skipped)."""
@@ -173,7 +174,8 @@ def scene_cloud(
         gains = white_balance_gains(rgb[::4][np.abs(height[::4]) < threshold], table_rgb)
         if gains is not None:
             rgb = np.clip(rgb * gains, 0.0, 1.0)
-    return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings, noise, threshold)
+    origin = np.asarray(T_base_camera, dtype=float)[:3, 3].copy()
+    return SceneCloud(base, rgb, pixels, plane, height, (H, W), timings, noise, threshold, origin)
 
 
 # a light whose colour moves the table's chromaticity by less than this is left alone: the rendered table

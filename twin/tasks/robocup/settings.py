@@ -75,7 +75,9 @@ class RobocupPerceptionSettings(ConfigModel):
     when they differ by more than `height_check_min_diff_m` (this fixes the seed's lying-can failure),
     and calls a class whose two heights are alike (the cube: the same shape either way) vertical.
     `grasp` keys are `<class>_<vertical|horizontal>`; entries given in a config replace the defaults key
-    by key.
+    by key. `partial_view_fit` (not in the seed): a lying cylinder whose footprint is clearly shorter than
+    it is seen only in part; its centre is the pose that holds the visible points and blocks none of the
+    table the camera saw (`twin.perception.occlusion`), not where ICP slid the model.
     """
 
     min_depth_m: float = Field(0.20, ge=0)
@@ -93,6 +95,7 @@ class RobocupPerceptionSettings(ConfigModel):
     alpha3_vertical_deg: float = Field(30.0, gt=0, lt=90)
     force_vertical: list[str] = Field(default_factory=lambda: ["spam"])
     height_check: bool = True
+    partial_view_fit: bool = True
     height_check_min_diff_m: float = Field(0.015, ge=0)
     icp: IcpSettings = Field(default_factory=IcpSettings)
     grasp: dict[str, GraspEntry] = Field(default_factory=_default_grasp_table)
