@@ -20,7 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BoxFit", "fit_partly_seen_box"]
+__all__ = ["PARTIAL_VIEW_TOL_M", "BoxFit", "fit_partly_seen_box"]
+
+# a cluster whose footprint is this much shorter (or narrower) than the object it is of is that object seen
+# only in part: the footprint of a whole one is its size within a few mm of depth noise
+PARTIAL_VIEW_TOL_M = 0.008
 
 _COARSE_YAW = np.radians(6.0)
 _FINE_YAW = np.radians(0.5)

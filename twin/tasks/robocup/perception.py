@@ -43,7 +43,7 @@ from twin.camera import RGBDFrame
 from twin.config import RobocupPerceptionSettings, Settings
 from twin.perception.detection import Detection, Detector, SceneCloud, scene_cloud
 from twin.perception.geometry import NearestNeighbors, pca, rot_z, trimmed_icp
-from twin.perception.occlusion import fit_partly_seen_box
+from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
 from twin.perception.segmentation import footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.timing import stage
@@ -70,7 +70,6 @@ log = logging.getLogger("twin")
 
 Orientation = Literal["vertical", "horizontal"]
 CYLINDERS = ("bottle", "can", "marker")
-_PARTIAL_TOL_M = 0.008  # a footprint this much shorter than the object is an object seen only in part
 
 
 def wrap_half_turn(a: float) -> float:
@@ -328,7 +327,7 @@ def _estimate(
                 position = np.array([fp.center[0], fp.center[1], centroid_pca[2]])
                 yaw, source = fp.angle + math.pi / 2, "footprint"
             if orient == "horizontal" and det.cls in CYLINDERS and params.partial_view_fit:
-                seen = _partly_seen_lying(det.cls, pts, cloud, position, yaw)
+                seen = _partly_seen_lying(det.cls, pts, cloud, position)
                 if seen is not None:
                     position, source = seen, f"{source}+partial"
     timings["icp"] = icp_stage.seconds
@@ -358,9 +357,7 @@ def _estimate(
     )
 
 
-def _partly_seen_lying(
-    cls: str, pts: np.ndarray, cloud: SceneCloud, position: np.ndarray, yaw: float
-) -> np.ndarray | None:
+def _partly_seen_lying(cls: str, pts: np.ndarray, cloud: SceneCloud, position: np.ndarray) -> np.ndarray | None:
     """The centre of a lying cylinder seen only in part (its footprint clearly shorter than the cylinder: an
     end hidden behind something, or out of the image), from what is seen of it and of the table around it
     (`twin.perception.occlusion`, its box as long and wide as the cylinder); None when it is seen whole. ICP
@@ -369,7 +366,7 @@ def _partly_seen_lying(
     if cloud.camera_origin is None:
         return None
     d, length = OBJECT_TEMPLATES[cls].size[0], OBJECT_TEMPLATES[cls].size[2]
-    if footprint(pts).length >= length - _PARTIAL_TOL_M:
+    if footprint(pts).length >= length - PARTIAL_VIEW_TOL_M:
         return None
     table = cloud.points[np.abs(cloud.height) < cloud.table_threshold_m]
     table_z = _table_z(cloud, float(position[0]), float(position[1]))

@@ -27,7 +27,7 @@ from twin.camera import RGBDFrame, point_cloud
 from twin.config import WarehousePerceptionSettings
 from twin.perception.colors import classify_color
 from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
-from twin.perception.occlusion import fit_partly_seen_box
+from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
 from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
 from twin.timing import stage
 from twin.types import BoxBounds
@@ -35,7 +35,6 @@ from twin.types import BoxBounds
 __all__ = ["LabeledCube", "WarehouseResult", "perceive_warehouse"]
 
 log = logging.getLogger("twin")
-_PARTIAL_TOL_M = 0.008  # a footprint this much narrower than a cube's face is a cube seen only in part
 _SLACK_M = 0.01  # a cluster this far past the obstacle's box (a noisy face of it) still lies within it
 
 
@@ -195,7 +194,7 @@ def _table_height(plane_base: Plane) -> float:
 def _partly_seen(cl: Cluster, side_m: float) -> bool:
     """Whether the cluster's footprint is clearly narrower than a cube's face: the rest of the cube is
     hidden (behind something taller, or cut off by the image's edge)."""
-    return footprint(cl.points).width < side_m - _PARTIAL_TOL_M
+    return footprint(cl.points).width < side_m - PARTIAL_VIEW_TOL_M
 
 
 def _fit_partly_seen(
