@@ -54,3 +54,34 @@ def test_a_lagging_controller_does_not_lose_the_goal(mode: str, index: int) -> N
     assert biggest <= 0.15 + 1e-7  # what was commanded kept the step bound
     # the case is the one meant: some solve from a lagged state was rejected, and the loop went on
     assert any("rejected" in e for e in log)
+
+
+def test_a_plan_that_runs_into_a_collision_ahead_is_braked_and_solved_again() -> None:
+    """Warehouse stress seed 1160 (croc): a warm plan bent the upper arm into the held cube (gripped across two
+    edges) a few steps ahead; the loop braked to a stop and ended the goal ("the plan runs into a collision
+    (upper_arm_link with cube) within 4 steps; braked to a stop"), and the cube was lost. Now it brakes to rest
+    and solves again cold, as for a segment with no free stop. Here such a verdict is forced on a nominal
+    transfer (before, the goal ended there; from rest a cold solve may still find no plan, and then it ends)."""
+    settings = load_config("warehouse")
+    ctx = make_context(settings)
+    ts = transfer_scenes(5, 0, settings=settings)[2]
+    scene = build_scene(settings, ts)
+    planner = make_planner(PlannerBlock(name="croc", params={"dt": 0.08}), ctx)
+    planner.reset(ts.request, scene)
+    inner = planner.inner
+    real, calls = inner._collision_ahead, []
+
+    def ahead(knots: np.ndarray) -> tuple[str, int] | None:
+        calls.append(knots)
+        return ("upper_arm_link with cube", 4) if len(calls) == 6 else real(knots)  # the arm at speed by then
+
+    inner._collision_ahead = ahead
+    q = ts.request.start.copy()
+    for _ in range(300):
+        out = planner.step(q)
+        if isinstance(out, MotionResult):
+            break
+        q = out.trajectory.q[-1]
+    assert len(calls) > 6, "the loop went on after the forced verdict"
+    assert isinstance(out, MotionResult) and out.success, out.reason
+    assert inner._recoveries == 1

@@ -127,8 +127,9 @@ class RecedingHorizonMPC:
     # another `robot.model` and a comparison skips such a pair
     robot_models = frozenset({"ur5e"})
     name = "mpc"  # in log lines
-    # a segment that would leave no free way to stop at its end: brake to rest and solve again (`_recover`)
-    # rather than end the goal; croc's (its lagged fallbacks near the warehouse wall); nmpc's tests keep the end
+    # a segment that would leave no free way to stop at its end, or a plan that runs into a collision a few
+    # steps ahead: brake to rest and solve again (`_recover`, at most `max_solves` solves in all) rather than end
+    # the goal; croc's (its lagged fallbacks near the warehouse wall); nmpc's tests keep the end
     _recovers_blocked_segments = False
 
     def __init__(self, params: RecedingParams | None, context: PluginContext):
@@ -401,6 +402,12 @@ class RecedingHorizonMPC:
             if ahead is not None:
                 pair, n = ahead
                 why = f"the plan runs into a collision ({pair}) within {n} step{'' if n == 1 else 's'}"
+                if self._recovers_blocked_segments and self._moving() and self._solves < self.params.max_solves:
+                    # as for a blocked segment: to rest by a free stop, and a cold solve from there (stress seed
+                    # 1160: a warm plan bent the upper arm into the held cube, held across two edges)
+                    recovered = self._recover(knots[0], why, err, self.spheres(), self._boxes())
+                    if recovered is not None:
+                        return recovered
                 return self._end(Status.COLLISION, why, knots[0], hit=True)
         elif hit is not None:
             kind = "braking segment" if braking else ("fallback segment" if info.get("fallback") else "segment")
