@@ -203,14 +203,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_verbosity(parser, after_command=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    _add_planners_parser(sub)
+    _add_scene_parser(sub)
+    _add_plan_parser(sub)
+    _add_run_parser(sub)
+    _add_compare_parser(sub)
+    _add_perceive_parser(sub)
+    _add_calibrate_parser(sub)
+    _add_replay_parser(sub)
+    _add_check_planner_parser(sub)
+    add_exchange_parsers(sub)
+    for p in {id(p): p for p in sub.choices.values()}.values():  # `twin run X -v` as `twin -v run X`
+        _add_verbosity(p, after_command=True)
+    return parser
 
+
+def _add_planners_parser(sub: Any) -> None:
+    """`twin planners`."""
     p = sub.add_parser("planners", help="list every registered planner, retimer and detector")
     p.add_argument("--json", dest="json_path", default=None, help="also write the list to this JSON file")
 
+
+def _add_scene_parser(sub: Any) -> None:
+    """`twin scene`."""
     p = sub.add_parser("scene", help="build a scene and render it from the configured camera and an overview")
     _add_config_args(p)
     p.add_argument("--snapshot", required=True, help="output PNG (camera view | overview side by side)")
 
+
+def _add_plan_parser(sub: Any) -> None:
+    """`twin plan`."""
     p = sub.add_parser("plan", help="plan one motion query with a named planner")
     _add_config_args(p)
     p.add_argument(
@@ -242,6 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", dest="json_path", default=None, help="write status, reason, planning_time_s and t, q, qd, qdd here"
     )
 
+
+def _add_run_parser(sub: Any) -> None:
+    """`twin run`."""
     p = sub.add_parser("run", help="run a sorting task end to end (perception to placed objects) and judge it")
     _add_config_args(p)
     p.add_argument(
@@ -276,6 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--json", dest="json_path", default=None, help="write the run summary here")
 
+
+def _add_compare_parser(sub: Any) -> None:
+    """`twin compare`."""
     p = sub.add_parser(
         "compare", help="compare planners: planners x scenarios x seeds -> results.jsonl, summary, plots"
     )
@@ -335,6 +363,9 @@ def build_parser() -> argparse.ArgumentParser:
         "the p95), planning_time_abs_s=0.005, duration=0.05 (relative)",
     )
 
+
+def _add_perceive_parser(sub: Any) -> None:
+    """`twin perceive`."""
     p = sub.add_parser(
         "perceive", help="run the configured perception pipeline on a seeded scene and score it against ground truth"
     )
@@ -346,12 +377,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", dest="json_path", default=None, help="write objects, false_positives, calibration, timings here"
     )
 
+
+def _add_calibrate_parser(sub: Any) -> None:
+    """`twin calibrate`."""
     p = sub.add_parser(
         "calibrate", help="estimate the camera-to-base transform from the base ArUco marker; error against the truth"
     )
     _add_config_args(p)
     p.add_argument("--json", dest="json_path", default=None, help="write the calibration (errors and poses) here")
 
+
+def _add_replay_parser(sub: Any) -> None:
+    """`twin replay`."""
     p = sub.add_parser(
         "replay", help="run one comparison row again with a Rerun recording, and say what differs from the stored row"
     )
@@ -359,6 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run_id", help="the row's run_id (the summary lists the replay command of each failed row)")
     p.add_argument("--rerun", required=True, metavar="OUT.rrd", help="where the recording goes (needs twin[viz])")
 
+
+def _add_check_planner_parser(sub: Any) -> None:
+    """`twin check-planner`."""
     p = sub.add_parser(
         "check-planner", help="check a planner against the planner contract (twin.testing.check_planner)"
     )
@@ -383,10 +423,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--json", dest="json_path", default=None, help="write the verdict of every rule and the requests asked here"
     )
-    add_exchange_parsers(sub)
-    for p in {id(p): p for p in sub.choices.values()}.values():  # `twin run X -v` as `twin -v run X`
-        _add_verbosity(p, after_command=True)
-    return parser
 
 
 def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) -> Any:
