@@ -16,7 +16,8 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from twin.compare.metrics import METRICS, TIMINGS
-from twin.compare.report import (
+from twin.compare.stats import MIN_DISCORDANT, SIGNIFICANCE, is_tie
+from twin.compare.summary import (
     ALL,
     SUCCESS,
     PairedComparison,
@@ -25,7 +26,6 @@ from twin.compare.report import (
     by_problem,
     paired_comparison,
 )
-from twin.compare.stats import MIN_DISCORDANT, SIGNIFICANCE, is_tie
 
 __all__ = ["VERDICT_METRICS", "Verdict", "p_text", "verdicts"]
 
