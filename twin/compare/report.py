@@ -57,8 +57,8 @@ from twin.compare.stats import (
     is_tie,
 )
 from twin.compare.summary import (
-    _DEFS,
     ALL,
+    METRIC_DEFS,
     PAIRED_KEYS,
     SUCCESS,
     SWEEP_TIME_KEYS,
@@ -254,7 +254,7 @@ def write_summary(summary: Summary, out_dir: str | Path) -> list[Path]:
     `SweepPoint`); returns the paths."""
     out = Path(out_dir)
     csv_path, md_path, paired_path = out / "summary.csv", out / "summary.md", out / "paired.csv"
-    keys = [d.key for d in _DEFS]
+    keys = [d.key for d in METRIC_DEFS]
     try:
         with open(csv_path, "w", newline="", encoding="utf-8") as f:
             w = csv.writer(f)
@@ -323,7 +323,7 @@ _REPLAYS_LISTED = 3  # failed rows per planner whose replay command summary.md l
 
 def summary_markdown(summary: Summary) -> str:
     """summary.md's text (also the body of summary.html)."""
-    defs = {d.key: d for d in _DEFS}
+    defs = {d.key: d for d in METRIC_DEFS}
     keys = summary.metric_keys()
     planners = [r.planner for r in summary.overall]
     lines = ["# Planner comparison", ""]
@@ -408,7 +408,7 @@ def summary_markdown(summary: Summary) -> str:
                 name = re.sub(r"[^A-Za-z0-9]+", "_", rid.rsplit("|", 1)[0]).strip("_")
                 lines.append(f"- {r.planner}: `twin replay results.jsonl '{rid}' --rerun {name}.rrd`")
     lines += ["", "## Metric definitions", ""]
-    lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in _DEFS if d.key in keys]
+    lines += [f"- `{d.key}` ({d.unit or 'count'}): {d.description}" for d in METRIC_DEFS if d.key in keys]
     return "\n".join(lines) + "\n"
 
 
@@ -519,7 +519,7 @@ def summary_table(summary: Summary, *, title: str = "planner comparison") -> Tab
     from rich.markup import escape
     from rich.table import Table
 
-    defs = {d.key: d for d in _DEFS}
+    defs = {d.key: d for d in METRIC_DEFS}
     keys = [k for k in _TABLE_KEYS if k in summary.metric_keys()]
     keys += [k for k in ("task_success_rate", "cycle_time_s") if k in summary.metric_keys()]
     table = Table(title=title, caption=INTERVALS)

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ALL",
+    "METRIC_DEFS",
     "PAIRED_KEYS",
     "SUCCESS",
     "SWEEP_TIME_KEYS",
@@ -49,8 +50,8 @@ __all__ = [
 ]
 
 ALL = "all"  # the scenario column of a planner's overall row
-_DEFS: tuple[MetricDef, ...] = METRICS + TIMINGS
-_BETTER = {d.key: d.better for d in _DEFS}
+METRIC_DEFS: tuple[MetricDef, ...] = METRICS + TIMINGS  # every metric and timing a summary has
+_BETTER = {d.key: d.better for d in METRIC_DEFS}
 
 PAIRED_KEYS = ("planning_time_s", "duration_s")  # metrics compared pair by pair with the reference
 SUCCESS = "success"  # the metric name of the paired success comparison
@@ -235,7 +236,7 @@ class Summary:
 
     def metric_keys(self) -> list[str]:
         """Metrics that have at least one value (the others would be empty columns)."""
-        return [d.key for d in _DEFS if any(r.stats[d.key].n for r in self.overall)]
+        return [d.key for d in METRIC_DEFS if any(r.stats[d.key].n for r in self.overall)]
 
     def row(self, planner: str, scenario: str = ALL) -> SummaryRow | None:
         """The row of `planner` on `scenario` (ALL: overall), None if it has no runs there."""
@@ -275,7 +276,7 @@ def _summarize(rows: list[dict[str, Any]], planner: str, scenario: str) -> Summa
         d.key: Stat.of(
             [v for r in rows if (v := _value(r, d.key)) is not None], seed=stable_seed(planner, scenario, d.key)
         )
-        for d in _DEFS
+        for d in METRIC_DEFS
     }
     with_pair = [
         (v, r["clearance_pair"])
