@@ -8,19 +8,28 @@ read a half-written one; the content depends on the marker alone, so whoever wri
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from twin.config import ArucoSettings
 from twin.errors import ConfigError, WorldError
 from twin.resources import cache_dir
 from twin.scene_layout import MARKER_MARGIN_FRACTION
 
-__all__ = ["MARKER_PX", "marker_quad_obj", "write_atomic"]
+__all__ = ["MARKER_PX", "digest", "marker_quad_obj", "write_atomic"]
 
 MARKER_PX = 600  # texture pixels across the black marker square
 _MARKER_ASSET_VERSION = "v1"  # bump when the generated marker files change shape
+
+
+def digest(obj: Any, n: int = 8) -> str:
+    """A short stable hash of JSON-able data (key order does not matter): run ids, cached assets' names."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:n]
 
 
 def write_atomic(path: Path, data: bytes) -> None:

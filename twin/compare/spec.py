@@ -56,7 +56,6 @@ value the config rejects is a ConfigError naming the scenario, the key and what 
 from __future__ import annotations
 
 import difflib
-import hashlib
 import itertools
 import json
 import math
@@ -80,6 +79,7 @@ from pydantic import (
     model_validator,
 )
 
+from twin.assets import digest
 from twin.config import PlannerBlock, apply_override, find_config, load_config, read_yaml
 from twin.config.loader import unknown_key_hint
 from twin.errors import ConfigError
@@ -487,12 +487,6 @@ class Case(NamedTuple):
 
 
 # ---- runs ----------------------------------------------------------------------------------------
-def digest(obj: Any, n: int = 8) -> str:
-    """A short stable hash of JSON-able data (key order does not matter)."""
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()[:n]
-
-
 def config_digest(path: str | Path, overrides: Iterable[str] = ()) -> str:
     """Hash of a scene/task config as loaded (after `extends` and overrides), so an edit to the file that
     changes what a run does changes the run ids, and a comment or a moved checkout does not."""

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.assets import digest
 from twin.errors import ConfigError
 from twin.problems.model import (
     BoxShape,
@@ -105,7 +106,6 @@ def object_urdf(obj: CollisionObject) -> Path:
     """The URDF of one object (a static link whose collision and visual elements are its primitives, in
     the world frame), written to twin's cache on first use."""
     from twin.assets import write_atomic
-    from twin.compare.spec import digest
     from twin.resources import cache_dir
 
     body = []
