@@ -12,8 +12,9 @@ from typing import Any
 
 import pytest
 
-from twin.compare.report import INTERVALS, Summary, summarize, summary_table, sweep_tables, write_summary
-from twin.compare.stats import wilson_ci
+from twin.compare.report import summarize, summary_table, sweep_tables, write_summary
+from twin.compare.stats import INTERVALS, wilson_ci
+from twin.compare.summary import Summary
 
 
 def run(planner: str, seed: int, *, success: bool, level: int = 1, duration_s: float = 1.0) -> dict[str, Any]:

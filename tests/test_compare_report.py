@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from tests.test_compare_stats import row
-from twin.compare.report import ALL, summarize, write_summary
+from twin.compare.report import summarize, write_summary
 from twin.compare.stats import MIN_DISCORDANT
+from twin.compare.summary import ALL
 from twin.compare.verdicts import verdicts
 
 

@@ -13,17 +13,9 @@ import numpy as np
 import pytest
 
 from twin.compare.metrics import METRIC_KEYS, TIMING_KEYS
-from twin.compare.report import (
-    ALL,
-    MIN_DISCORDANT,
-    Stat,
-    bootstrap_ci,
-    is_tie,
-    summarize,
-    summary_table,
-    write_summary,
-)
-from twin.compare.stats import wilson_ci
+from twin.compare.report import summarize, summary_table, write_summary
+from twin.compare.stats import MIN_DISCORDANT, bootstrap_ci, is_tie, wilson_ci
+from twin.compare.summary import ALL, Stat
 from twin.errors import ConfigError
 
 

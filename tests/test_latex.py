@@ -23,8 +23,9 @@ from tests.cli_runner import ROOT, twin
 from tests.test_compare_stats import row
 from twin.cli import main
 from twin.compare.latex import latex_escape, latex_table, read_result_rows
-from twin.compare.report import Provenance, summarize, write_summary
+from twin.compare.report import summarize, write_summary
 from twin.compare.stats import wilson_ci
+from twin.compare.summary import Provenance
 from twin.errors import ConfigError
 from twin.problems import ProblemSet
 from twin.problems.model import JointGoalSpec, Problem, RobotSpec

@@ -9,7 +9,8 @@ import html
 from collections.abc import Sequence
 from pathlib import Path
 
-from twin.compare.report import Summary, summary_markdown
+from twin.compare.report import summary_markdown
+from twin.compare.summary import Summary
 from twin.errors import ConfigError
 
 __all__ = ["PLOT_CAPTIONS", "write_html"]

@@ -18,8 +18,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from twin.compare.report import Stat, Summary, SummaryRow, _fmt, summarize
+from twin.compare.report import _fmt, summarize
 from twin.compare.stats import BOOTSTRAP_RESAMPLES, CONFIDENCE
+from twin.compare.summary import Stat, Summary, SummaryRow
 from twin.errors import ConfigError
 
 __all__ = ["DEFAULT_LABEL", "latex_escape", "latex_report", "latex_table", "read_result_rows", "write_latex"]

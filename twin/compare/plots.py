@@ -26,14 +26,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.compare.report import ALL
+from twin.compare.summary import ALL
 from twin.errors import ConfigError, DependencyMissing
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from twin.compare.report import Stat, Summary, SummaryRow, SweepPoint
+    from twin.compare.summary import Stat, Summary, SummaryRow, SweepPoint
 
 __all__ = ["BOX_PLOTS", "BoxPlot", "best_first", "comparison_figures", "sweep_figures", "write_plots"]
 

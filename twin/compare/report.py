@@ -48,30 +48,21 @@ from typing import TYPE_CHECKING, Any
 
 from twin.compare.metrics import FAILURES, MetricDef
 from twin.compare.stats import (
-    BOOTSTRAP_RESAMPLES,
-    CONFIDENCE,
     INTERVALS,
     MIN_DISCORDANT,
     SIGNIFICANCE,
-    bootstrap_ci,
-    is_tie,
 )
 from twin.compare.summary import (
     ALL,
     METRIC_DEFS,
     PAIRED_KEYS,
     SUCCESS,
-    SWEEP_TIME_KEYS,
-    PairedComparison,
     Provenance,
     Stat,
     Summary,
     SummaryRow,
     SweepPoint,
-    by_problem,
-    paired_comparison,
     summary_of,
-    sweep_points,
 )
 from twin.compare.verdicts import p_text, verdicts
 from twin.errors import ConfigError
@@ -80,28 +71,9 @@ if TYPE_CHECKING:
     from rich.table import Table
 
 __all__ = [
-    "ALL",
-    "BOOTSTRAP_RESAMPLES",
-    "CONFIDENCE",
-    "INTERVALS",
-    "MIN_DISCORDANT",
-    "PAIRED_KEYS",
-    "SUCCESS",
-    "SWEEP_TIME_KEYS",
-    "PairedComparison",
-    "Provenance",
-    "Stat",
-    "Summary",
-    "SummaryRow",
-    "SweepPoint",
-    "bootstrap_ci",
-    "by_problem",
-    "is_tie",
-    "paired_comparison",
     "summarize",
     "summary_markdown",
     "summary_table",
-    "sweep_points",
     "sweep_tables",
     "write_summary",
 ]

@@ -81,7 +81,7 @@ class CompareResult:
     ran: int  # runs executed by this call
     resumed: int  # runs found finished in results.jsonl and not redone
     skipped: list[tuple[str, str]]  # (run_id, reason) of runs that could not run here
-    summary: Any  # twin.compare.report.Summary
+    summary: Any  # twin.compare.summary.Summary
     files: list[Path] = field(default_factory=list)
     wall_time_s: float = 0.0
     retried: int = 0  # runs whose earlier row ended in 'error' and that ran again
@@ -753,7 +753,8 @@ def run_comparison(
     latest = dict(finished)
     latest.update({row["run_id"]: row for row in new_rows})  # a rerun replaces its 'error' row
     rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
-    from twin.compare.report import Provenance, summarize, write_summary
+    from twin.compare.report import summarize, write_summary
+    from twin.compare.summary import Provenance
 
     skipped_ids = {rid for rid, _ in skipped}
     skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
