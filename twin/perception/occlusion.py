@@ -100,11 +100,12 @@ def _rays_near(o: np.ndarray, table: np.ndarray, table_z: float, h: float, c: np
     return p[d < r]
 
 
-def _centres(q: np.ndarray, half: np.ndarray, step: float, near: tuple[np.ndarray, float] | None) -> np.ndarray:
-    """(c, 2) candidate centres, in the box's axes, of a box that holds the visible points `q` (n, 2; the box's
-    axes): a grid over the interval each axis allows (the middle when the points spread wider than the box),
-    within `near` (centre (2,) in the box's axes, half width) when given."""
-    lo_q, hi_q = np.percentile(q, [_KEEP_PCT, 100.0 - _KEEP_PCT], axis=0)
+def _centres(
+    lo_q: np.ndarray, hi_q: np.ndarray, half: np.ndarray, step: float, near: tuple[np.ndarray, float] | None
+) -> np.ndarray:
+    """(c, 2) candidate centres, in the box's axes, of a box that holds the visible points spanning `lo_q` to
+    `hi_q` (2,) in the box's axes: a grid over the interval each axis allows (the middle when the points spread
+    wider than the box), within `near` (centre (2,) in the box's axes, half width) when given."""
     axes = []
     for k in range(2):
         lo, hi = hi_q[k] - half[k] - _INSIDE_TOL_M, lo_q[k] + half[k] + _INSIDE_TOL_M
@@ -113,13 +114,6 @@ def _centres(q: np.ndarray, half: np.ndarray, step: float, near: tuple[np.ndarra
         axes.append(np.arange(lo, hi + 1e-9, step) if hi > lo else np.array([(lo + hi) / 2]))
     gu, gv = np.meshgrid(axes[0], axes[1], indexing="ij")
     return np.column_stack([gu.ravel(), gv.ravel()])
-
-
-def _holds(q: np.ndarray, half: np.ndarray) -> bool:
-    """Whether a box of half extents `half` at some centre holds the points `q` (n, 2; the box's axes), all but
-    the outermost `_KEEP_PCT` % at each side, give or take the noise."""
-    lo_q, hi_q = np.percentile(q, [_KEEP_PCT, 100.0 - _KEEP_PCT], axis=0)
-    return bool(np.all(hi_q - lo_q <= 2.0 * (half[:2] + _INSIDE_TOL_M)))
 
 
 def _search(
@@ -139,12 +133,14 @@ def _search(
     zc = table_z + half[2]
     found: list[tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]] = []  # per yaw: centres, scores
     turns = [np.array([[np.cos(y), np.sin(y)], [-np.sin(y), np.cos(y)]]) for y in yaws]  # world x, y -> box axes
-    fits = [_holds(pts[:, :2] @ R.T, half) for R in turns]
-    for yaw, R, holds in zip(yaws, turns, fits, strict=True):
+    seen = [pts[:, :2] @ R.T for R in turns]
+    # the points' span in the box's axes, all but the outermost `_KEEP_PCT` % at each side
+    spans = [np.percentile(q, [_KEEP_PCT, 100.0 - _KEEP_PCT], axis=0) for q in seen]
+    fits = [bool(np.all(hi - lo <= 2.0 * (half[:2] + _INSIDE_TOL_M))) for lo, hi in spans]
+    for yaw, R, q, (lo_q, hi_q), holds in zip(yaws, turns, seen, spans, fits, strict=True):
         if any(fits) and not holds:  # the points spread wider than the box at this yaw: not its yaw
             continue
-        q = pts[:, :2] @ R.T
-        cq = _centres(q, half, step, None if near is None else (R @ near[0], near[1]))
+        cq = _centres(lo_q, hi_q, half, step, None if near is None else (R @ near[0], near[1]))
         q = q[:: -(-len(q) // _MAX_POINTS) or 1]  # scored on an even sample of the points
         # how far each visible point lies outside the box (scored from the box's faces, so that noise
         # either side centres it; counted beyond the noise)

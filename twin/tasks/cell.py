@@ -524,12 +524,13 @@ class Cell:
 
         refused: dict[int, str] = {}  # the planner's refusals, by id of the way's q_hover: not planned twice
         padded = self.scene.padded(CHOOSE_CLEARANCE_M)
+        raised = self._raised(q0)
 
         def reachable(q_hover: np.ndarray, scene: PlanningScene) -> bool:
             """Whether `reach_hover` has a way from here to `q_hover` that is free in `scene`: the straight
             joint move, or one of `move_joints_over`'s other ways."""
             q = self.nearest_turn(q_hover)
-            legs = [[q0, q]] + [[q0, *via, q] for _, via, _ in self._other_ways(q0, q)]
+            legs = [[q0, q]] + [[q0, *via, q] for _, via, _ in self._other_ways(q0, q, raised)]
             return any(scene.check_path(np.array(way), resolution_rad=res).free for way in legs)
 
         def first(same_arm: bool, scene: PlanningScene, there: bool) -> WayDown | None:
@@ -722,7 +723,7 @@ class Cell:
         if isinstance(refused, MotionResult):
             return refused
         q0 = self.world.joint_positions()
-        ways = self._other_ways(q0, q)
+        ways = self._other_ways(q0, q, self._raised(q0))
         i = self._first_clear([[q0, *via, q] for _, via, _ in ways])
         if i is not None:
             name, via, rises = ways[i]
@@ -739,11 +740,12 @@ class Cell:
         )
         raise refused
 
-    def _other_ways(self, q0: np.ndarray, q: np.ndarray) -> list[tuple[str, list[np.ndarray], bool]]:
+    def _other_ways(
+        self, q0: np.ndarray, q: np.ndarray, raised: np.ndarray | None
+    ) -> list[tuple[str, list[np.ndarray], bool]]:
         """The ways `move_joints_over` tries from `q0` to `q` when the straight joint move is refused, in
         order: (name, the joints it passes through, whether its first leg is the rise straight up to
-        `safe_height`)."""
-        raised = self._raised(q0)
+        `raised`, `_raised(q0)`)."""
         ways: list[tuple[str, list[np.ndarray], bool]] = [
             ("wrist first", [np.concatenate([q0[:3], q[3:]])], False),
             ("arm first", [np.concatenate([q[:3], q0[3:]])], False),

@@ -366,7 +366,8 @@ def _partly_seen_lying(cls: str, pts: np.ndarray, cloud: SceneCloud, position: n
     if cloud.camera_origin is None:
         return None
     d, length = OBJECT_TEMPLATES[cls].size[0], OBJECT_TEMPLATES[cls].size[2]
-    if footprint(pts).length >= length - PARTIAL_VIEW_TOL_M:
+    seen = footprint(pts).length
+    if seen >= length - PARTIAL_VIEW_TOL_M:
         return None
     table = cloud.points[np.abs(cloud.height) < cloud.table_threshold_m]
     table_z = _table_z(cloud, float(position[0]), float(position[1]))
@@ -375,7 +376,7 @@ def _partly_seen_lying(cls: str, pts: np.ndarray, cloud: SceneCloud, position: n
         "robocup: a lying %s seen only in part (%.0f of %.0f mm): fitted %.0f mm from the estimate (%d seen rays "
         "through it, %d points outside)",
         cls,
-        1000 * footprint(pts).length,
+        1000 * seen,
         1000 * length,
         1000 * float(np.linalg.norm(fit.center_xy - position[:2])),
         fit.free_rays_through,

@@ -156,10 +156,13 @@ def perceive_warehouse(
                     unknown.append(BoxBounds(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]))
                 continue
             centroid = _cube_centroid(cl, table_z) if params.centroid == "resting" else cl.points.mean(axis=0)
-            if params.partial_view_fit and _partly_seen(cl, params.cube_side_m):
+            # a footprint clearly narrower than a cube's face: the rest of the cube is hidden (behind something
+            # taller, or cut off by the image's edge)
+            width = footprint(cl.points).width if params.partial_view_fit else params.cube_side_m
+            if width < params.cube_side_m - PARTIAL_VIEW_TOL_M:
                 if table_base is None:
                     table_base = transform_points(T_base_camera, table_cam)
-                centroid = _fit_partly_seen(cl, centroid, params.cube_side_m, table_z, T_base_camera, table_base)
+                centroid = _fit_partly_seen(cl, width, centroid, params.cube_side_m, table_z, T_base_camera, table_base)
             cubes.append(
                 LabeledCube(
                     centroid, label, cl.n_points, transform_points(T_camera_base, centroid[None])[0], cl.mean_rgb
@@ -191,17 +194,17 @@ def _table_height(plane_base: Plane) -> float:
     return float(plane_base.offset / nz) if abs(nz) > 1e-6 else 0.0
 
 
-def _partly_seen(cl: Cluster, side_m: float) -> bool:
-    """Whether the cluster's footprint is clearly narrower than a cube's face: the rest of the cube is
-    hidden (behind something taller, or cut off by the image's edge)."""
-    return footprint(cl.points).width < side_m - PARTIAL_VIEW_TOL_M
-
-
 def _fit_partly_seen(
-    cl: Cluster, centroid: np.ndarray, side_m: float, table_z: float, T_base_camera: np.ndarray, table: np.ndarray
+    cl: Cluster,
+    width_m: float,
+    centroid: np.ndarray,
+    side_m: float,
+    table_z: float,
+    T_base_camera: np.ndarray,
+    table: np.ndarray,
 ) -> np.ndarray:
-    """The centre of the cube of which `cl` is the visible part (twin.perception.occlusion): it contains
-    the visible points and blocks none of the table the camera saw."""
+    """The centre of the cube of which `cl` (its footprint `width_m` wide) is the visible part
+    (twin.perception.occlusion): it contains the visible points and blocks none of the table the camera saw."""
     fit = fit_partly_seen_box(
         cl.points, (side_m, side_m), side_m, table_z, T_base_camera[:3, 3], table, np.asarray(centroid[:2])
     )
@@ -209,7 +212,7 @@ def _fit_partly_seen(
         "warehouse: a cube seen only in part (%d points, %.0f mm wide): fitted %.0f mm from the visible part's "
         "centre (%d seen rays through it, %d points outside)",
         cl.n_points,
-        1000 * footprint(cl.points).width,
+        1000 * width_m,
         1000 * fit.shift_m,
         fit.free_rays_through,
         fit.points_outside,
