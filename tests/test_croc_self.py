@@ -243,7 +243,6 @@ def test_croc_whole_arm_places_warehouse_seed_105_without_folding_the_gripper_in
     """Warehouse seed 105 (found by a campaign over seeds 100..112): croc whole_arm's second transfer ended with
     "the next segment would collide (forearm_link with gripper_base); no free way to brake". Every segment it
     proposes now keeps the arm's links out of each other (FCL's self check) and every cube is placed."""
-    from twin.config import planner_overrides
     from twin.tasks import run_task
     from twin_croc.planner import CrocPlanner
 
@@ -267,8 +266,8 @@ def test_croc_whole_arm_places_warehouse_seed_105_without_folding_the_gripper_in
 
     monkeypatch.setattr(CrocPlanner, "reset", keep_reset)
     monkeypatch.setattr(CrocPlanner, "step", judge_step)
-    ov = planner_overrides("transfer", "croc", ["planners.transfer.params.mode=whole_arm"])
-    settings = load_config("configs/warehouse.yaml", ov).model_copy(update={"seed": 105})
+    ov = ["planners.transfer.params.mode=whole_arm"]
+    settings = load_config("configs/warehouse.yaml", ov, planners={"transfer": "croc"}).model_copy(update={"seed": 105})
     summary = run_task(settings, config_name="warehouse.yaml")
     assert all(o.placed for o in summary.objects), [o.error for o in summary.objects if not o.placed]
     assert segments[0] > 20 and not touching, touching

@@ -426,16 +426,15 @@ def _add_check_planner_parser(sub: Any) -> None:
 
 
 def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) -> Any:
-    """The config with `--set` overrides; `transfer_planner` (`--planner`) is applied as an override of the
-    whole `planners.transfer` block before them, so `--set planners.transfer.params.K=V` reaches it and is
-    validated by its own model (twin.config.planner_overrides)."""
-    from twin.config import load_config, planner_overrides
+    """The config with `--set` overrides; `transfer_planner` (`--planner`) swaps the whole `planners.transfer`
+    block before them, so `--set planners.transfer.params.K=V` reaches it and is validated by its own model
+    (twin.config.swap_planner)."""
+    from twin.config import load_config
     from twin.faults import fault_overrides
 
     overrides = [*(fault_overrides(args.faults) if args.faults else ()), *args.overrides]
-    if transfer_planner is not None:
-        overrides = planner_overrides("transfer", transfer_planner, overrides)
-    settings = load_config(args.config, overrides)
+    planners = {"transfer": transfer_planner} if transfer_planner is not None else None
+    settings = load_config(args.config, overrides, planners=planners)
     if args.seed is not None:
         settings = settings.model_copy(update={"seed": args.seed})
     return settings

@@ -28,6 +28,7 @@ import numpy as np
 from twin.errors import InvalidRequestError, PlanningError, PluginCrashed, TwinError
 from twin.limit_check import LIMIT_TOLERANCE, LimitExcess, limit_excess, stitched
 from twin.registry import PluginContext, Registry, default_registry
+from twin.robot import Robot
 from twin.timing import stage
 from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 
@@ -261,12 +262,12 @@ def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) 
     return Limits(vel, np.full(6, float(r.max_joint_acc)), np.full(6, float(r.max_joint_jerk)), tcp_speed)
 
 
-def make_context(settings: Settings, registry: Registry | None = None, kinematics: UR5e | None = None) -> PluginContext:
-    from twin.kinematics import UR5e
-
+def make_context(settings: Settings, registry: Registry | None = None, robot: Robot | None = None) -> PluginContext:
+    """The plugin context of a config: its settings, its robot (`robot`, or built from `settings.robot`:
+    build it once and pass it on, as `twin run` does) and the registry (default: every installed plugin)."""
     return PluginContext(
         settings=settings,
-        kinematics=kinematics or UR5e.from_settings(settings),
+        robot=robot or Robot.from_settings(settings),
         registry=registry or default_registry(),
     )
 

@@ -29,7 +29,8 @@ from twin.timing import stage
 
 if TYPE_CHECKING:
     from twin.config import Settings
-    from twin.kinematics import UR5e
+    from twin.kinematics import URArm
+    from twin.robot import Robot
 
 __all__ = ["HOOKS", "Availability", "Entry", "Kind", "PluginContext", "Registry", "default_registry", "plugin_manager"]
 
@@ -116,11 +117,17 @@ def _unavailable_reason(cls: type) -> str | None:
 
 @dataclass(frozen=True)
 class PluginContext:
-    """What a plugin gets besides its parameters: the settings, the kinematics and the registry."""
+    """What a plugin gets besides its parameters: the settings, the robot (built once per run from
+    `settings.robot`: `twin.robot.Robot`) and the registry."""
 
     settings: Settings
-    kinematics: UR5e
+    robot: Robot
     registry: Registry
+
+    @property
+    def kinematics(self) -> URArm:
+        """The robot's arm (DH kinematics, joint limits, IK): `robot.arm`."""
+        return self.robot.arm
 
 
 def validate_params(entry: Entry, cls: type, params: dict[str, Any] | BaseModel | None) -> Any:

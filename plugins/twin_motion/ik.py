@@ -92,11 +92,12 @@ def condition_numbers(kin: UR5e, qs: np.ndarray, frame: str = "tcp") -> np.ndarr
 class DefensiveIK:
     """The seed's defensive IK over every analytic branch; see the module docstring.
 
-    `kin` supplies joint limits and the tool frames; `params` the weights and thresholds.
+    `kin` (the context's arm: no default) supplies joint limits and the tool frames; `params` the weights
+    and thresholds.
     """
 
-    def __init__(self, kin: UR5e | None = None, params: DefensiveIKParams | None = None):
-        self.kin = kin or UR5e()
+    def __init__(self, kin: UR5e, params: DefensiveIKParams | None = None):
+        self.kin = kin
         self.params = params or DefensiveIKParams()
         self._tool = {f: self.kin.tool_transform(f) for f in ("tcp", "flange")}
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}

@@ -23,7 +23,6 @@ from twin.plugin import (
     MotionRequest,
     MotionResult,
     PoseGoal,
-    Settings,
     Status,
     Trajectory,
     UR5e,
@@ -80,15 +79,11 @@ class MotionPlannerBase:
     # each subclass narrows this to its own `Params` (the registry validates with that model)
     params: MotionPlannerBase.Params
 
-    def __init__(self, params: MotionPlannerBase.Params | None = None, context: PluginContext | None = None):
+    def __init__(self, params: MotionPlannerBase.Params | None, context: PluginContext):
         self.params = params if params is not None else self.Params()
-        self.context = context
-        if context is not None:
-            self.kin: UR5e = context.kinematics
-            settings = context.settings
-        else:
-            self.kin = UR5e()
-            settings = Settings()
+        self.context = context  # the robot it plans for: no default arm (a UR10e config plans a UR10e)
+        self.kin: UR5e = context.kinematics
+        settings = context.settings
         self.home = np.array(settings.robot.home, dtype=float)
         self.check_rad = float(settings.collision.check_resolution_rad)
         self.check_m = float(settings.collision.check_resolution_m)

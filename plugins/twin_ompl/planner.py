@@ -75,12 +75,10 @@ from twin.plugin import (
     PlanningError,
     PoseGoal,
     Retimer,
-    Settings,
     Status,
     UR5e,
     colliding_pair,
     jerk_limited,
-    make_context,
 )
 from twin_ompl.budget import Budget, search_roadmap, stop_at_first_path
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, OptimizingOmplParams, PlannerSpec, params_model
@@ -146,18 +144,14 @@ class OmplPlanner(PathPlanner):
     spec: PlannerSpec = PLANNER_SPECS["RRTConnect"]
     Params: type[OmplParams] = params_model(spec)
 
-    def __init__(self, params: OmplParams | None = None, context: PluginContext | None = None):
+    def __init__(self, params: OmplParams | None, context: PluginContext):
         reason = self.unavailable_reason()
         if reason is not None:
             raise DependencyMissing(reason)
         self.params = params if params is not None else self.Params()
-        self.context = context
-        if context is not None:
-            self.kin: UR5e = context.kinematics
-            self.settings = context.settings
-        else:
-            self.kin = UR5e()
-            self.settings = Settings()
+        self.context = context  # the robot it plans for: no default arm (a UR10e config plans a UR10e)
+        self.kin: UR5e = context.kinematics
+        self.settings = context.settings
         self._planner_setters = self._setters()
         self._default_retimer: Retimer | None = None
         self._warm_up()
@@ -229,12 +223,8 @@ class OmplPlanner(PathPlanner):
         if self.retimer is not None:
             return self.retimer
         if self._default_retimer is None:
-            if self.context is not None:
-                registry, context = self.context.registry, self.context
-            else:
-                context = make_context(self.settings, kinematics=self.kin)
-                registry = context.registry
-            self._default_retimer = registry.retimer(self.params.retimer, self.params.retimer_params, context)
+            registry = self.context.registry
+            self._default_retimer = registry.retimer(self.params.retimer, self.params.retimer_params, self.context)
         return self._default_retimer
 
     # ---- the protocol ----------------------------------------------------------------------------

@@ -366,7 +366,7 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
         )
     row["straight_free"] = _STRAIGHT_FREE[key]
     request = _request(task, query, settings)
-    context = make_context(settings, kinematics=cell.kin)
+    context = make_context(settings)  # FIXME(issue 40): the cell's robot
     planner = make_planner(PlannerBlock(**task.planner), context)
     result = plan_with(planner, request, cell.scene, context)
     timing, solves = timing_metrics(result)

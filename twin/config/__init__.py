@@ -16,12 +16,16 @@ from twin.config.loader import (
     find_config,
     load_config,
     one_line,
-    planner_overrides,
     read_yaml,
     settings_from_dict,
     short_repr,
+    swap_planner,
+    with_planner,
 )
 from twin.config.schema import (
+    DEFAULT_PLANNERS,
+    STAGE_GROUPS,
+    STAGES,
     ArucoSettings,
     CameraSettings,
     CollisionSettings,
@@ -47,6 +51,9 @@ from twin.tasks.robocup.settings import GraspEntry, IcpSettings, RobocupPercepti
 from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
 __all__ = [
+    "DEFAULT_PLANNERS",
+    "STAGES",
+    "STAGE_GROUPS",
     "ArucoSettings",
     "CameraSettings",
     "CollisionSettings",
@@ -77,10 +84,11 @@ __all__ = [
     "find_config",
     "load_config",
     "one_line",
-    "planner_overrides",
     "read_yaml",
     "settings_from_dict",
     "short_repr",
+    "swap_planner",
+    "with_planner",
 ]
 
 

@@ -13,10 +13,9 @@ them (URDFs) are found next to the config first and in twin's shipped data secon
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import UnionType
@@ -25,7 +24,7 @@ from typing import Annotated, Any, Union, get_args, get_origin
 import yaml
 from pydantic import BaseModel, Tag, ValidationError
 
-from twin.config.schema import Settings
+from twin.config.schema import PlannerBlock, PlannerGroups, Settings
 from twin.errors import ConfigError
 from twin.resources import CONFIG_SUFFIXES, config_names, packaged_config
 
@@ -36,11 +35,12 @@ __all__ = [
     "format_validation",
     "load_config",
     "one_line",
-    "planner_overrides",
     "read_yaml",
     "settings_from_dict",
     "short_repr",
+    "swap_planner",
     "unknown_key_hint",
+    "with_planner",
 ]
 
 
@@ -249,20 +249,44 @@ def _read_chain(
     return data, dirs
 
 
-def planner_overrides(group: str, name: str, overrides: Iterable[str] = ()) -> list[str]:
-    """`overrides` with `planners.<group>` first made a new block `{name: <name>}`, for `load_config`: how
-    `twin run --planner NAME` (group `transfer`) swaps a planner. The config's params and retimer of that
-    group belonged to the planner it had, so they go; `--set planners.<group>.params.KEY=VALUE` (or
-    `.retimer=...`) overrides, applied after, give the new planner's, and the loaded block is validated by
-    that planner's own model like any other. An override that names the group's planner too is a
-    ConfigError (two answers to one question)."""
-    overrides = list(overrides)
-    block = f"planners.{group}"
+def swap_planner(
+    data: dict[str, Any], group: str, block: PlannerBlock | Mapping[str, Any] | str, overrides: Iterable[str] = ()
+) -> None:
+    """Make `planners.<group>` of raw config `data` the block `block` (a planner's name, or a whole block with
+    its params and retimer), in place: the one way a group's planner is swapped (`load_config(planners=)`
+    for `--planner` and a comparison's task rows, `with_planner` for loaded settings). The config's block
+    of that group belonged to the planner it named, so its params and retimer go; `overrides` applied
+    after (`--set planners.<group>.params.KEY=VALUE`) give the new planner's, validated by its own model
+    like any other. An override that names the group's planner too is a ConfigError (two answers to one
+    question), as is a group that does not exist (with a did-you-mean)."""
+    if group not in PlannerGroups.model_fields:
+        close = difflib.get_close_matches(group, list(PlannerGroups.model_fields), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"no planner group {group!r}{hint}; the groups are {', '.join(PlannerGroups.model_fields)}")
+    try:
+        new = PlannerBlock(name=block) if isinstance(block, str) else PlannerBlock.model_validate(block)
+    except ValidationError as err:
+        raise ConfigError(format_validation(f"planners.{group}", err, PlannerBlock)) from None
+    key = f"planners.{group}"
     for o in overrides:
-        key = ".".join(p.strip() for p in o.split("=", 1)[0].split("."))  # as `apply_override` reads it
-        if key in (block, f"{block}.name"):
-            raise ConfigError(f"--planner {name} and --set {short_repr(o)} both choose the {group} planner; give one")
-    return [f"{block}={json.dumps({'name': name})}", *overrides]
+        if ".".join(p.strip() for p in o.split("=", 1)[0].split(".")) in (key, f"{key}.name"):  # as apply_override
+            raise ConfigError(
+                f"--planner {new.name} and --set {short_repr(o)} both choose the {group} planner; give one"
+            )
+    planners = data.get("planners")
+    data["planners"] = {**(planners if isinstance(planners, dict) else {}), group: new.model_dump()}
+
+
+def with_planner(settings: Settings, group: str, block: PlannerBlock | Mapping[str, Any] | str) -> Settings:
+    """`settings` with the planner of `group` swapped for `block` (a name, or a whole block): `swap_planner`
+    on loaded settings, as the library (`run_task(planner=)`) does it."""
+    data: dict[str, Any] = {"planners": settings.planners.model_dump()}
+    swap_planner(data, group, block)
+    try:
+        groups = PlannerGroups.model_validate(data["planners"])
+    except ValidationError as err:
+        raise ConfigError(format_validation("with_planner", err, PlannerGroups)) from None
+    return settings.model_copy(update={"planners": groups})
 
 
 def apply_override(data: dict[str, Any], override: str) -> None:
@@ -462,9 +486,12 @@ def _check_files(settings: Settings, source: str, overrides: Sequence[str] = ())
             )
 
 
-def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:
+def load_config(
+    path: str | Path, overrides: Iterable[str] = (), *, planners: Mapping[str, PlannerBlock | str] | None = None
+) -> Settings:
     """Load a YAML config (a path, or the name of a config twin ships: 'robocup'), following `extends`,
-    apply `a.b=value` overrides, validate.
+    swap the planner blocks of `planners` (group -> a name or a block: `swap_planner`), apply `a.b=value`
+    overrides, validate.
 
     Raises ConfigError, with one line naming the file and the dotted key, for a missing, unreadable,
     binary, non-UTF-8, empty or invalid YAML file, an unknown key, a bad value, or a URDF that is not a file.
@@ -472,6 +499,8 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Settings:
     p = find_config(path)
     data, dirs = _read_chain(p)
     overrides = list(overrides)
+    for group, block in (planners or {}).items():
+        swap_planner(data, group, block, overrides)
     for o in overrides:
         apply_override(data, o)
     settings = settings_from_dict(data, source=str(p), config_dirs=dirs, overrides=overrides)

@@ -27,6 +27,9 @@ from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSe
 from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
 __all__ = [
+    "DEFAULT_PLANNERS",
+    "STAGES",
+    "STAGE_GROUPS",
     "ArucoSettings",
     "CameraSettings",
     "CollisionSettings",
@@ -357,15 +360,37 @@ class PlannerBlock(ConfigModel):
     retimer_params: dict[str, Any] = Field(default_factory=dict)
 
 
-class PlannerGroups(ConfigModel):
-    """The planner of each group of a task's motion stages (`twin.tasks.cell.STAGES`): `movej` (capture pose,
-    base alignment, pre-grasp hover, home), `movel` (descent, ascent, placing) and `transfer` (carrying the
-    object to its bin). A group left out gets the task's default (`twin.tasks.cell.DEFAULT_PLANNERS`); any
-    other key is refused (a misspelt group would otherwise leave the default running silently)."""
+# stage -> (its planner group, the kind of goal it asks for). A transfer ends above the place point and the
+# place move finishes it, so it asks for a position within `task.transfer_tolerance_m` with the orientation
+# free; every other stage for an exact goal.
+STAGES: dict[str, tuple[str, str]] = {
+    "capture": ("movej", "joint"),
+    "align": ("movej", "joint"),
+    "hover": ("movej", "pose"),
+    "home": ("movej", "joint"),
+    "descent": ("movel", "pose"),
+    "ascent": ("movel", "pose"),
+    "place": ("movel", "pose"),
+    "transfer": ("transfer", "position"),
+}
+STAGE_GROUPS = {stage: group for stage, (group, _) in STAGES.items()}
+DEFAULT_PLANNERS = {"movej": "ruckig.movej", "movel": "toppra.movel", "transfer": "ruckig.movej"}
 
-    movej: PlannerBlock | None = None
-    movel: PlannerBlock | None = None
-    transfer: PlannerBlock | None = None
+
+class PlannerGroups(ConfigModel):
+    """The planner of each group of a task's motion stages (`STAGES`). A group left out gets its default
+    (`DEFAULT_PLANNERS`); any other key is refused with a did-you-mean (a misspelt group would otherwise
+    leave the default running silently). `with_planner` swaps one group's block."""
+
+    movej: PlannerBlock | None = Field(
+        None, description="joint moves: to the capture pose, the base alignment, the pre-grasp hover, home"
+    )
+    movel: PlannerBlock | None = Field(
+        None, description="straight tcp lines: the descent to a grasp, the ascent, the placing move"
+    )
+    transfer: PlannerBlock | None = Field(
+        None, description="carrying the held object to its bin: the planner a comparison compares"
+    )
 
     @model_serializer(mode="wrap")
     def _given_only(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
@@ -374,11 +399,16 @@ class PlannerGroups(ConfigModel):
         return {k: v for k, v in handler(self).items() if v is not None}
 
     def get(self, group: str) -> PlannerBlock | None:
-        """The block of `group` ('movej', 'movel', 'transfer'); None when the config leaves it to the task."""
+        """The block of `group` ('movej', 'movel', 'transfer'); None when the config leaves it to the default."""
         if group not in type(self).model_fields:
             raise KeyError(f"no planner group {group!r}; the groups are {', '.join(type(self).model_fields)}")
         block: PlannerBlock | None = getattr(self, group)
         return block
+
+    def block(self, group: str) -> PlannerBlock:
+        """The block that plans `group`'s stages: the config's, else the group's default planner."""
+        given = self.get(group)
+        return given if given is not None else PlannerBlock(name=DEFAULT_PLANNERS[group])
 
     def given(self) -> dict[str, PlannerBlock]:
         """group -> block, for the groups the config gives."""

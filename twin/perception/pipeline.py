@@ -22,12 +22,12 @@ log = logging.getLogger("twin")
 
 def make_detector(settings: Settings, *, name: str | None = None, params: dict[str, Any] | None = None) -> Detector:
     """The detector plugin named in `settings.perception.detector` (or `name`/`params`), instantiated."""
-    from twin.kinematics import UR5e
     from twin.registry import PluginContext, default_registry
+    from twin.robot import Robot
 
     block = settings.perception.detector
     reg = default_registry()
-    ctx = PluginContext(settings=settings, kinematics=UR5e.from_settings(settings), registry=reg)
+    ctx = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=reg)
     return reg.detector(name or block.name, block.params if params is None and name is None else params, ctx)
 
 
