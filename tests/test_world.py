@@ -6,8 +6,10 @@ plugin, ~0.3 s each).
 
 from __future__ import annotations
 
+import ast
 import itertools
 import math
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -21,6 +23,7 @@ from twin.errors import ConfigError, WorldError
 from twin.scene_layout import OBJECT_TEMPLATES, marker_corners_in_base, marker_pose_in_base
 from twin.world import World
 
+ROOT = Path(__file__).resolve().parent.parent
 TCP_OFFSET_M = 0.135
 HOVER_M = 0.15
 LIFT_M = 0.20
@@ -132,6 +135,48 @@ def pick_and_hold(world: World, oid: int, z_grasp: float, yaw: float) -> dict[st
 
 def poses(world: World) -> np.ndarray:
     return np.array([np.r_[o.position, o.orientation_xyzw] for o in world.objects()])
+
+
+# ---- the one importer of PyBullet ------------------------------------------------------------------
+def imports_pybullet(source: str) -> bool:
+    """True when the module's code imports pybullet anywhere (top level, in a function, in a TYPE_CHECKING
+    block): `import pybullet [as pb]`, `import pybullet_data`, `from pybullet import ...`."""
+    for node in ast.walk(ast.parse(source)):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module]
+        if any(n.split(".")[0].startswith("pybullet") for n in names):
+            return True
+    return False
+
+
+def test_only_the_world_package_imports_pybullet_and_there_only_its_bullet_module() -> None:
+    """The simulator stays behind `twin.world` (CONVENTIONS: Modules), and inside it one module imports it,
+    with the banner it prints at import silenced (`twin.world.bullet`)."""
+    files = [*(ROOT / "twin").rglob("*.py"), *(ROOT / "plugins").rglob("*.py")]
+    importers = sorted(str(f.relative_to(ROOT)) for f in files if imports_pybullet(f.read_text(encoding="utf-8")))
+    assert importers == ["twin/world/bullet.py"]
+    assert len(files) > 100  # the walk saw the sources
+
+
+def test_the_pybullet_import_rule_catches_every_form_of_import() -> None:
+    """The rule above is not vacuous: each way of importing pybullet is caught, and nothing else is."""
+    for code in (
+        "import pybullet as pb",
+        "import numpy, pybullet",
+        "from pybullet import connect",
+        "import pybullet_data",
+        "def f():\n    import pybullet\n",
+        "if TYPE_CHECKING:\n    import pybullet\n",
+    ):
+        assert imports_pybullet(code), code
+    for code in (
+        "import numpy as np",
+        "from twin.world import World",
+        "from .pybullet import x",
+        "x = 'import pybullet'",
+    ):
+        assert not imports_pybullet(code), code
 
 
 # ---- physical grasp -------------------------------------------------------------------------------
