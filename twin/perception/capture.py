@@ -112,8 +112,6 @@ def capture_frame(
     `prefetch_noise`: the noise's random numbers are drawn on a second thread while the scene settles
     (`PrefetchedDraws`: the same numbers, only sooner), unless `prefetch_next_capture` started them earlier.
     """
-    from twin.kinematics import UR5e
-
     cam = settings.camera
     if cam.mount == "wrist" and move:
         q_target = cam.capture_pose if pose == "capture" or cam.calibration_pose is None else cam.calibration_pose
@@ -141,7 +139,7 @@ def capture_frame(
     t1 = time.perf_counter()
     q = world.joint_positions()
     if cam.mount == "wrist":
-        T_nominal = UR5e.from_settings(settings).fk(q, "flange") @ wrist_camera_offset(settings)
+        T_nominal = world.robot.arm.fk(q, "flange") @ wrist_camera_offset(settings)
         T_render = true_camera_pose(cam, world.seed, world.link_matrix("tool0"))
     else:
         T_nominal = camera_pose(cam)
@@ -154,7 +152,7 @@ def capture_frame(
         world.step(late)
         q = world.joint_positions()
         if cam.mount == "wrist":
-            T_nominal = UR5e.from_settings(settings).fk(q, "flange") @ wrist_camera_offset(settings)
+            T_nominal = world.robot.arm.fk(q, "flange") @ wrist_camera_offset(settings)
         t1 += time.perf_counter() - t3
     with stage("perception.noise") as noise:
         # the burst the depth filter averages: the last frames of the settling pause, one render (the scene

@@ -19,7 +19,7 @@ import numpy as np
 from twin.assets import marker_quad_obj
 from twin.config import Settings
 from twin.errors import ConfigError, WorldError
-from twin.kinematics import URArm
+from twin.robot import Robot
 from twin.scene_layout import (
     PLATE_SIZE_M,
     Placement,
@@ -32,7 +32,6 @@ from twin.scene_layout import (
 )
 from twin.transforms import rpy_to_matrix
 from twin.types import matrix_to_quat
-from twin.urdf_model import RobotModel
 from twin.world.bullet import URDF_FLAGS, pb
 from twin.world.values import ARM_JOINT_NAMES, FINGER_JOINT_NAMES, FINGER_LINKS, physics_parts_missing
 
@@ -66,20 +65,21 @@ class BuiltScene:
     object_scales: dict[str, dict[str, float]]  # object name -> knob ('mass', 'friction') -> factor drawn
 
 
-def build_scene(client_id: int, settings: Settings, seed: int, dt: float) -> BuiltScene:
+def build_scene(client_id: int, settings: Settings, seed: int, dt: float, robot: Robot) -> BuiltScene:
     """Engine parameters and every body, always by the same call sequence (determinism, reset).
 
     The client must be freshly connected or reset (no bodies yet); the renderer plugin, if any, is loaded
-    before (bodies created earlier render blank)."""
-    return _SceneBuilder(client_id, settings, seed).build(dt)
+    before (bodies created earlier render blank). `robot`: the config's robot (its URDF, read once)."""
+    return _SceneBuilder(client_id, settings, seed, robot).build(dt)
 
 
 class _SceneBuilder:
     """One scene being built: the bodies so far (one builder per build)."""
 
-    def __init__(self, client_id: int, settings: Settings, seed: int) -> None:
+    def __init__(self, client_id: int, settings: Settings, seed: int, robot: Robot) -> None:
         self._cid = client_id
         self.settings = settings
+        self.robot = robot
         self.seed = seed
         self._bodies: dict[str, int] = {}
         self._fixtures: dict[str, int] = {}
@@ -131,13 +131,12 @@ class _SceneBuilder:
     def _load_robot(self) -> None:
         c = self._cid
         urdf = self._urdf(self.settings.robot.urdf)
-        model = RobotModel.from_urdf(urdf)
+        model = self.robot.urdf_model
         missing = physics_parts_missing(model)
         if missing:  # a collision model without twin's gripper plans (`execute: false`) but cannot run physics
             raise WorldError(f"robot URDF {self.settings.robot.urdf} lacks joints/links {missing} the physics needs")
-        # The world's one construction of the arm's model, for where the arm's base is the world origin: the
-        # URDF's root (a root above the arm: `URArm.urdf_base`).
-        root = URArm.from_settings(self.settings).urdf_base(model)
+        # where the arm's base is the world origin: the URDF's root (a root above the arm: `URArm.urdf_base`)
+        root = self.robot.urdf_base
         try:
             self.robot_id = pb.loadURDF(
                 urdf,

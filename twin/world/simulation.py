@@ -18,6 +18,7 @@ import numpy as np
 
 from twin.config import Settings
 from twin.errors import InvalidRequestError, WorldError
+from twin.robot import Robot
 from twin.scene_layout import find_marker_plate
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_stdout
@@ -49,8 +50,12 @@ class World(GroundTruth):
         *,
         gui: bool | None = None,
         renderer: Literal["auto", "egl", "tiny"] = "auto",
+        robot: Robot | None = None,
     ) -> None:
         """Connect, build the scene of `settings` with objects placed from `seed`.
+
+        `robot`: the config's robot, built once for a run and handed down (`PluginContext.robot`); None
+        builds it from `settings.robot`.
 
         `gui`: None takes settings.world.gui. `renderer`: "auto" tries the EGL plugin and falls back to
         TinyRenderer silently; "egl" requires it (WorldError otherwise); "tiny" skips it (faster to
@@ -60,6 +65,7 @@ class World(GroundTruth):
             raise InvalidRequestError(f"renderer must be 'auto', 'egl' or 'tiny', got {renderer!r}")
         self._renderer_request = renderer
         self.settings = settings
+        self.robot = robot if robot is not None else Robot.from_settings(settings)
         self.seed = int(seed)
         if self.seed < 0:
             raise InvalidRequestError(f"seed must be a non-negative integer, got {self.seed}")
@@ -110,7 +116,7 @@ class World(GroundTruth):
 
     def _build_scene(self) -> None:
         """Every body (`build_scene`), then the controller and the commands a new world starts with."""
-        self._scene: BuiltScene = build_scene(self._cid, self.settings, self.seed, self.dt)
+        self._scene: BuiltScene = build_scene(self._cid, self.settings, self.seed, self.dt, self.robot)
         self.robot_id = self._scene.robot_id
         self.unmodelled_obstacle_centre = self._scene.unmodelled_obstacle_centre  # ground truth; it is static
         self.object_scales = self._scene.object_scales  # `world.objects.mass_scale` / `friction_scale` drawn
