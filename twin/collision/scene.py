@@ -51,6 +51,7 @@ from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.config import Settings
+    from twin.kinematics import URArm
 
 __all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "UnknownFixtures"]
 
@@ -173,17 +174,26 @@ class PlanningScene:
         planner contract plan in, so one query gets one answer everywhere. A task perceives them instead:
         its cell asks for `unknown_fixtures="ignore"` and adds what perception found with `add_box_bounds`.
         """
-        if unknown_fixtures not in ("box", "ignore"):
-            raise InvalidRequestError(f"unknown_fixtures must be 'box' or 'ignore', got {unknown_fixtures!r}")
+        _check_unknown_fixtures(unknown_fixtures)
+        from twin.kinematics import URArm
+
+        arm = URArm.from_settings(settings)
+        model = arm.fit_urdf(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
+        return cls.from_model(model, settings, arm=arm, unknown_fixtures=unknown_fixtures)
+
+    @classmethod
+    def from_model(
+        cls, model: RobotModel, settings: Settings, *, arm: URArm, unknown_fixtures: UnknownFixtures = "box"
+    ) -> PlanningScene:
+        """The cell of a config (as `from_settings`) around a robot model already parsed and fitted to `arm`
+        (`arm.fit_urdf`): the one place a scene is built from settings. ConfigError when the model is not
+        that arm (the planners plan with the DH kinematics: the collision model must be that arm)."""
+        _check_unknown_fixtures(unknown_fixtures)
         fixtures = [
             FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
             for f in settings.world.fixtures
             if f.known
         ]
-        from twin.kinematics import URArm
-
-        arm = URArm.from_settings(settings)
-        model = arm.fit_urdf(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
         scene = cls(
             model,
             fixtures=fixtures,
@@ -192,7 +202,7 @@ class PlanningScene:
             sphere_filter=settings.collision.sphere_filter,
         )
         wrong = arm.urdf_mismatch(scene.model)
-        if wrong is not None:  # the planners plan with the DH kinematics: the collision model must be that arm
+        if wrong is not None:
             raise ConfigError(
                 f"robot.urdf {settings.robot.urdf} is not the arm of robot.model {settings.robot.model}: {wrong}"
             )
@@ -490,6 +500,11 @@ def _densify(qs: np.ndarray, resolution_rad: float) -> tuple[np.ndarray, list[in
         pts.append(qs[i] + t * (qs[i + 1] - qs[i]))
         seg.extend([i] * steps)
     return np.concatenate(pts), seg
+
+
+def _check_unknown_fixtures(unknown_fixtures: str) -> None:
+    if unknown_fixtures not in ("box", "ignore"):
+        raise InvalidRequestError(f"unknown_fixtures must be 'box' or 'ignore', got {unknown_fixtures!r}")
 
 
 def _check_padding(padding_m: float) -> float:
