@@ -192,7 +192,7 @@ def test_the_whole_arm_spheres_cover_every_link_beyond_the_base_at_any_gripper_o
     planner = make_planner(PlannerBlock(name="croc", params={"mode": "whole_arm"}), ctx).inner
     sph = planner.spheres()
     rng = np.random.default_rng(0)
-    shapes = [s for s in scene._shapes if s.link != "base_link"]
+    shapes = [s for s in scene._body.shapes if s.link != "base_link"]
     assert {s.link for s in shapes} >= {"upper_arm_link", "forearm_link", "wrist_2_link", "left_finger"}
     for opening in (0.0, scene.max_opening_m):
         scene.set_gripper_opening(opening)

@@ -279,20 +279,21 @@ def test_no_point_of_the_robot_moves_farther_than_the_reach_bound(cells: dict[st
     and no point of a self pair's part moves, seen from the other part, farther than that sum over the joints
     between the two."""
     scene = cells[name]
+    body = scene._body
     rng = np.random.default_rng(31)
     qs = random_configs(scene, 300, seed=32)
     moved_q = qs + rng.normal(scale=0.05, size=qs.shape) * rng.uniform(0, 1, size=(300, 1))
     worst, worst_pair = 0.0, 0.0
     for a, b in zip(qs, moved_q, strict=True):
         pa, pb = (_part_points(scene, q) for q in (a, b))
-        w = np.abs(b - a) * scene._reach
+        w = np.abs(b - a) * body.reach
         moved = np.concatenate(pa) - np.concatenate(pb)
         worst = max(worst, float(np.linalg.norm(moved, axis=1).max() / w.sum()))
         # a self pair: the points of one part seen from the other's frame move only through the joints between
-        Fa, Fb = scene._frames_one(a), scene._frames_one(b)
-        for p, (i, k) in enumerate(zip(scene._pa.tolist(), scene._pb.tolist(), strict=True)):
-            bound = float(scene._pair_moves[p] @ w)
-            Ti = [F[scene._object_frame[i]] @ scene._obj_const[i] for F in (Fa, Fb)]
+        Fa, Fb = body.chain.frames_one(a), body.chain.frames_one(b)
+        for p, (i, k) in enumerate(zip(body.pa.tolist(), body.pb.tolist(), strict=True)):
+            bound = float(body.pair_moves[p] @ w)
+            Ti = [F[body.object_frame[i]] @ body.obj_const[i] for F in (Fa, Fb)]
             rel = [(P[k] - T[:3, 3]) @ T[:3, :3] for P, T in zip((pa, pb), Ti, strict=True)]
             shift = float(np.linalg.norm(rel[0] - rel[1], axis=1).max())
             assert shift <= bound + 1e-12, (p, shift, bound)
@@ -304,17 +305,18 @@ def test_no_point_of_the_robot_moves_farther_than_the_reach_bound(cells: dict[st
 
 def _part_points(scene: PlanningScene, q: np.ndarray) -> list[np.ndarray]:
     """Per robot part, the world positions of its cover spheres' centres and its bounding-box corners at q."""
-    F = scene._frames_one(q)
+    body = scene._body
+    F = body.chain.frames_one(q)
     out = []
     corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-    for o, f in enumerate(scene._object_frame.tolist()):
-        T = F[f] @ scene._obj_const[o]
-        lo, hi = scene._sph_start[o], scene._sph_start[o + 1]
+    for o, f in enumerate(body.object_frame.tolist()):
+        T = F[f] @ body.obj_const[o]
+        lo, hi = body.sph_start[o], body.sph_start[o + 1]
         out.append(
             np.vstack(
                 [
-                    scene._sph[lo:hi, :3] @ F[f][:3, :3].T + F[f][:3, 3],
-                    (corners * scene._obj_dims[o]) @ T[:3, :3].T + T[:3, 3],
+                    body.sph[lo:hi, :3] @ F[f][:3, :3].T + F[f][:3, 3],
+                    (corners * body.obj_dims[o]) @ T[:3, :3].T + T[:3, 3],
                 ]
             )
         )

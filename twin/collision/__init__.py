@@ -4,8 +4,13 @@
   transforms, broadphase callbacks); meshes are rejected.
 * `twin.collision.rules`: the allowed-collision rules (which robot link pairs are never tested, the
   reference-configuration contact rule, what a held object is tested against).
-* `twin.collision.scene`: `PlanningScene` with its queries (collision, signed distance, clearance, path
-  checks) and edits (boxes, fixtures, gripper opening, attach/detach, `padded` copies).
+* `twin.collision.chain`: the arm's URDF chain compiled to numpy constants (link poses at q).
+* `twin.collision.robot_body`: the robot set up for collision checks (FCL shapes posed through the chain,
+  gripper opening, held box, allowed self pairs, sphere model).
+* `twin.collision.obstacles`: the environment (fixtures and run-time boxes) as padded FCL objects.
+* `twin.collision.scene`: `PlanningScene`, one robot body and one environment, with its queries (collision,
+  signed distance, clearance, path checks) and edits (boxes, fixtures, gripper opening, attach/detach,
+  `padded` copies).
 
 Padding: `padding_m` inflates every environment shape (fixtures and boxes) on each side; the robot, the
 held object and self-collision are unpadded. Distances are signed: < 0 is a penetration.

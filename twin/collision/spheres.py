@@ -13,7 +13,7 @@ the rest go to FCL unchanged. So the scene's answers do not change at all, only 
 the judge of every configuration the spheres cannot clear. Along a dense sequence (a final check walks
 thousands of configurations 2 mrad apart) the next configurations are cleared without evaluation while
 no robot point can have moved as far as the last cleared configuration's clearance (conservative
-advancement; `PlanningScene._joint_reach` bounds how far a joint motion moves any point).
+advancement; `CompiledChain.joint_reach` bounds how far a joint motion moves any point).
 
 Covers (built by partition, so they enclose their shape by construction):
 * box: a grid of cells no longer than `CELL_M` per side, each inside its circumscribed sphere;
