@@ -28,6 +28,7 @@ import numpy as np
 
 from twin.collision.geometry import DISTANCE_REQUEST, fcl_geometry, fcl_transform, primitive_shapes
 from twin.errors import ConfigError
+from twin.robot.gripper import gripper_stroke_m
 from twin.urdf_model import RobotModel
 
 __all__ = [
@@ -36,7 +37,6 @@ __all__ = [
     "CollisionRules",
     "contact_pairs",
     "gripper_links",
-    "gripper_stroke_m",
     "rigid_body_links",
     "structural_pairs",
 ]
@@ -47,13 +47,6 @@ CONTACT_TOL_M = 1e-3  # rule 3: "in contact" at a reference configuration, m
 HELD = "\0held"  # node name of the held object in the self-collision pair list
 
 Pair = tuple[str, str]
-
-
-def gripper_stroke_m(model: RobotModel) -> float:
-    """Largest total finger opening, m: each finger moves half the opening (RobotModel convention), so
-    the stroke is twice the smallest gripper-joint upper limit (0 without gripper joints)."""
-    g = model.gripper_joints
-    return 2.0 * min(model.joints[n].upper for n in g) if g else 0.0
 
 
 def rigid_body_links(model: RobotModel, link: str) -> set[str]:

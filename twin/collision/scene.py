@@ -44,14 +44,14 @@ from twin.collision.geometry import collide_callback as _collide_cb
 from twin.collision.geometry import distance_callback as _distance_cb
 from twin.collision.obstacles import Obstacles, box_from_bounds, check_pose, check_size
 from twin.collision.robot_body import RobotBody
-from twin.errors import ConfigError, InvalidRequestError
+from twin.errors import InvalidRequestError
+from twin.robot import Robot
 from twin.timing import stage
 from twin.types import BoxBounds
 from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.config import Settings
-    from twin.kinematics import URArm
 
 __all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "UnknownFixtures"]
 
@@ -162,11 +162,14 @@ class PlanningScene:
         return new
 
     @classmethod
-    def from_settings(cls, settings: Settings, *, unknown_fixtures: UnknownFixtures = "box") -> PlanningScene:
-        """The cell of a config: robot from settings.robot.urdf (gripper fully open; in the arm's base frame,
-        with the arm's TCP where the URDF has no tcp link: `URArm.fit_urdf`), fixtures from
-        settings.world.fixtures, padding from settings.collision.padding_m, the sphere filter from
-        settings.collision.sphere_filter; the home posture is an exclusion reference.
+    def from_settings(
+        cls, settings: Settings, *, robot: Robot | None = None, unknown_fixtures: UnknownFixtures = "box"
+    ) -> PlanningScene:
+        """The cell of a config: the robot (`robot`, the run's, built once; None builds it from
+        settings.robot: its URDF model in the arm's base frame, with the arm's TCP where the URDF has no tcp
+        link, checked against the arm; gripper fully open), fixtures from settings.world.fixtures, padding from
+        settings.collision.padding_m, the sphere filter from settings.collision.sphere_filter; the home
+        posture is an exclusion reference.
 
         Fixtures marked `known: false` (obstacles the robot has to perceive) are, with `unknown_fixtures="box"`
         (the default), in the scene as a perfect detector reports them: boxes at their true poses
@@ -175,37 +178,19 @@ class PlanningScene:
         its cell asks for `unknown_fixtures="ignore"` and adds what perception found with `add_box_bounds`.
         """
         _check_unknown_fixtures(unknown_fixtures)
-        from twin.kinematics import URArm
-
-        arm = URArm.from_settings(settings)
-        model = arm.fit_urdf(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
-        return cls.from_model(model, settings, arm=arm, unknown_fixtures=unknown_fixtures)
-
-    @classmethod
-    def from_model(
-        cls, model: RobotModel, settings: Settings, *, arm: URArm, unknown_fixtures: UnknownFixtures = "box"
-    ) -> PlanningScene:
-        """The cell of a config (as `from_settings`) around a robot model already parsed and fitted to `arm`
-        (`arm.fit_urdf`): the one place a scene is built from settings. ConfigError when the model is not
-        that arm (the planners plan with the DH kinematics: the collision model must be that arm)."""
-        _check_unknown_fixtures(unknown_fixtures)
+        robot = robot if robot is not None else Robot.from_settings(settings)
         fixtures = [
             FixtureSpec(f.name, settings.resolve(f.urdf), pose_from_xyz_rpy(f.position, f.rpy))
             for f in settings.world.fixtures
             if f.known
         ]
         scene = cls(
-            model,
+            robot.model,
             fixtures=fixtures,
             padding_m=settings.collision.padding_m,
             reference_configs=[settings.robot.home],
             sphere_filter=settings.collision.sphere_filter,
         )
-        wrong = arm.urdf_mismatch(scene.model)
-        if wrong is not None:
-            raise ConfigError(
-                f"robot.urdf {settings.robot.urdf} is not the arm of robot.model {settings.robot.model}: {wrong}"
-            )
         if unknown_fixtures == "box":
             scene.add_unknown_fixtures(settings)
         return scene
