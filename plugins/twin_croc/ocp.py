@@ -95,6 +95,37 @@ class PairDistances(crocoddyl.ResidualModelAbstract):  # type: ignore[misc]
         data.Rx[:] = rx
 
 
+def _step_cost(state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.CostModelResidual:
+    """The joint step (the velocity half of the state) squared."""
+    return crocoddyl.CostModelResidual(
+        state,
+        crocoddyl.ActivationModelWeightedQuad(np.concatenate([np.zeros(6), np.ones(6)])),
+        crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
+    )
+
+
+def _control_cost(state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.CostModelResidual:
+    """The change of the step (the control) squared: a small regularisation."""
+    return crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state, nu))
+
+
+def _acceleration_row(state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.ConstraintModelResidual:
+    """|step change| <= the acceleration bound (set per solve; open until then)."""
+    return crocoddyl.ConstraintModelResidual(
+        state, crocoddyl.ResidualModelControl(state, nu), np.full(6, -_OPEN), np.full(6, _OPEN)
+    )
+
+
+def _state_row(state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.ConstraintModelResidual:
+    """Joint limits and |step| <= the step bound, on the state (set per solve; open until then)."""
+    return crocoddyl.ConstraintModelResidual(
+        state,
+        crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
+        np.full(state.nx, -_OPEN),
+        np.full(state.nx, _OPEN),
+    )
+
+
 @dataclass(frozen=True)
 class Solve:
     """A solve's plan: joints (H+1, 6) and steps (H+1, 6) at the knots; whether CSQP met its tolerance, its
@@ -130,6 +161,38 @@ class HorizonProblem:
         self_slots: int = 0,
     ):
         self.model = arm_model(kin)
+        self._add_sphere_frames(spheres, tcp_index, n_object, self_spheres, self_slots)
+        self._add_track_frames()
+        self.data = self.model.createData()
+        self.horizon, self.acceleration_rows = horizon, acceleration_rows
+        self._table_floor = table_z_m + table_clearance_m
+        state = crocoddyl.StateMultibody(self.model)
+        self._pin_model = state.pinocchio  # the model the residuals read (the object frames are set on it)
+        actuation = crocoddyl.ActuationModelFull(state)
+        self._goal_rows: list[crocoddyl.ResidualModelFrameTranslation] = []
+        self._table_rows: list[list[crocoddyl.ActivationModelQuadraticBarrier]] = []
+        self._spheres: list[list[crocoddyl.ConstraintModelResidual]] = []  # per knot: one row per sphere
+        self._limits: list[crocoddyl.ConstraintModelResidual | None] = []
+        self._accel: list[crocoddyl.ConstraintModelResidual | None] = []
+        self._self: list[tuple[PairDistances, crocoddyl.ConstraintModelResidual] | None] = []  # per knot
+        models = [self._knot(state, actuation, k, weights) for k in range(horizon + 1)]
+        self._open_rows()
+        self.problem = crocoddyl.ShootingProblem(np.zeros(state.nx), models[:-1], models[-1])
+        # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
+        # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
+        _one_thread(self.problem)
+        self._bound_slack = 2 * qp_tolerance
+        self._tolerances = (termination_tolerance, qp_tolerance)
+        self.solver = self._new_solver()
+        self._last: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None  # xs, us, duals
+        self.set_track(np.zeros(3))
+
+    # ---- the formulation's terms: each builds one named piece (the constructor reads as their list) ----------
+    def _add_sphere_frames(
+        self, spheres: np.ndarray, tcp_index: int, n_object: int, self_spheres: np.ndarray | None, self_slots: int
+    ) -> None:
+        """A frame per sphere of the robot and of the held object (parked at the tcp, r 0.01, until `set_object`),
+        then per sphere of the self set."""
         robot = np.asarray(spheres, dtype=float).reshape(-1, 5)
         obj = np.column_stack([np.full(n_object, tcp_index), np.zeros((n_object, 3)), np.full(n_object, 0.01)])
         self.n_robot, self.n_object = robot.shape[0], n_object
@@ -144,115 +207,109 @@ class HorizonProblem:
             sphere_frames(self.model, own, tcp_index=tcp_index, prefix="self") + self.sphere_ids[len(robot) :],
             dtype=int,
         )
+
+    def _add_track_frames(self) -> None:
+        """The point that goes to the goal (`set_track`: the tcp, or the flange for a flange goal), and the
+        facing-down point 0.1 m further along the tool axis."""
         tcp = self.model.getFrameId(TCP_FRAME_NAME)
         self._tcp_placement = self.model.frames[tcp].placement.copy()
         joint = self.model.frames[tcp].parentJoint
-        # the point that goes to the goal (`set_track`: the tcp, or the flange for a flange goal), and the
-        # facing-down point 0.1 m further along the tool axis
         track = self.model.addFrame(pin.Frame("track", joint, self._tcp_placement, pin.FrameType.OP_FRAME))
         ahead_id = self.model.addFrame(pin.Frame("ahead", joint, self._tcp_placement, pin.FrameType.OP_FRAME))
         self._track_ids = (track, ahead_id)
-        self.data = self.model.createData()
-        self.horizon, self.acceleration_rows = horizon, acceleration_rows
-        self._table_floor = table_z_m + table_clearance_m
-        state = crocoddyl.StateMultibody(self.model)
-        self._pin_model = state.pinocchio  # the model the residuals read (the object frames are set on it)
-        actuation = crocoddyl.ActuationModelFull(state)
+
+    def _knot(
+        self, state: crocoddyl.StateMultibody, actuation: crocoddyl.ActuationModelFull, k: int, weights: Weights
+    ) -> crocoddyl.IntegratedActionModelEuler:
+        """Knot k's action model: its costs and constraints (the terminal knot: no control, the heavier position
+        cost and facing down; the first knot, the measured state: no state rows)."""
+        terminal = k == self.horizon
         nu = actuation.nu
-        self._goal_rows: list[crocoddyl.ResidualModelFrameTranslation] = []
-        self._table_rows: list[list[crocoddyl.ActivationModelQuadraticBarrier]] = []
-        self._spheres: list[list[crocoddyl.ConstraintModelResidual]] = []  # per knot: one row per sphere
-        self._limits: list[crocoddyl.ConstraintModelResidual | None] = []
-        self._accel: list[crocoddyl.ConstraintModelResidual | None] = []
-        self._self: list[tuple[PairDistances, crocoddyl.ConstraintModelResidual] | None] = []  # per knot
-        models = []
-        for k in range(horizon + 1):
-            terminal = k == horizon
-            costs = crocoddyl.CostModelSum(state, nu)
-            goal = crocoddyl.ResidualModelFrameTranslation(state, track, np.zeros(3), nu)
-            self._goal_rows.append(goal)
-            weight = weights.position * (weights.terminal_factor if terminal else 1.0)
-            costs.addCost("position", crocoddyl.CostModelResidual(state, goal), weight)
-            costs.addCost(
-                "step",
-                crocoddyl.CostModelResidual(
-                    state,
-                    crocoddyl.ActivationModelWeightedQuad(np.concatenate([np.zeros(6), np.ones(6)])),
-                    crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
-                ),
-                weights.step,
+        costs = crocoddyl.CostModelSum(state, nu)
+        position = weights.position * (weights.terminal_factor if terminal else 1.0)
+        costs.addCost("position", self._position_cost(state, nu), position)
+        costs.addCost("step", _step_cost(state, nu), weights.step)
+        if not terminal:
+            costs.addCost("control", _control_cost(state, nu), 1e-4)
+        for s, table in enumerate(self._table_costs(state, nu)):
+            costs.addCost(f"table{s:03d}", table, weights.table_slack)
+        if terminal:
+            costs.addCost("facing_down", self._facing_down_cost(state, nu), weights.facing_down_slack)
+        # the manager orders its rows by name: a_accel (6), b_limits (12), c_sphere000 .. (3 each), d_self
+        constraints = crocoddyl.ConstraintModelManager(state, nu)
+        accel = _acceleration_row(state, nu) if self.acceleration_rows and not terminal else None
+        if accel is not None:
+            constraints.addConstraint("a_accel", accel)
+        limits = _state_row(state, nu) if k > 0 else None  # the first knot is the measured state
+        if limits is not None:
+            constraints.addConstraint("b_limits", limits)
+        rows = self._sphere_rows(state, nu) if k > 0 else []
+        for j, row in enumerate(rows):
+            constraints.addConstraint(f"c_sphere{j:03d}", row)
+        self_row = self._self_row(state, nu) if self.self_slots and k > 0 else None
+        if self_row is not None:
+            constraints.addConstraint("d_self", self_row[1])
+        self._self.append(self_row)
+        self._accel.append(accel)
+        self._limits.append(limits)
+        self._spheres.append(rows)
+        dam = crocoddyl.DifferentialActionModelFreeInvDynamics(state, actuation, costs, constraints)
+        return crocoddyl.IntegratedActionModelEuler(dam, 0.0 if terminal else 1.0)
+
+    def _position_cost(self, state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.CostModelResidual:
+        """The tracked point's distance from the goal (the goal is set per solve)."""
+        goal = crocoddyl.ResidualModelFrameTranslation(state, self._track_ids[0], np.zeros(3), nu)
+        self._goal_rows.append(goal)
+        return crocoddyl.CostModelResidual(state, goal)
+
+    def _table_costs(self, state: crocoddyl.StateMultibody, nu: int) -> list[crocoddyl.CostModelResidual]:
+        """Per sphere the soft table clearance: a barrier on its centre's height (the object's re-set by
+        `set_object`)."""
+        barriers, costs = [], []
+        for s, fid in enumerate(self.sphere_ids):
+            floor = np.array([-_FAR, -_FAR, self._table_floor + self.radii[s]])
+            barrier = crocoddyl.ActivationModelQuadraticBarrier(crocoddyl.ActivationBounds(floor, np.full(3, _FAR)))
+            row = crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu)
+            costs.append(crocoddyl.CostModelResidual(state, barrier, row))
+            barriers.append(barrier)
+        self._table_rows.append(barriers)
+        return costs
+
+    def _facing_down_cost(self, state: crocoddyl.StateMultibody, nu: int) -> crocoddyl.CostModelResidual:
+        """The facing-down point's distance from the point below the goal (the yaw stays free)."""
+        self._ahead_row = crocoddyl.ResidualModelFrameTranslation(state, self._track_ids[1], np.zeros(3), nu)
+        return crocoddyl.CostModelResidual(state, self._ahead_row)
+
+    def _sphere_rows(self, state: crocoddyl.StateMultibody, nu: int) -> list[crocoddyl.ConstraintModelResidual]:
+        """Per sphere its centre within bounds (`twin_croc.rows`, set per solve; open until then)."""
+        return [
+            crocoddyl.ConstraintModelResidual(
+                state,
+                crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu),
+                np.full(3, -_OPEN),
+                np.full(3, _OPEN),
             )
-            if not terminal:
-                costs.addCost(
-                    "control", crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state, nu)), 1e-4
-                )
-            barriers = []
-            for s, fid in enumerate(self.sphere_ids):
-                floor = np.array([-_FAR, -_FAR, self._table_floor + self.radii[s]])
-                barrier = crocoddyl.ActivationModelQuadraticBarrier(crocoddyl.ActivationBounds(floor, np.full(3, _FAR)))
-                row = crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu)
-                costs.addCost(f"table{s:03d}", crocoddyl.CostModelResidual(state, barrier, row), weights.table_slack)
-                barriers.append(barrier)
-            self._table_rows.append(barriers)
-            if terminal:
-                self._ahead_row = crocoddyl.ResidualModelFrameTranslation(state, ahead_id, np.zeros(3), nu)
-                facing = crocoddyl.CostModelResidual(state, self._ahead_row)
-                costs.addCost("facing_down", facing, weights.facing_down_slack)
-            # the manager orders its rows by name: a_accel (6), b_limits (12), c_sphere000 .. (3 each)
-            constraints = crocoddyl.ConstraintModelManager(state, nu)
-            accel = limits = None
-            if acceleration_rows and not terminal:
-                accel = crocoddyl.ConstraintModelResidual(
-                    state, crocoddyl.ResidualModelControl(state, nu), np.full(6, -_OPEN), np.full(6, _OPEN)
-                )
-                constraints.addConstraint("a_accel", accel)
-            if k > 0:  # the first knot is the measured state
-                limits = crocoddyl.ConstraintModelResidual(
-                    state,
-                    crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu),
-                    np.full(state.nx, -_OPEN),
-                    np.full(state.nx, _OPEN),
-                )
-                constraints.addConstraint("b_limits", limits)
-            rows = []
-            for j, fid in enumerate(self.sphere_ids if k > 0 else []):
-                row = crocoddyl.ConstraintModelResidual(
-                    state,
-                    crocoddyl.ResidualModelFrameTranslation(state, fid, np.zeros(3), nu),
-                    np.full(3, -_OPEN),
-                    np.full(3, _OPEN),
-                )
-                constraints.addConstraint(f"c_sphere{j:03d}", row)
-                rows.append(row)
-            self_row = None
-            if self.self_slots and k > 0:
-                dist = PairDistances(state, nu, self.self_slots)
-                open_ = np.full(self.self_slots, _OPEN)
-                self_row = (dist, crocoddyl.ConstraintModelResidual(state, dist, -open_, open_))
-                constraints.addConstraint("d_self", self_row[1])
-            self._self.append(self_row)
-            self._accel.append(accel)
-            self._limits.append(limits)
-            self._spheres.append(rows)
-            dam = crocoddyl.DifferentialActionModelFreeInvDynamics(state, actuation, costs, constraints)
-            models.append(crocoddyl.IntegratedActionModelEuler(dam, 0.0 if terminal else 1.0))
-        # where a knot's sphere rows start in its duals (after a_accel and b_limits)
+            for fid in self.sphere_ids
+        ]
+
+    def _self_row(
+        self, state: crocoddyl.StateMultibody, nu: int
+    ) -> tuple[PairDistances, crocoddyl.ConstraintModelResidual]:
+        """The knot's self rows: `self_slots` pair distances, re-targeted per solve (`_set_self`; open until then)."""
+        dist = PairDistances(state, nu, self.self_slots)
+        open_ = np.full(self.self_slots, _OPEN)
+        return dist, crocoddyl.ConstraintModelResidual(state, dist, -open_, open_)
+
+    def _open_rows(self) -> None:
+        """What the rows hold now, all open: where each knot's sphere rows start in its duals (after a_accel and
+        b_limits), the sphere rows' bounds and the self rows' pairs (sphere indices of the self set, -1: open) and
+        lower bounds."""
         self._sphere_offset = [(6 if a is not None else 0) + (12 if k > 0 else 0) for k, a in enumerate(self._accel)]
-        self._bounds = np.empty((horizon + 1, len(self.sphere_ids), 2, 3))  # what the sphere rows hold now
+        self._bounds = np.empty((self.horizon + 1, len(self.sphere_ids), 2, 3))
         self._bounds[:, :, 0], self._bounds[:, :, 1] = -_OPEN, _OPEN
         self._bounds_now: dict[str, tuple[bytes, bytes]] = {}
-        # what the self rows hold now: the pair (sphere indices of the self set, -1: open) and lower bound
-        self._self_pairs = np.full((horizon + 1, self.self_slots, 2), -1, dtype=int)
-        self._self_lo = np.full((horizon + 1, self.self_slots), -_OPEN)
-        self.problem = crocoddyl.ShootingProblem(np.zeros(state.nx), models[:-1], models[-1])
-        # one thread: a horizon of 30 small knots gains little from threads, and compare runs in workers. NB: a NaN
-        # in a step makes CSQP throw inside its OpenMP loop, which aborts the process instead of reaching Python
-        _one_thread(self.problem)
-        self._bound_slack = 2 * qp_tolerance
-        self._tolerances = (termination_tolerance, qp_tolerance)
-        self.solver = self._new_solver()
-        self._last: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None  # xs, us, duals
-        self.set_track(np.zeros(3))
+        self._self_pairs = np.full((self.horizon + 1, self.self_slots, 2), -1, dtype=int)
+        self._self_lo = np.full((self.horizon + 1, self.self_slots), -_OPEN)
 
     def renew(self) -> None:
         """Crocoddyl's data of every knot and the solver as new (~5 ms for the whole arm with self rows). Some

@@ -194,6 +194,257 @@ class SolveOutput:
     warm: bool
 
 
+# ---- the NLP's terms: each builds one named piece of the formulation (NMPCProblem reads as their list) ------
+_SphereSX = tuple[int, "ca.DM | ca.SX", "float | ca.SX"]  # (frame, centre in that frame, radius)
+_Points = list[tuple[ca.SX, "float | ca.SX"]]  # sphere centres (3,) and radii at one check point
+
+
+@dataclass(frozen=True)
+class _StageParameters:
+    """The solve's parameters (`NMPCProblem`'s vector p) as a stage reads them: goal (3), tracked point in the
+    TCP frame (3), table z, per box (centre, half extents) and per held-object sphere (TCP-frame offset, r)."""
+
+    goal: ca.SX
+    track: ca.SX
+    table_z: ca.SX
+    boxes: list[tuple[ca.SX, ca.SX]]
+    objects: list[tuple[ca.SX, ca.SX]]
+
+
+@dataclass(frozen=True)
+class _Stage:
+    """One stage as an SX function, (qa, qb, s, p, w, self slots) -> (box, table and self rows, cost residuals,
+    R(qb) column-major), and how many rows of each kind it has (the NLP's row layout needs them)."""
+
+    function: ca.Function
+    n_box_rows: int
+    n_table_rows: int
+    n_self_rows: int
+
+
+def _stage_parameters(ps: ca.SX, n_boxes: int, n_object: int) -> _StageParameters:
+    """Slices of the parameter symbol `ps`: q0, the last two steps (18) come first and only the horizon reads them."""
+    n0 = N_FIXED_PARAMS
+    goal, track, table_z = ps[18:21], ps[21:24], ps[24]
+    boxes = [(ps[n0 + 6 * b : n0 + 3 + 6 * b], ps[n0 + 3 + 6 * b : n0 + 6 + 6 * b]) for b in range(n_boxes)]
+    o0 = n0 + 6 * n_boxes
+    objects = [(ps[o0 + 4 * s : o0 + 4 * s + 3], ps[o0 + 4 * s + 3]) for s in range(n_object)]
+    return _StageParameters(goal, track, table_z, boxes, objects)
+
+
+def _sphere_model(robot_spheres: np.ndarray, objects: list[tuple[ca.SX, ca.SX]]) -> list[_SphereSX]:
+    """The robot's spheres as constants, then the held object's as parameters on the TCP."""
+    spheres: list[_SphereSX] = [(int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in robot_spheres]
+    spheres += [(TCP_FRAME, off, r) for off, r in objects]
+    return spheres
+
+
+def _check_points(
+    spheres: list[_SphereSX],
+    qa: ca.SX,
+    dq: ca.SX,
+    qb: ca.SX,
+    *,
+    substeps: int,
+    self_frames: bool,
+    dh: DHParameters,
+    tcp_offset_m: float,
+) -> tuple[list[_Points], dict[int, ca.SX]]:
+    """The spheres at qa, at the `substeps - 1` joint-linear points between and at qb (what the box rows pair up),
+    and the frames at qb (the table, self and cost terms read them). Frames 2 and 3 are placed for the self rows."""
+    used = sorted({f for f, _, _ in spheres} | {TCP_FRAME} | ({2, 3} if self_frames else set()))
+    qs = ca.SX.sym("q", 6)
+    frames = fk_frames_sx(qs, tcp_offset_m, dh)
+    fk = ca.Function("fk", [qs], [frames[f] for f in used])
+
+    def at(q: ca.SX) -> tuple[_Points, dict[int, ca.SX]]:
+        # `call` returns a list even for one output; `fk(q)` would return the bare matrix when `used`
+        # is only the TCP frame (no wrist spheres), and a CasADi matrix is not iterable
+        Fs = dict(zip(used, fk.call([q]), strict=True))
+        return [(Fs[f][:3, 3] + ca.mtimes(Fs[f][:3, :3], off), r) for f, off, r in spheres], Fs
+
+    seq = [at(qa)[0]]
+    for sub in range(1, substeps + 1):
+        pts, frames_b = at(qb if sub == substeps else qa + (sub / substeps) * dq)
+        seq.append(pts)
+    return seq, frames_b
+
+
+def _box_distance(p: ca.SX, c: ca.SX, h: ca.SX) -> ca.SX:
+    """Smooth-outside distance of a point from the box (centre c, half extents h); see the module docstring."""
+    d = ca.fmax(ca.fabs(p - c) - h, 0)
+    return ca.sqrt(ca.dot(d, d) + _EPS2)
+
+
+def _box_rows(seq: list[_Points], boxes: list[tuple[ca.SX, ca.SX]]) -> list[ca.SX]:
+    """Per box, sphere and pair of consecutive check points a, b: d(a) + d(b) - |c(b) - c(a)| - 2 r >= 0, in 5 cm."""
+    rows: list[ca.SX] = []
+    for c, h in boxes:
+        dist = [[_box_distance(p, c, h) for p, _ in pts] for pts in seq]
+        for s in range(len(seq[0])):
+            r = seq[0][s][1]
+            for a in range(len(seq) - 1):
+                chord = ca.sqrt(ca.sumsqr(seq[a + 1][s][0] - seq[a][s][0]) + _CHORD_EPS2)
+                rows.append((dist[a][s] + dist[a + 1][s] - chord - 2 * r) * _PAIR_SCALE)
+    return rows
+
+
+def _table_rows(points_b: _Points, slack: ca.SX, table_z: ca.SX) -> list[ca.SX]:
+    """Per sphere at qb: its lowest point above the table, softened by the stage's slack (>= the clearance)."""
+    return [p[2] - r + slack - table_z for p, r in points_b]
+
+
+def _self_rows(frames_b: dict[int, ca.SX], pself: ca.SX, slots: int) -> list[ca.SX]:
+    """Self rows at qb (`twin_nmpc.selfrows`): per slot a tool sphere (offset in the TCP frame: the gripper's or the
+    held object's) and an arm sphere (offset in DH frame 2 if `sel` is 1, else in frame 3), their centres'
+    distance in units of 5 cm; which pair a slot holds and its bound are set per solve."""
+    rows: list[ca.SX] = []
+    for k in range(slots):
+        a_off, b_off, sel = pself[7 * k : 7 * k + 3], pself[7 * k + 3 : 7 * k + 6], pself[7 * k + 6]
+        Ft, F2, F3 = frames_b[TCP_FRAME], frames_b[2], frames_b[3]
+        pa = Ft[:3, 3] + ca.mtimes(Ft[:3, :3], a_off)
+        p2 = F2[:3, 3] + ca.mtimes(F2[:3, :3], b_off)
+        pb = sel * p2 + (1 - sel) * (F3[:3, 3] + ca.mtimes(F3[:3, :3], b_off))
+        rows.append(ca.sqrt(ca.sumsqr(pa - pb) + _EPS2) * _PAIR_SCALE)
+    return rows
+
+
+def _stage_residuals(
+    tcp_b: ca.SX, dq: ca.SX, slack: ca.SX, wpos: ca.SX, par: _StageParameters, weights: Weights
+) -> ca.SX:
+    """The stage's cost as residuals: the cost is sum(res^2), whose Gauss-Newton Hessian 2 J_res^T J_res is cheap
+    and positive. Tracking (the tracked point's error from the goal, weight `wpos`), joint step, table slack."""
+    e = tcp_b[:3, 3] + ca.mtimes(tcp_b[:3, :3], par.track) - par.goal
+    return ca.vertcat(ca.sqrt(wpos) * e, math.sqrt(weights.step) * dq, math.sqrt(weights.table_slack) * slack)
+
+
+def _stage(
+    shape: ProblemShape,
+    robot_spheres: np.ndarray,
+    *,
+    n_params: int,
+    dh: DHParameters,
+    tcp_offset_m: float,
+    weights: Weights,
+) -> _Stage:
+    """One stage, from q_{j-1} (qa) to q_j (qb), as an SX function: built once, mapped over the horizon (~N times
+    cheaper to build and differentiate than the whole horizon in SX; the NLP is the same row for row)."""
+    qa, qb, sb = ca.SX.sym("qa", 6), ca.SX.sym("qb", 6), ca.SX.sym("s")
+    ps = ca.SX.sym("ps", n_params)  # the solve's parameters, the same for every stage
+    wpos = ca.SX.sym("wpos")  # position weight of the stage (the terminal one is heavier)
+    par = _stage_parameters(ps, shape.n_boxes, shape.n_object_spheres)
+    spheres = _sphere_model(robot_spheres, par.objects)
+    dq = qb - qa
+    seq, frames_b = _check_points(
+        spheres,
+        qa,
+        dq,
+        qb,
+        substeps=shape.substeps,
+        self_frames=bool(shape.self_slots),
+        dh=dh,
+        tcp_offset_m=tcp_offset_m,
+    )
+    box = _box_rows(seq, par.boxes)
+    table = _table_rows(seq[-1], sb, par.table_z)
+    pself = ca.SX.sym("pself", 7 * shape.self_slots)
+    self_ = _self_rows(frames_b, pself, shape.self_slots)
+    res = _stage_residuals(frames_b[TCP_FRAME], dq, sb, wpos, par, weights)
+    R = ca.reshape(frames_b[TCP_FRAME][:3, :3], 9, 1)
+    function = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos, pself], [ca.vertcat(*box, *table, *self_), res, R])
+    return _Stage(function, len(box), len(table), len(self_))
+
+
+def _knots(x: ca.MX, q0: ca.MX, horizon: int, block_x: int) -> tuple[ca.MX, ca.MX, ca.MX]:
+    """The decision vector's knots q_1..q_N (6, N), table slacks (1, N) and each stage's start q_0..q_{N-1} (6, N)."""
+    body = ca.reshape(x[: horizon * block_x], block_x, horizon)  # column j = stage j's block
+    Q = body[0:6, :]
+    S = body[6, :]
+    QA = ca.horzcat(q0, Q[:, : horizon - 1]) if horizon > 1 else q0
+    return Q, S, QA
+
+
+def _position_weights(weights: Weights, horizon: int) -> ca.DM:
+    """(1, N) the tracking weight of each stage: the last one `terminal_factor` times heavier (the terminal cost)."""
+    wvec = np.full(horizon, weights.position)
+    wvec[-1] *= weights.terminal_factor
+    return ca.DM(wvec).T
+
+
+_Rows = tuple[list[ca.MX], list[np.ndarray], list[np.ndarray]]  # g, lbg, ubg
+
+
+def _motion_rows(d: ca.MX, d_prev: ca.MX, d_prev2: ca.MX) -> list[ca.MX]:
+    """The step d_j (bounded by the step bound), its change (acceleration x dt^2) and the change of that (jerk x
+    dt^3), from the two steps before."""
+    return [d, d - d_prev, d - 2 * d_prev + d_prev2]
+
+
+def _stage_blocks(
+    Q: ca.MX, QA: ca.MX, dq_prev: ca.MX, dq_prev2: ca.MX, stage_rows: ca.MX, stage_lb: np.ndarray
+) -> _Rows:
+    """Block j of the constraints: the step d_j, its change and the change of that (bounds set per solve: step,
+    acceleration and jerk rows), then the stage's box, table and self rows (lower bounds `stage_lb`)."""
+    g: list[ca.MX] = []
+    lbg: list[np.ndarray] = []
+    ubg: list[np.ndarray] = []
+    d_prev, d_prev2 = dq_prev, dq_prev2
+    for j in range(Q.shape[1]):
+        d = Q[:, j] - QA[:, j]
+        g += [*_motion_rows(d, d_prev, d_prev2), stage_rows[:, j]]
+        lbg.append(np.full(18, -np.inf))  # step, step-change and jerk bounds are set per solve
+        ubg.append(np.full(18, np.inf))
+        lbg.append(stage_lb.copy())
+        ubg.append(np.full(stage_lb.size, np.inf))
+        d_prev, d_prev2 = d, d_prev
+    return g, lbg, ubg
+
+
+def _stage_lower_bounds(stage: _Stage, table_clearance_m: float) -> np.ndarray:
+    """Box rows >= 0, table rows >= the clearance, self rows open (their bounds are set per solve)."""
+    return np.concatenate(
+        [
+            np.zeros(stage.n_box_rows),
+            np.full(stage.n_table_rows, table_clearance_m),
+            np.full(stage.n_self_rows, -np.inf),
+        ]
+    )
+
+
+def _joined(*terms: _Rows) -> _Rows:
+    """Rows of several terms, in the order given."""
+    g: list[ca.MX] = []
+    lbg: list[np.ndarray] = []
+    ubg: list[np.ndarray] = []
+    for tg, tl, tu in terms:
+        g += tg
+        lbg += tl
+        ubg += tu
+    return g, lbg, ubg
+
+
+def _facing_down_row(stage_R: ca.MX, s_down: ca.MX, facing_down_cos: float) -> _Rows:
+    """The terminal row -R_N[2, 2] + s_down >= cos(tol) (column-major reshape: element 8 is (2, 2))."""
+    return [-stage_R[8, stage_R.shape[1] - 1] + s_down], [np.full(1, facing_down_cos)], [np.full(1, np.inf)]
+
+
+def _cost(stage_res: ca.MX, s_down: ca.MX, weights: Weights) -> ca.MX:
+    """Sum of squares of every stage's residuals and the facing-down slack's."""
+    return ca.sumsqr(ca.vertcat(ca.vec(stage_res), math.sqrt(weights.facing_down_slack) * s_down))
+
+
+def _solvers(
+    nlp: dict[str, ca.MX], *, expand: bool, cold_options: dict[str, Any], warm_options: dict[str, Any]
+) -> tuple[ca.Function, ca.Function]:
+    """The cold and the warm-started IPOPT of the NLP. expand: the horizon's graph turned into one SX graph, whose
+    derivatives CasADi then generates (~1.5 s with one box, ~2 s more per box) and evaluates ~2x faster than the
+    mapped stage calls (~0.1 s to build)."""
+    quiet: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "expand": expand}
+    cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
+    warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, dict(quiet, **warm_options))
+    return cold, warm
+
+
 class NMPCProblem:
     """The NLP for one `ProblemShape`, with a cold and a warm-started IPOPT instance built once
     (`cold_options`, `warm_options`: nlpsol options, e.g. {"ipopt.tol": 1e-2}).
@@ -223,147 +474,60 @@ class NMPCProblem:
         t0 = time.perf_counter()
         self.expanded = bool(expand)
         self.shape = shape
-        N, nb, no, ns_sub = shape.horizon, shape.n_boxes, shape.n_object_spheres, shape.substeps
+        N = shape.horizon
         self.robot_spheres = np.asarray(robot_spheres, dtype=float).reshape(-1, 5)
-        nt = self.robot_spheres.shape[0]
-        self.n_spheres = nt + no
+        self.n_spheres = self.robot_spheres.shape[0] + shape.n_object_spheres
         self.block_x = 7
         self.nx = N * self.block_x + 1
-        n0 = N_FIXED_PARAMS
         self.n_self = shape.self_slots
-        self.n_params = n0 + 6 * nb + 4 * no
-
-        # ---- one stage as an SX function, mapped over the horizon (built once: ~N times cheaper to build and
-        # differentiate than the whole horizon in SX; the NLP is the same row for row) ------------------------
-        qa, qb, sb = ca.SX.sym("qa", 6), ca.SX.sym("qb", 6), ca.SX.sym("s")
-        ps = ca.SX.sym("ps", self.n_params)  # the solve's parameters, the same for every stage
-        wpos = ca.SX.sym("wpos")  # position weight of the stage (the terminal one is heavier)
-        goal, track, table_z = ps[18:21], ps[21:24], ps[24]
-        boxes = [(ps[n0 + 6 * b : n0 + 3 + 6 * b], ps[n0 + 3 + 6 * b : n0 + 6 + 6 * b]) for b in range(nb)]
-        o0 = n0 + 6 * nb
-        obj = [(ps[o0 + 4 * s : o0 + 4 * s + 3], ps[o0 + 4 * s + 3]) for s in range(no)]
-        # (frame, centre in that frame, radius): the robot's are constants, the held object's parameters
-        spheres_local: list[tuple[int, ca.DM | ca.SX, float | ca.SX]] = [
-            (int(s[0]), ca.DM(s[1:4]), float(s[4])) for s in self.robot_spheres
-        ]
-        spheres_local += [(TCP_FRAME, off, r) for off, r in obj]
-        used = sorted({f for f, _, _ in spheres_local} | {TCP_FRAME} | ({2, 3} if self.n_self else set()))
-
-        qs = ca.SX.sym("q", 6)
-        frames = fk_frames_sx(qs, tcp_offset_m, dh)
-        fk = ca.Function("fk", [qs], [frames[f] for f in used])
-
-        last_frames: dict[int, ca.SX] = {}
-
-        def sphere_points(q: ca.SX) -> tuple[list[tuple[ca.SX, float | ca.SX]], ca.SX, ca.SX]:
-            # `call` returns a list even for one output; `fk(q)` would return the bare matrix when `used`
-            # is only the TCP frame (no wrist spheres), and a CasADi matrix is not iterable
-            Fs = dict(zip(used, fk.call([q]), strict=True))
-            last_frames.clear()
-            last_frames.update(Fs)
-            pts = [(Fs[f][:3, 3] + ca.mtimes(Fs[f][:3, :3], off), r) for f, off, r in spheres_local]
-            T = Fs[TCP_FRAME]
-            return pts, T[:3, 3], T[:3, :3]
-
-        def box_distance(p_: ca.SX, c: ca.SX, h: ca.SX) -> ca.SX:
-            d = ca.fmax(ca.fabs(p_ - c) - h, 0)
-            return ca.sqrt(ca.dot(d, d) + _EPS2)
-
-        dq = qb - qa
-        seq = [sphere_points(qa)[0]]
-        for sub in range(1, ns_sub + 1):
-            qm = qb if sub == ns_sub else qa + (sub / ns_sub) * dq
-            pts, pj, Rj = sphere_points(qm)
-            seq.append(pts)
-        rows: list[ca.SX] = []
-        for c, h in boxes:
-            dist = [[box_distance(p_, c, h) for p_, _ in pts] for pts in seq]
-            for s in range(len(spheres_local)):
-                r = seq[0][s][1]
-                for a in range(ns_sub):
-                    chord = ca.sqrt(ca.sumsqr(seq[a + 1][s][0] - seq[a][s][0]) + _CHORD_EPS2)
-                    rows.append((dist[a][s] + dist[a + 1][s] - chord - 2 * r) * _PAIR_SCALE)
-        n_box_rows = len(rows)
-        for p_, r in seq[-1]:
-            rows.append(p_[2] - r + sb - table_z)
-        # self rows at q_j (`twin_nmpc.selfrows`): per slot a tool sphere (offset in the TCP frame: the gripper's
-        # or the held object's) and an arm sphere (offset in DH frame 2 if `sel` is 1, else in frame 3), their
-        # centres' distance in units of 5 cm; which pair a slot holds and its bound are set per solve
-        pself = ca.SX.sym("pself", 7 * self.n_self)
-        for k in range(self.n_self):
-            a_off, b_off, sel = pself[7 * k : 7 * k + 3], pself[7 * k + 3 : 7 * k + 6], pself[7 * k + 6]
-            Ft, F2, F3 = last_frames[TCP_FRAME], last_frames[2], last_frames[3]
-            pa = Ft[:3, 3] + ca.mtimes(Ft[:3, :3], a_off)
-            p2 = F2[:3, 3] + ca.mtimes(F2[:3, :3], b_off)
-            pb = sel * p2 + (1 - sel) * (F3[:3, 3] + ca.mtimes(F3[:3, :3], b_off))
-            rows.append(ca.sqrt(ca.sumsqr(pa - pb) + _EPS2) * _PAIR_SCALE)
-        e = pj + ca.mtimes(Rj, track) - goal
-        # the cost is a sum of squares, sum(res^2): its Gauss-Newton Hessian 2 J_res^T J_res is cheap and positive
-        res = ca.vertcat(ca.sqrt(wpos) * e, math.sqrt(weights.step) * dq, math.sqrt(weights.table_slack) * sb)
-        stage = ca.Function("nmpc_stage", [qa, qb, sb, ps, wpos, pself], [ca.vertcat(*rows), res, ca.reshape(Rj, 9, 1)])
-        # (qa, qb, s, p, w, self slots) -> (box, table and self rows, cost residuals, R(qb) column-major): kept for
-        # other forms of the same problem (bench/nmpc_alternatives.py)
-        self.stage_function = stage
-        mapped = stage.map(N, "serial")
-
-        # ---- the NLP over the horizon, stage-major as before --------------------------------------
-        x = ca.MX.sym("x", self.nx)
+        self.n_params = N_FIXED_PARAMS + 6 * shape.n_boxes + 4 * shape.n_object_spheres
         self.n_self_params = 7 * self.n_self * N  # after the fixed, box and object parameters, stage-major
-        p = ca.MX.sym("p", self.n_params + self.n_self_params)
-        q0, dq_prev, dq_prev2 = p[0:6], p[6:12], p[12:18]
-        body = ca.reshape(x[: N * self.block_x], self.block_x, N)  # column j = stage j's block
-        Q = body[0:6, :]
-        S = body[6, :]
-        QA = ca.horzcat(q0, Q[:, : N - 1]) if N > 1 else q0
-        wvec = np.full(N, weights.position)
-        wvec[-1] *= weights.terminal_factor
-        PS = ca.reshape(p[self.n_params :], 7 * self.n_self, N)
-        stage_rows, stage_res, stage_R = mapped(QA, Q, S, ca.repmat(p[: self.n_params], 1, N), ca.DM(wvec).T, PS)
-        g: list[ca.MX] = []
-        lbg: list[np.ndarray] = []
-        ubg: list[np.ndarray] = []
-        d_prev, d_prev2 = dq_prev, dq_prev2
-        for j in range(N):
-            d = Q[:, j] - QA[:, j]
-            g += [d, d - d_prev, d - 2 * d_prev + d_prev2, stage_rows[:, j]]
-            lbg.append(np.full(18, -np.inf))  # step, step-change and jerk bounds are set per solve
-            ubg.append(np.full(18, np.inf))
-            lbg.append(
-                np.concatenate(
-                    [
-                        np.zeros(n_box_rows),
-                        np.full(len(spheres_local), table_clearance_m),
-                        np.full(self.n_self, -np.inf),
-                    ]
-                )
-            )
-            ubg.append(np.full(n_box_rows + len(spheres_local) + self.n_self, np.inf))
-            d_prev, d_prev2 = d, d_prev
-        s_down = x[-1]
-        g.append(-stage_R[8, N - 1] + s_down)  # -R_N[2, 2] (column-major reshape: element 8 is (2, 2))
-        lbg.append(np.full(1, facing_down_cos))
-        ubg.append(np.full(1, np.inf))
-        residuals = ca.vertcat(ca.vec(stage_res), math.sqrt(weights.facing_down_slack) * s_down)
-        J = ca.sumsqr(residuals)
 
+        stage = _stage(
+            shape, self.robot_spheres, n_params=self.n_params, dh=dh, tcp_offset_m=tcp_offset_m, weights=weights
+        )
+        self.stage_function = stage.function  # kept for other forms of the same problem (bench/nmpc_alternatives.py)
+
+        # ---- the NLP over the horizon: the stage mapped over it, its rows stage-major --------------------------
+        x = ca.MX.sym("x", self.nx)
+        p = ca.MX.sym("p", self.n_params + self.n_self_params)
+        q0, dq_prev, dq_prev2, s_down = p[0:6], p[6:12], p[12:18], x[-1]
+        Q, S, QA = _knots(x, q0, N, self.block_x)
+        stage_rows, stage_res, stage_R = stage.function.map(N, "serial")(
+            QA,
+            Q,
+            S,
+            ca.repmat(p[: self.n_params], 1, N),
+            _position_weights(weights, N),
+            ca.reshape(p[self.n_params :], 7 * self.n_self, N),
+        )
+        g, lbg, ubg = _joined(
+            _stage_blocks(Q, QA, dq_prev, dq_prev2, stage_rows, _stage_lower_bounds(stage, table_clearance_m)),
+            _facing_down_row(stage_R, s_down, facing_down_cos),
+        )
+        J = _cost(stage_res, s_down, weights)
+
+        self._index_rows(lbg, ubg, stage)
+        nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
+        self._cold, self._warm = _solvers(nlp, expand=expand, cold_options=cold_options, warm_options=warm_options)
+        self.build_time_s = time.perf_counter() - t0
+        log.debug("nmpc: built NLP %s (%d vars, %d constraints) in %.2f s", shape, self.nx, self.ng, self.build_time_s)
+
+    def _index_rows(self, lbg: list[np.ndarray], ubg: list[np.ndarray], stage: _Stage) -> None:
+        """Where the rows of each kind sit in g (N blocks of `block_g`, then the facing-down row), for `bounds`."""
+        N = self.shape.horizon
         self.block_g = sum(int(a.size) for a in lbg[:-1]) // N
         self.ng = sum(int(a.size) for a in lbg)
         self.lbg = np.concatenate(lbg)
         self.ubg = np.concatenate(ubg)
-        self._box_rows_per_box = len(spheres_local) * ns_sub
+        self._box_rows_per_box = stage.n_table_rows * self.shape.substeps  # one per sphere and sub-step
         self._stage_rows_dq = np.concatenate([np.arange(6) + j * self.block_g for j in range(N)])
         self._stage_rows_ddq = self._stage_rows_dq + 6
         self._stage_rows_dddq = self._stage_rows_dq + 12
-        first_self = 18 + n_box_rows + len(spheres_local)
-        self._self_rows = (np.arange(N)[:, None] * self.block_g + first_self + np.arange(self.n_self)[None]).astype(int)
-        nlp = {"x": x, "p": p, "f": J, "g": ca.vertcat(*g)}
-        # expand: the horizon's graph turned into one SX graph, whose derivatives CasADi then generates (~1.5 s
-        # with one box, ~2 s more per box) and evaluates ~2x faster than the mapped stage calls (~0.1 s to build)
-        quiet: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "expand": expand}
-        self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, dict(quiet, **cold_options))
-        self._warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, dict(quiet, **warm_options))
-        self.build_time_s = time.perf_counter() - t0
-        log.debug("nmpc: built NLP %s (%d vars, %d constraints) in %.2f s", shape, self.nx, self.ng, self.build_time_s)
+        first_self = 18 + stage.n_box_rows + stage.n_table_rows
+        self._self_rows = (
+            np.arange(N)[:, None] * self.block_g + first_self + np.arange(stage.n_self_rows)[None]
+        ).astype(int)
 
     # ---- layout helpers ---------------------------------------------------------------------------
     def pack_x(self, q_knots: np.ndarray, slack: np.ndarray | None = None, s_down: float = 0.0) -> np.ndarray:
