@@ -20,7 +20,7 @@ What the loop does the same for every solver:
   `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
   knots, as far as the arm needs to stop, coarsely). When either collides the arm brakes, as a real
   controller's protective stop does: a shortest stop within the step, acceleration and jerk bounds
-  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair. A start
+  (`twin.planning.braking`), returned only if it is free itself, then Status.COLLISION naming the pair. A start
   in collision is refused with INVALID_START naming the pair. Every other end while the arm moves (no plan
   left, `max_solves` solves) brakes the same way before its status.
 * A way to stop is planned clear before it is needed: a moving segment is commanded only when a stop from
@@ -57,26 +57,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.plugin import (
-    JointGoal,
-    MotionRequest,
-    MotionResult,
-    PlanningError,
-    PoseGoal,
-    Segment,
-    Status,
-    Trajectory,
-    as_q,
-    colliding_pair,
-    densify,
-    densify_path,
-    first_collision,
-)
-from twin_nmpc.braking import can_stop_now, stopping_steps
-from twin_nmpc.guess import initial_guess
-from twin_nmpc.model import Weights
-from twin_nmpc.params import RecedingParams
-from twin_nmpc.spheres import (
+from twin.errors import PlanningError
+from twin.planning.braking import can_stop_now, stopping_steps
+from twin.planning.checked import Segment, colliding_pair, densify, densify_path, first_collision
+from twin.planning.guess import initial_guess
+from twin.planning.proxy_spheres import (
     Box,
     clearance,
     drop_covered,
@@ -86,9 +71,13 @@ from twin_nmpc.spheres import (
     violation,
     with_object,
 )
+from twin.planning.receding_params import RecedingParams, Weights
+from twin.types import JointGoal, MotionRequest, MotionResult, PoseGoal, Status, Trajectory, as_q
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, PluginContext, UR5e
+    from twin.collision import PlanningScene
+    from twin.kinematics import UR5e
+    from twin.registry import PluginContext
 
 __all__ = ["RecedingHorizonMPC", "Solved"]
 
@@ -207,7 +196,7 @@ class RecedingHorizonMPC:
         self._dq_prev = np.zeros(6)  # the last executed step (knot to knot): the start is at rest
         self._dq_prev2 = np.zeros(6)  # the step before it
         self._started = False  # whether step() has seen the measured start
-        self._guess_kind = ""  # what the last cold solve started from (twin_nmpc.guess)
+        self._guess_kind = ""  # what the last cold solve started from (twin.planning.guess)
         self._done: MotionResult | None = None
         self._pending: MotionResult | None = None
         self._safe_stop: np.ndarray | None = None  # a checked-free stop (knots) from the last segment's end
@@ -381,7 +370,7 @@ class RecedingHorizonMPC:
         return self._execute(knots, dict(entry, cost=sol.cost), sol.time_s, err)
 
     def _cold_guess(self, q: np.ndarray, boxes: list[Box], sph: np.ndarray) -> np.ndarray:
-        """The initial guess of a cold solve from `q` (`twin_nmpc.guess`); says which in `_guess_kind`."""
+        """The initial guess of a cold solve from `q` (`twin.planning.guess`); says which in `_guess_kind`."""
         step, dstep, jstep = self._step_bounds()
         guess, self._guess_kind = initial_guess(
             self.kin, self.params, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
