@@ -23,7 +23,6 @@ from twin.errors import ConfigError
 from twin.planning import (
     RecedingHorizonPlanner,
     Segment,
-    _checked,
     densify,
     first_collision,
     limits_from_settings,
@@ -32,6 +31,7 @@ from twin.planning import (
     plan,
     plan_with,
 )
+from twin.planning.checked import _checked
 from twin.planning.proxy_spheres import (
     TCP_FRAME,
     object_spheres,
