@@ -9,11 +9,10 @@ import pytest
 pin = pytest.importorskip("pinocchio")
 pytest.importorskip("crocoddyl")
 
+from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres, sphere_centres  # noqa: E402
 from twin.plugin import UR5e  # noqa: E402
 from twin_croc.model import TCP_FRAME_NAME, arm_model, dh_frame_name, sphere_frames  # noqa: E402
-from twin_nmpc.model import TCP_FRAME, sphere_centres  # noqa: E402
 from twin_nmpc.params import NMPCParams  # noqa: E402
-from twin_nmpc.spheres import robot_spheres  # noqa: E402
 
 
 def _configurations(n: int) -> np.ndarray:

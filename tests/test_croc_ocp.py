@@ -12,12 +12,11 @@ import pytest
 pytest.importorskip("crocoddyl")
 pytest.importorskip("mim_solvers")
 
+from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres
 from twin.plugin import UR5e
 from twin_croc.ocp import HorizonProblem
 from twin_croc.rows import close_pairs, sphere_bounds
-from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.params import NMPCParams
-from twin_nmpc.spheres import robot_spheres
 
 WALL = (np.array([-0.48, 0.09, 0.0]), np.array([-0.36, 0.39, 0.20]))  # the warehouse obstacle
 
@@ -152,8 +151,8 @@ def test_a_sphere_passing_over_a_box_stays_above_its_top_on_the_way_there():
 def test_a_sphere_starting_within_a_margin_may_stay_as_deep_but_not_go_deeper():
     """A held can lifted 8 mm into the margin of the bottle beside it: its bounds give way by exactly what the
     start lacks, and the loop's check (`path_gaps`) lets a path stay that deep but not go deeper."""
+    from twin.planning.proxy_spheres import path_gaps
     from twin.plugin import UR5e
-    from twin_nmpc.spheres import path_gaps
 
     box = [("bottle", np.array([0.0, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))]
     r, margin = 0.05, 0.01

@@ -18,13 +18,13 @@ from twin.collision.scene import PlanningScene
 from twin.config import PlannerBlock, load_config
 from twin.errors import ConfigError
 from twin.planning import RecedingHorizonPlanner, Segment, densify_path, make_context, make_planner, plan_with
+from twin.planning.proxy_spheres import clearance, sphere_positions
+from twin.planning.receding_params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES, RecedingParams
 from twin.registry import Kind, default_registry
 from twin.types import MotionResult
 from twin_croc.ocp import HorizonProblem
-from twin_croc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
-from twin_nmpc.params import NMPCParams, RecedingParams
+from twin_nmpc.params import NMPCParams
 from twin_nmpc.scenarios import build_scene, check_trajectory, transfer_scenes
-from twin_nmpc.spheres import clearance, sphere_positions
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""croc keeps the arm from itself: the self rows (`twin_croc.selfrows`) pair only spheres on links that are not
+"""croc keeps the arm from itself: the self rows (`twin.planning.selfrows`) pair only spheres on links that are not
 neighbours, give each knot its nearest pairs and none when nothing is near, never ask a start that is already
 closer to move apart at once; the distance row's derivative is the distance's; a horizon pulled towards a
 folded elbow (the upper arm into wrist 1) stops short of it with the rows and goes through it without; and
@@ -17,15 +17,14 @@ import pinocchio as pin
 from twin.collision.scene import PlanningScene
 from twin.config import PlannerBlock, load_config
 from twin.planning import densify, make_context, make_planner, plan_with
+from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres, sphere_positions
+from twin.planning.receding_params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
+from twin.planning.selfrows import SelfRows, link_groups, self_pairs, self_rows, self_violation
 from twin.plugin import UR5e
 from twin.types import MotionResult
 from twin_croc.ocp import HorizonProblem
-from twin_croc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
-from twin_croc.selfrows import SelfRows, link_groups, self_pairs, self_rows, self_violation
-from twin_nmpc.model import TCP_FRAME
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.scenarios import build_scene, transfer_scenes
-from twin_nmpc.spheres import robot_spheres, sphere_positions
 
 SELF_SPH = robot_spheres(DEFAULT_WHOLE_ARM_TOOL_SPHERES, np.array(DEFAULT_ARM_SPHERES, dtype=float))
 # the upper arm folded into wrist 1 (FCL: 63 mm deep), and the same arm with the elbow 0.65 rad more open
@@ -174,7 +173,7 @@ def test_the_closed_loop_plans_a_drop_that_folds_the_elbow_without_touching_itse
     """Bench scene 8 of seed 000: the drop zone close to the base folds the elbow; without self rows the plan's
     momentum carried the upper arm into wrist 1 on the shortest stop at the goal ("the next braking segment
     would collide (upper_arm_link with wrist_1_link)"). The loop now keeps a free stop from every segment's end
-    (`twin_nmpc.receding`), so that plan comes to rest on it instead: both land, neither touches itself."""
+    (`twin.planning.receding`), so that plan comes to rest on it instead: both land, neither touches itself."""
     settings = load_config("warehouse")
     ctx = make_context(settings)
     ts = transfer_scenes(9, 0, settings=settings)[8]

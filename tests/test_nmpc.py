@@ -23,7 +23,6 @@ from twin.errors import ConfigError
 from twin.planning import (
     RecedingHorizonPlanner,
     Segment,
-    _checked,
     densify,
     first_collision,
     limits_from_settings,
@@ -32,14 +31,21 @@ from twin.planning import (
     plan,
     plan_with,
 )
+from twin.planning.checked import _checked
+from twin.planning.proxy_spheres import (
+    TCP_FRAME,
+    object_spheres,
+    pair_clearance,
+    sphere_box_clearance,
+    sphere_centres,
+)
 from twin.registry import Kind, default_registry
 from twin.testing import contract_queries, limit_violations
 from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
-from twin_nmpc.model import TCP_FRAME, ProblemShape, fk_frames_sx, pair_clearance, sphere_box_clearance, sphere_centres
+from twin_nmpc.model import ProblemShape, fk_frames_sx
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.planner import NMPCPlanner
 from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes
-from twin_nmpc.spheres import object_spheres
 
 SEED000 = {"dt": 0.08, "execute_steps": 1}
 SEED001 = {"dt": 0.1, "execute_steps": 3}

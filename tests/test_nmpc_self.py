@@ -1,4 +1,4 @@
-"""nmpc keeps the arm from itself (issue 39): its NLP's self rows (`twin_nmpc.selfrows`, shared with croc) keep the
+"""nmpc keeps the arm from itself (issue 39): its NLP's self rows (`twin.planning.selfrows`, shared with croc) keep the
 gripper and the held cube from the forearm and upper arm. The case is the transfer an unseen-seed campaign lost
 (nominal warehouse: "transfer: nmpc: collision: the next segment would collide (forearm_link with
 gripper_base)"), kept here as numbers: the arm at the pick, the cube in the closed fingers, the perceived

@@ -1,8 +1,9 @@
 """twin_croc: a receding-horizon MPC on the field's optimal-control stack, Crocoddyl + mim-solvers (constrained
 SQP) with pinocchio (extra `croc`), registered through the `twin` entry-point group.
 
-- `croc` (`twin_croc.planner:CrocPlanner`): `nmpc`'s receding-horizon loop (`twin_nmpc.receding`) around a
-  CSQP solve; `mode: seed` (nmpc's formulation) or `whole_arm` (every link against every box of the scene).
+- `croc` (`twin_croc.planner:CrocPlanner`): the receding-horizon loop `nmpc` uses too (`twin.planning.receding`)
+  around a CSQP solve; `mode: seed` (nmpc's formulation) or `whole_arm` (every link against every box of the
+  scene).
   The name is registered lazily, so `import twin` never imports Crocoddyl.
 
 Import pinocchio or crocoddyl before mim_solvers: imported first, mim_solvers fails on a missing boost library

@@ -13,7 +13,7 @@ limit bounds (`nmpc`'s `limit_acceleration`). The rows:
   axis-aligned region that keeps it beyond a face of every box near it (`twin_croc.rows`), re-set at each
   solve. Only rows whose bounds changed are touched: a warm start shifts the plan, and the bounds with it,
   so most stay as they were; and, in a problem built with self slots, up to `self_slots` rows per knot, each
-  the distance of two spheres on links that are not neighbours (`twin_croc.selfrows`), re-targeted per solve.
+  the distance of two spheres on links that are not neighbours (`twin.planning.selfrows`), re-targeted per solve.
 
 The held object's spheres are frames on the tcp whose placements change per goal (`set_object`), so the
 problem is built once per sphere model and horizon.
@@ -29,9 +29,8 @@ import mim_solvers  # after crocoddyl (see twin_croc)
 import numpy as np
 import pinocchio as pin
 
+from twin.plugin import SelfRows, Weights  # the seed's cost weights, nmpc's too
 from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
-from twin_croc.selfrows import SelfRows
-from twin_nmpc.model import Weights  # the seed's cost weights, nmpc's too
 
 if TYPE_CHECKING:
     from twin.plugin import UR5e
@@ -433,7 +432,7 @@ class HorizonProblem:
         """Solve from joints `q0` and last step `step0` towards the goal position `goal` (3,) of the tracked point
         with each sphere's centre within `bounds` (H+1, n, 2, 3) (`twin_croc.rows`; knot 0's are not used; n: the
         robot's spheres, then the object's, parked ones free), steps within `step_bound` (6,) and step changes within
-        `accel_bound` (6,), and the self rows `self_rows` (`twin_croc.selfrows`; None: none). Cold from the joint
+        `accel_bound` (6,), and the self rows `self_rows` (`twin.planning.selfrows`; None: none). Cold from the joint
         plan `guess` (H+1, 6), or warm (guess None): the last solution (of `source`, the same problem with or
         without self rows, if given) shifted by `shift` executed steps, primal and dual (a row's duals kept only
         where its bounds are those of the knot `shift` later)."""

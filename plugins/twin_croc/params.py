@@ -1,9 +1,9 @@
 """Parameters of `croc` (a pydantic model, validated from a planner block's `params:`) and the default
 spheres of the arm's links for its `whole_arm` mode.
 
-The shared ones (`twin_nmpc.params.RecedingParams`: horizon, dt, step bound, weights, tool, wrist and
-held-object spheres, margin, the loop's tolerances) have the same defaults as `nmpc`'s, so that in `seed`
-mode the two MPCs solve the same formulation and differ in their solver.
+The shared ones (`RecedingParams`, `twin.planning.receding_params`: horizon, dt, step bound, weights, tool,
+wrist and held-object spheres, margin, the loop's tolerances) have the same defaults as `nmpc`'s, so that in
+`seed` mode the two MPCs solve the same formulation and differ in their solver.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from twin_nmpc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES, RecedingParams
+from twin.plugin import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES, RecedingParams
 
 __all__ = ["DEFAULT_ARM_SPHERES", "DEFAULT_WHOLE_ARM_TOOL_SPHERES", "CrocParams"]
 

@@ -1,5 +1,5 @@
 """`croc`: the receding-horizon MPC on the field's optimal-control stack, Crocoddyl's shooting problem solved by
-mim-solvers' constrained SQP (CSQP), in the loop `nmpc` uses (`twin_nmpc.receding`: checks, fallback,
+mim-solvers' constrained SQP (CSQP), in the loop `nmpc` uses (`twin.planning.receding`: checks, fallback,
 braking, segments), so the two differ only in the solver and, in `whole_arm` mode, in what they keep apart.
 
 Modes:
@@ -14,7 +14,7 @@ Modes:
   except the table, which stays the soft table term: an MPC that can work in the RoboCup cell. Its spheres
   cover the links only with the box margin, so a measured state with a sphere inside a box the link is
   clear of (FCL) is not refused: the rows hold that sphere no deeper than it started.
-* Both modes keep the arm from itself (`twin_croc.selfrows`, `self_slots`): the seeds' formulation does not,
+* Both modes keep the arm from itself (`twin.planning.selfrows`, `self_slots`): the seeds' formulation does not,
   and croc's plans folded the elbow until the upper arm met wrist 1 (a warehouse drop near the base) or
   swung the gripper into the forearm; the loop's FCL check stopped them, the goal was lost. The rows are
   there only while a pair of the arm's spheres comes near (`self_screen_m`), so most solves are the seeds'
@@ -53,13 +53,25 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.plugin import (
+    CHECK_TOL_M,
+    TCP_FRAME,
+    Box,
+    RecedingHorizonMPC,
+    SelfRows,
+    Solved,
+    pair_gaps,
+    robot_spheres,
+    self_pairs,
+    self_rows,
+    self_violation,
+    sphere_positions,
+    subdivide,
+    with_object,
+)
 from twin_croc.ocp import HorizonProblem
 from twin_croc.params import CrocParams
 from twin_croc.rows import Pairs, close_pairs, sphere_bounds
-from twin_croc.selfrows import SelfRows, pair_gaps, self_pairs, self_rows, self_violation
-from twin_nmpc.model import TCP_FRAME
-from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.spheres import CHECK_TOL_M, Box, robot_spheres, sphere_positions, subdivide, with_object
 
 if TYPE_CHECKING:
     from twin.plugin import MotionRequest, PlanningScene, PluginContext
@@ -87,7 +99,7 @@ class CrocPlanner(RecedingHorizonMPC):
 
     Params = CrocParams
     name = "croc"
-    _recovers_blocked_segments = True  # (twin_nmpc.receding): stress seed 110, a lagged fallback by the wall
+    _recovers_blocked_segments = True  # (twin.planning.receding): stress seed 110, a lagged fallback by the wall
     params: CrocParams
 
     def __init__(self, params: CrocParams | None, context: PluginContext):
@@ -141,7 +153,7 @@ class CrocPlanner(RecedingHorizonMPC):
     def _self_rows(
         self, qs: np.ndarray, self_sph: np.ndarray, pairs: np.ndarray, centres: np.ndarray | None = None
     ) -> SelfRows | None:
-        """The self rows of the plan `qs` (H+1, 6) (`twin_croc.selfrows`; `centres`: the self set's there, when
+        """The self rows of the plan `qs` (H+1, 6) (`twin.planning.selfrows`; `centres`: the self set's there, when
         known), None if it needs none."""
         P = self.params
         if not P.self_slots:
@@ -171,7 +183,7 @@ class CrocPlanner(RecedingHorizonMPC):
     def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
         """The loop's check of the hard constraints (`RecedingHorizonMPC._violation`) and of the self rows: every
         pair of the self set, at the knots and between them (`constraint_substeps` points per step, joint-linear),
-        stays `_self_bound` apart or no closer than it starts (`twin_croc.selfrows.self_violation`)."""
+        stays `_self_bound` apart or no closer than it starts (`twin.planning.selfrows.self_violation`)."""
         why = super()._violation(knots, sph, boxes)
         if why is not None or not self.params.self_slots or knots.shape[0] < 2:
             return why

@@ -14,7 +14,7 @@ holds the bounds of the step ending there and of the one starting there. Only pa
 of each other somewhere along the plan are bounded (a RoboCup cell has ~15 boxes); the loop's independent
 check judges every pair, and a solution that comes close to a pair without bounds is solved again with it.
 
-A box is (name, lo (3,), hi (3,)) without the margin, as `twin_nmpc.spheres.Box`.
+A box is (name, lo (3,), hi (3,)) without the margin, as `twin.plugin.Box`.
 """
 
 from __future__ import annotations

@@ -55,32 +55,27 @@ from typing import TYPE_CHECKING, Any
 import casadi as ca
 import numpy as np
 
+# the NLP's rows and their numeric twins (`pair_clearance`, the loop's check) share the sphere model and its
+# smoothing constants (why these values: `twin.planning.proxy_spheres`)
+from twin.plugin import CHORD_EPS2 as _CHORD_EPS2
+from twin.plugin import DISTANCE_EPS2 as _EPS2
+from twin.plugin import TCP_FRAME, Weights
+
 if TYPE_CHECKING:
     from twin.plugin import DHParameters
 
 __all__ = [
-    "TCP_FRAME",
     "NMPCProblem",
     "ProblemShape",
     "SolveOutput",
-    "Weights",
     "cached_problem",
     "fk_frames_sx",
     "fk_tcp_sx",
-    "pair_clearance",
-    "sphere_box_clearance",
-    "sphere_centres",
 ]
 
 log = logging.getLogger("twin")
 
-TCP_FRAME = 7  # sphere frame code of the TCP (DH frames are 0..6)
 _PAIR_SCALE = 1.0 / 0.05  # sphere-box rows in units of 5 cm
-_EPS2 = 1e-10  # (10 um)^2 under the distance's square root (feasible distances are >= r anyway)
-# under the chord's square root: (1 cm)^2. A robot standing still (the horizon's tail, once at the goal)
-# has zero chords, where sqrt(x^2 + eps) has curvature 1/sqrt(eps): with (10 um)^2 that was 1e5, IPOPT
-# regularised heavily and cycled for ~100 iterations. 1 cm costs at most 5 mm of extra clearance there.
-_CHORD_EPS2 = 1e-4
 N_FIXED_PARAMS = 25  # q0, last step, the step before, goal, tracked point, table z (see NMPCProblem)
 
 
@@ -121,41 +116,6 @@ def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, c
     return out
 
 
-def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
-    """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
-    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP (`twin_nmpc.centres_kernel`)."""
-    from twin_nmpc.centres_kernel import sphere_centres_into
-
-    tool = np.eye(4)
-    tool[2, 3] = tcp_offset_m
-    spheres = np.asarray(spheres, dtype=float)
-    out = np.empty((frames.shape[0], spheres.shape[0], 3))
-    frame = spheres[:, 0].astype(np.int64)
-    if np.any((frame < 0) | (frame > TCP_FRAME)):
-        raise ValueError(f"sphere frames must be DH frames 0..6 or the tcp ({TCP_FRAME}), got {sorted(set(frame))}")
-    sphere_centres_into(np.ascontiguousarray(frames), tool, frame, np.ascontiguousarray(spheres[:, 1:4]), out)
-    return out
-
-
-def sphere_box_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Signed clearance (m) of spheres (n, 3), radii (n,) from the box [lo, hi]: distance from each centre to
-    the box minus its radius; negative when the sphere enters the box (centres inside give -radius or less)."""
-    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    d = np.abs(centres - c) - h
-    outside = np.linalg.norm(np.maximum(d, 0.0), axis=-1)
-    inside = np.minimum(d.max(axis=-1), 0.0)
-    return outside + inside - radii
-
-
-def pair_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Numeric twin of the NLP's box rows: for consecutive check points (m, n, 3) of n spheres, the
-    guaranteed clearance (m-1, n) along the way, (d(a) + d(b) - |c(b) - c(a)|) / 2 - r (m; >= 0 is clear)."""
-    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    d = np.sqrt(np.sum(np.maximum(np.abs(centres - c) - h, 0.0) ** 2, axis=-1) + _EPS2)
-    chord = np.sqrt(np.sum(np.diff(centres, axis=0) ** 2, axis=-1) + _CHORD_EPS2)
-    return 0.5 * (d[:-1] + d[1:] - chord) - radii
-
-
 @dataclass(frozen=True)
 class ProblemShape:
     """What fixes the NLP's structure: a new shape means a new `nlpsol` (cached by the planner)."""
@@ -164,18 +124,7 @@ class ProblemShape:
     n_boxes: int
     n_object_spheres: int
     substeps: int
-    self_slots: int = 0  # self rows per stage (`twin_nmpc.selfrows`): a tool sphere from an arm sphere
-
-
-@dataclass(frozen=True)
-class Weights:
-    """Cost weights: position error (stage; terminal = position * terminal_factor), joint step, slacks."""
-
-    position: float
-    terminal_factor: float
-    step: float
-    table_slack: float
-    facing_down_slack: float
+    self_slots: int = 0  # self rows per stage (`twin.planning.selfrows`): a tool sphere from an arm sphere
 
 
 @dataclass(frozen=True)

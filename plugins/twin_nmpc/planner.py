@@ -31,16 +31,18 @@ Why these choices:
   therefore seeded over the box: lift, transfer, lower, through IK waypoints (measured on the bench
   scenes: ~35 IPOPT iterations from this guess, ~180 from the straight one, which only the chord terms of
   the pairwise box rows pull out of the box at all).
-* Everything around a solve is the receding-horizon loop's (`twin_nmpc.receding`, shared with `croc`): the
+* Everything around a solve is the receding-horizon loop's (`twin.planning.receding`, shared with `croc`): the
   independent numpy check of every plan, the fallback to the last feasible plan, the FCL check of every
   segment and the braking before a collision, segments whose derivatives are their knots' differences, the
   `goal_kinds` (positions) and what the result's info counts. The NLP's step, step-change and jerk rows are
   the velocity, acceleration and jerk limits of what a segment declares.
 
-The pieces: `twin_nmpc.params` (the parameter model, the default spheres), `twin_nmpc.model` (the NLP and
-its cache), `twin_nmpc.spheres` (the proxy spheres and the numpy check of a plan), `twin_nmpc.guess` (the
-cold solve's initial guess), `twin_nmpc.braking` (stops within the bounds), `twin_nmpc.receding` (the
-receding-horizon loop around a solve, shared with `croc`); this module holds the IPOPT solve.
+The pieces: `twin_nmpc.params` (the parameter model), `twin_nmpc.model` (the NLP and its cache); from twin's
+core, through `twin.plugin`, what it shares with `croc`: `twin.planning.receding_params` (the shared parameters,
+the default spheres), `twin.planning.proxy_spheres` (the proxy spheres and the numpy check of a plan),
+`twin.planning.guess` (the cold solve's initial guess), `twin.planning.braking` (stops within the bounds),
+`twin.planning.selfrows` (the self rows), `twin.planning.receding` (the receding-horizon loop around a solve);
+this module holds the IPOPT solve.
 """
 
 from __future__ import annotations
@@ -51,12 +53,28 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin_nmpc.guess import guess_slack
+from twin.plugin import (
+    CHECK_TOL_M,
+    DEFAULT_ARM_SPHERES,
+    DEFAULT_WHOLE_ARM_TOOL_SPHERES,
+    Box,
+    RecedingHorizonMPC,
+    SelfRows,
+    Solved,
+    box_gaps,
+    guess_slack,
+    link_groups,
+    pair_gaps,
+    robot_spheres,
+    self_pairs,
+    self_rows,
+    self_violation,
+    sphere_positions,
+    subdivide,
+    with_object,
+)
 from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, cached_problem
-from twin_nmpc.params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES, NMPCParams
-from twin_nmpc.receding import RecedingHorizonMPC, Solved
-from twin_nmpc.selfrows import SelfRows, link_groups, pair_gaps, self_pairs, self_rows, self_violation
-from twin_nmpc.spheres import CHECK_TOL_M, Box, box_gaps, robot_spheres, sphere_positions, subdivide, with_object
+from twin_nmpc.params import NMPCParams
 
 if TYPE_CHECKING:
     from twin.plugin import PluginContext
@@ -268,7 +286,7 @@ class NMPCPlanner(RecedingHorizonMPC):
     # ---- the self rows ---------------------------------------------------------------------------------
     def _self_set(self, obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The self set with the held object's spheres `obj` (m, 4) (TCP frame) and its pairs the rows keep apart
-        (`twin_nmpc.selfrows.self_pairs`, those of a tool or held-object sphere with a forearm or upper-arm one)."""
+        (`twin.planning.selfrows.self_pairs`, those of a tool or held-object sphere with a forearm or upper-arm one)."""
         own = with_object(self._self_sph, obj)
         pairs = self._self_pairs.get(obj.shape[0])
         if pairs is None:
@@ -286,7 +304,7 @@ class NMPCPlanner(RecedingHorizonMPC):
         return 2 * self.params.box_margin_m
 
     def _self_rows(self, q: np.ndarray, ref: np.ndarray, own: np.ndarray, pairs: np.ndarray) -> SelfRows | None:
-        """The self rows of the plan q, ref (N, 6) (`twin_nmpc.selfrows.self_rows`, croc's choice and margins)."""
+        """The self rows of the plan q, ref (N, 6) (`twin.planning.selfrows.self_rows`, croc's choice and margins)."""
         P = self.params
         if not P.self_slots:
             return None
@@ -323,7 +341,7 @@ class NMPCPlanner(RecedingHorizonMPC):
 
     def _self_short(self, knots: np.ndarray, own: np.ndarray, pairs: np.ndarray) -> str | None:
         """Why the knot path (m+1, 6) brings a pair of the self set closer than the self bound, between the knots
-        too (`constraint_substeps` points per step), or None (`twin_nmpc.selfrows.self_violation`)."""
+        too (`constraint_substeps` points per step), or None (`twin.planning.selfrows.self_violation`)."""
         if not self.params.self_slots or knots.shape[0] < 2 or pairs.shape[0] == 0:
             return None
         qs = np.vstack([knots[:1], subdivide(knots, self.params.constraint_substeps)])

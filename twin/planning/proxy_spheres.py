@@ -1,11 +1,11 @@
-"""The proxy spheres `nmpc` keeps out of the obstacle boxes, and the numpy check of a plan's hard constraints.
+"""The proxy spheres the MPCs keep out of the obstacle boxes, and the numpy check of a plan's hard constraints.
 
-The NLP (`twin_nmpc.model`) models the gripper, the wrist and a held box as spheres (frame, x, y, z, r):
-`robot_spheres` from the parameters, `object_spheres` covering the held box, `with_object` both together.
-Every plan is checked again here, independently of IPOPT's own view, before a step of it is executed
-(`violation`): joint steps, their change and the change of that (acceleration, jerk), joint limits, the
-spheres' pairwise box rows at the NLP's check points (`model.pair_clearance`), and the joint-linear path
-between knots densely against the boxes.
+Both MPCs (`twin_nmpc.model`'s NLP, `twin_croc`'s OCP) model the gripper, the wrist and a held box as spheres
+(frame, x, y, z, r): `robot_spheres` from the parameters, `object_spheres` covering the held box, `with_object`
+both together. Every plan is checked again here, independently of the solver's own view, before a step of it
+is executed (`violation`): joint steps, their change and the change of that (acceleration, jerk), joint
+limits, the spheres' pairwise box rows at the NLP's check points (`pair_clearance`, the numeric twin of nmpc's
+rows), and the joint-linear path between knots densely against the boxes.
 
 A box is (name, lo (3,), hi (3,)) in the base frame, m, without the margin.
 """
@@ -20,21 +20,25 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from twin_nmpc.model import TCP_FRAME, pair_clearance, sphere_box_clearance, sphere_centres
-
 if TYPE_CHECKING:
     from twin.plugin import UR5e
 
 __all__ = [
     "CHECK_TOL_M",
+    "CHORD_EPS2",
+    "DISTANCE_EPS2",
+    "TCP_FRAME",
     "Box",
     "box_gaps",
     "clearance",
     "drop_covered",
     "object_spheres",
+    "pair_clearance",
     "path_gaps",
     "robot_spheres",
     "segment_box_distance",
+    "sphere_box_clearance",
+    "sphere_centres",
     "sphere_positions",
     "subdivide",
     "violation",
@@ -46,6 +50,48 @@ log = logging.getLogger("twin")
 Box = tuple[str, np.ndarray, np.ndarray]
 
 CHECK_TOL_M = 5e-4  # the numpy re-check of the hard constraints accepts this much below the margin
+TCP_FRAME = 7  # sphere frame code of the TCP (DH frames are 0..6)
+# the smoothing of the box rows, shared by every MPC's rows (`twin_nmpc.model`) and their numeric twins here:
+DISTANCE_EPS2 = 1e-10  # (10 um)^2 under the distance's square root (feasible distances are >= r anyway)
+# under the chord's square root: (1 cm)^2. A robot standing still (the horizon's tail, once at the goal)
+# has zero chords, where sqrt(x^2 + eps) has curvature 1/sqrt(eps): with (10 um)^2 that was 1e5, IPOPT
+# regularised heavily and cycled for ~100 iterations. 1 cm costs at most 5 mm of extra clearance there.
+CHORD_EPS2 = 1e-4
+
+
+def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
+    """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
+    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP (`twin.planning.mpc_kernel`)."""
+    from twin.planning.mpc_kernel import sphere_centres_into  # numba: loaded on first use
+
+    tool = np.eye(4)
+    tool[2, 3] = tcp_offset_m
+    spheres = np.asarray(spheres, dtype=float)
+    out = np.empty((frames.shape[0], spheres.shape[0], 3))
+    frame = spheres[:, 0].astype(np.int64)
+    if np.any((frame < 0) | (frame > TCP_FRAME)):
+        raise ValueError(f"sphere frames must be DH frames 0..6 or the tcp ({TCP_FRAME}), got {sorted(set(frame))}")
+    sphere_centres_into(np.ascontiguousarray(frames), tool, frame, np.ascontiguousarray(spheres[:, 1:4]), out)
+    return out
+
+
+def sphere_box_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Signed clearance (m) of spheres (n, 3), radii (n,) from the box [lo, hi]: distance from each centre to
+    the box minus its radius; negative when the sphere enters the box (centres inside give -radius or less)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    d = np.abs(centres - c) - h
+    outside = np.linalg.norm(np.maximum(d, 0.0), axis=-1)
+    inside = np.minimum(d.max(axis=-1), 0.0)
+    return outside + inside - radii
+
+
+def pair_clearance(centres: np.ndarray, radii: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Numeric twin of the NLP's box rows: for consecutive check points (m, n, 3) of n spheres, the
+    guaranteed clearance (m-1, n) along the way, (d(a) + d(b) - |c(b) - c(a)|) / 2 - r (m; >= 0 is clear)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    d = np.sqrt(np.sum(np.maximum(np.abs(centres - c) - h, 0.0) ** 2, axis=-1) + DISTANCE_EPS2)
+    chord = np.sqrt(np.sum(np.diff(centres, axis=0) ** 2, axis=-1) + CHORD_EPS2)
+    return 0.5 * (d[:-1] + d[1:] - chord) - radii
 
 
 @functools.lru_cache(maxsize=64)

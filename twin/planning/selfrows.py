@@ -25,13 +25,11 @@ executed.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from twin_nmpc.model import TCP_FRAME
+from twin.planning.proxy_spheres import TCP_FRAME
 
 __all__ = ["SelfRows", "link_groups", "pair_gaps", "self_pairs", "self_rows", "self_violation"]
 
@@ -68,23 +66,12 @@ def self_pairs(sph: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.column_stack([i[keep], j[keep]]), dtype=np.int64)
 
 
-@njit(cache=True, nogil=True)
-def _pair_gaps(centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray, out: np.ndarray) -> None:
-    """out[k, p] = how far apart the spheres of pair p are at knot k (negative: overlapping); compiled, since it
-    runs at every solve (numpy's gathers cost ~0.4 ms for the whole arm's ~380 pairs over 31 knots)."""
-    for k in range(centres.shape[0]):
-        for p in range(pairs.shape[0]):
-            i, j = pairs[p, 0], pairs[p, 1]
-            dx = centres[k, i, 0] - centres[k, j, 0]
-            dy = centres[k, i, 1] - centres[k, j, 1]
-            dz = centres[k, i, 2] - centres[k, j, 2]
-            out[k, p] = math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j]
-
-
 def pair_gaps(centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """(m, P) how far apart the spheres (centres (m, n, 3), radii (n,)) of each pair (P, 2) are (< 0: overlapping)."""
+    from twin.planning.mpc_kernel import pair_gaps_into  # numba: loaded on first use
+
     gap = np.empty((centres.shape[0], pairs.shape[0]))
-    _pair_gaps(np.ascontiguousarray(centres), np.ascontiguousarray(radii, dtype=float), pairs, gap)
+    pair_gaps_into(np.ascontiguousarray(centres), np.ascontiguousarray(radii, dtype=float), pairs, gap)
     return gap
 
 

@@ -1,12 +1,13 @@
-"""The first (cold) solve's initial guess of `nmpc`: knots the NLP starts from when there is no plan to shift.
+"""The first (cold) solve's initial guess of the MPCs (`nmpc`, `croc`): knots the solver starts from when there
+is no plan to shift.
 
 A straight initial guess through the perceived box starts IPOPT where the box distance has zero gradient
-(the smooth-outside distance of `twin_nmpc.model`), so when the straight Cartesian line to the goal
-crosses a box the guess goes over it: lift, transfer, lower, through continuity-seeded IK at constant tool
-orientation (measured on the bench scenes: ~35 IPOPT iterations from this guess, ~180 from the straight
-one). Without a continuous IK along the way, the guess heads straight for the goal configuration nearest
-in the arm joints. The path is then resampled into the horizon's knots from rest, under the step bound and,
-with an acceleration bound, coming to rest at every corner.
+(the smooth-outside distance of the MPCs' box rows, `twin.planning.proxy_spheres`), so when the straight
+Cartesian line to the goal crosses a box the guess goes over it: lift, transfer, lower, through
+continuity-seeded IK at constant tool orientation (measured on the bench scenes: ~35 IPOPT iterations from
+this guess, ~180 from the straight one). Without a continuous IK along the way, the guess heads straight for
+the goal configuration nearest in the arm joints. The path is then resampled into the horizon's knots from
+rest, under the step bound and, with an acceleration bound, coming to rest at every corner.
 """
 
 from __future__ import annotations
@@ -19,9 +20,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from twin_nmpc.model import TCP_FRAME
-from twin_nmpc.params import RecedingParams
-from twin_nmpc.spheres import Box, sphere_positions
+from twin.planning.proxy_spheres import TCP_FRAME, Box, sphere_positions
+from twin.planning.receding_params import RecedingParams
 
 if TYPE_CHECKING:
     from twin.plugin import UR5e

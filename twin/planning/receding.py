@@ -20,7 +20,7 @@ What the loop does the same for every solver:
   `collision.check_resolution_*`) before it is returned, and the last plan a little beyond it (its next
   knots, as far as the arm needs to stop, coarsely). When either collides the arm brakes, as a real
   controller's protective stop does: a shortest stop within the step, acceleration and jerk bounds
-  (`twin_nmpc.braking`), returned only if it is free itself, then Status.COLLISION naming the pair. A start
+  (`twin.planning.braking`), returned only if it is free itself, then Status.COLLISION naming the pair. A start
   in collision is refused with INVALID_START naming the pair. Every other end while the arm moves (no plan
   left, `max_solves` solves) brakes the same way before its status.
 * A way to stop is planned clear before it is needed: a moving segment is commanded only when a stop from
@@ -57,46 +57,30 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.plugin import (
-    JointGoal,
-    MotionRequest,
-    MotionResult,
-    PlanningError,
-    PoseGoal,
-    Segment,
-    Status,
-    Trajectory,
-    as_q,
-    colliding_pair,
-    densify,
-    densify_path,
-    first_collision,
-)
-from twin_nmpc.braking import can_stop_now, stopping_steps
-from twin_nmpc.guess import initial_guess
-from twin_nmpc.model import Weights
-from twin_nmpc.params import RecedingParams
-from twin_nmpc.spheres import (
+from twin.errors import PlanningError
+from twin.planning.checked import Segment, colliding_pair
+from twin.planning.guess import initial_guess
+from twin.planning.proxy_spheres import (
     Box,
     clearance,
     drop_covered,
     object_spheres,
     robot_spheres,
     sphere_positions,
-    violation,
     with_object,
 )
+from twin.planning.receding_params import RecedingParams, Weights
+from twin.planning.stops import WaysToStop
+from twin.types import JointGoal, MotionRequest, MotionResult, PoseGoal, Status, Trajectory, as_q
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, PluginContext, UR5e
+    from twin.collision import PlanningScene
+    from twin.kinematics import UR5e
+    from twin.registry import PluginContext
 
 __all__ = ["RecedingHorizonMPC", "Solved"]
 
 log = logging.getLogger("twin")
-
-# the last plan beyond a segment is checked joint-linearly at this resolution (rad): a coarse early warning
-# (the segment itself is checked at the configured resolution), for the knots the arm needs to stop
-_LOOKAHEAD_RESOLUTION_RAD = 0.03
 
 
 @dataclass
@@ -117,9 +101,10 @@ class Solved:
     warm: bool = False
 
 
-class RecedingHorizonMPC:
+class RecedingHorizonMPC(WaysToStop):
     """The loop around a solve: `reset(request, scene)`, then `step(q)` until a MotionResult. A subclass
-    provides `_solve` and its `Params` (a `RecedingParams`)."""
+    provides `_solve` and its `Params` (a `RecedingParams`); the commanded motion and its ways to stop are
+    `WaysToStop`'s (`twin.planning.stops`)."""
 
     Params: type[RecedingParams] = RecedingParams
     goal_kinds = frozenset({"position"})  # see the module docstring
@@ -188,10 +173,6 @@ class RecedingHorizonMPC:
             return []
         return [(n, b.lo, b.hi) for n, b in sorted(self._scene.box_bounds().items())]
 
-    def _tracked(self, q: np.ndarray) -> np.ndarray:
-        T = self.kin.fk(q, "tcp")
-        return T[:3, 3] + T[:3, :3] @ self._track
-
     # ---- receding horizon -------------------------------------------------------------------------
     def _start_goal(self) -> None:
         """The state of one goal, as before its first solve (what the solver built is kept)."""
@@ -207,7 +188,7 @@ class RecedingHorizonMPC:
         self._dq_prev = np.zeros(6)  # the last executed step (knot to knot): the start is at rest
         self._dq_prev2 = np.zeros(6)  # the step before it
         self._started = False  # whether step() has seen the measured start
-        self._guess_kind = ""  # what the last cold solve started from (twin_nmpc.guess)
+        self._guess_kind = ""  # what the last cold solve started from (twin.planning.guess)
         self._done: MotionResult | None = None
         self._pending: MotionResult | None = None
         self._safe_stop: np.ndarray | None = None  # a checked-free stop (knots) from the last segment's end
@@ -381,7 +362,7 @@ class RecedingHorizonMPC:
         return self._execute(knots, dict(entry, cost=sol.cost), sol.time_s, err)
 
     def _cold_guess(self, q: np.ndarray, boxes: list[Box], sph: np.ndarray) -> np.ndarray:
-        """The initial guess of a cold solve from `q` (`twin_nmpc.guess`); says which in `_guess_kind`."""
+        """The initial guess of a cold solve from `q` (`twin.planning.guess`); says which in `_guess_kind`."""
         step, dstep, jstep = self._step_bounds()
         guess, self._guess_kind = initial_guess(
             self.kin, self.params, q, self._target, self._track, self._goal_candidates, boxes, sph, step, dstep, jstep
@@ -458,14 +439,6 @@ class RecedingHorizonMPC:
         info = {"solve": self._solves, "braking": True, "fallback": False, "recovering": why}
         return Segment(traj, 0.0, dict(info, position_error_m=err))
 
-    def _commit(self, knots: np.ndarray) -> None:
-        """The arm is commanded along `knots`: advance the plan and the step history."""
-        m = knots.shape[0] - 1
-        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
-        self._dq_prev2, self._dq_prev = hist[-2].copy(), hist[-1].copy()
-        self._plan_idx += m
-        self._ws_offset += m
-
     def _end(self, status: Status, reason: str, q: np.ndarray, *, hit: bool = False) -> Segment | MotionResult:
         """End the goal with `status`: a moving arm first brakes to rest (a braking segment: the shortest stop, or
         else the stop kept free from the last segment's end; the status follows at the next step), else the
@@ -487,210 +460,9 @@ class RecedingHorizonMPC:
         self._done = self._final(status, reason, q)
         return self._done
 
-    # ---- ways to stop, checked before they are needed ------------------------------------------------
-    def _free_stop(
-        self, q: np.ndarray, stops: list[np.ndarray | None], hist: tuple[np.ndarray, np.ndarray] | None = None
-    ) -> tuple[np.ndarray | None, str]:
-        """The first of `stops` (knots from `q`, None: none) that is free in the FCL scene, with the step history
-        `hist` (d2, d1) before it (default: the executed steps); else None and why not (the first pair hit)."""
-        why = "no stop within the limits"
-        for i, knots in enumerate(stops):
-            if knots is None:
-                continue
-            pair = self._collision(self._segment(knots, hist))
-            if pair is None:
-                return knots, ""
-            if i == 0 or why.startswith("no stop"):
-                why = pair
-        return None, why
-
-    def _stop_after(self, knots: np.ndarray) -> tuple[np.ndarray | None, str]:
-        """A free stop from the end of the segment `knots` (m+1, 6), with the steps it ends with: at rest there,
-        the end itself; else the shortest stop (`braking.stopping_steps`) or the last plan up to where it may
-        stop, the shorter first, whichever the FCL scene passes. None and the pair hit when neither is free."""
-        hist = np.vstack([self._dq_prev2[None], self._dq_prev[None], np.diff(knots, axis=0)])
-        d2, d1 = hist[-2], hist[-1]
-        _, dstep, jstep = self._step_bounds()
-        end = knots[-1]
-        if can_stop_now(d2, d1, dstep, jstep):
-            return np.vstack([end[None], end[None]]), ""
-        along = None
-        i = self._plan_idx + knots.shape[0] - 1
-        if self._plan is not None and i < self._plan.shape[0] and np.array_equal(self._plan[i], end):
-            along = self._along(end, self._plan[i + 1 :], d2, d1)
-        stops = sorted((s for s in (self._brake_knots(end, (d2, d1)), along) if s is not None), key=len)
-        return self._free_stop(end, list(stops) or [None], (d2, d1))
-
-    def _kept_stop(self, q: np.ndarray) -> list[np.ndarray]:
-        """The stop kept free from the last segment's end (`_stop_after`), from the measured state `q`: as it is
-        when `q` is that end, else its steps taken from `q` (the arm tracks to within its controller's error)."""
-        stop = self._safe_stop
-        if stop is None:
-            return []
-        if np.array_equal(stop[0], q):
-            return [stop]
-        return [np.vstack([q[None], q[None] + np.cumsum(np.diff(stop, axis=0), axis=0)])]
-
-    def _collision(self, traj: Trajectory) -> str | None:
-        """The colliding pair of the first colliding sample of `traj` (FCL, whole scene, configured resolution)."""
-        assert self._scene is not None
-        hit = first_collision(traj, self._scene, self.kin, **self._resolution)
-        if hit is None:
-            return None
-        return colliding_pair(self._scene, densify(traj, self.kin, **self._resolution)[hit])
-
-    def _collision_ahead(self, knots: np.ndarray) -> tuple[str, int] | None:
-        """(pair, steps) when the last plan, after the segment `knots` that follows it, collides within the
-        steps the arm needs to stop from the segment's end (+2), checked joint-linearly and coarsely."""
-        if self._plan is None or knots.shape[0] < 2:
-            return None
-        start = self._plan_idx + knots.shape[0] - 1
-        _, dstep, _ = self._step_bounds()
-        a = float(np.min(dstep)) if dstep is not None else self.params.max_step_rad
-        n = math.ceil(float(np.abs(knots[-1] - knots[-2]).max()) / a) + 2
-        rest = self._plan[start + 1 : start + 1 + n]
-        if rest.shape[0] == 0:
-            return None
-        path = np.vstack([knots[-1:], rest])
-        qs = densify_path(path, _LOOKAHEAD_RESOLUTION_RAD)[1:]
-        assert self._scene is not None
-        i = self._scene.first_collision(qs)
-        if i is None:
-            return None
-        # densify_path puts ceil(|step| / resolution) points on each step: which step the hit is on
-        lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        per_step = np.maximum(1, np.ceil(lengths / _LOOKAHEAD_RESOLUTION_RAD - 1e-9))
-        return colliding_pair(self._scene, qs[i]), int(np.searchsorted(np.cumsum(per_step), i + 1)) + 1
-
-    # ---- pieces of step() ---------------------------------------------------------------------------
-    def _step_bounds(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """Per-joint bounds (6,) of a step (velocity x dt), of its change (acceleration x dt^2) and of the
-        change of that (jerk x dt^3); None where the parameters switch a bound off."""
-        assert self._request is not None
-        P, lim = self.params, self._request.limits
-        step = np.minimum(P.max_step_rad, lim.max_joint_vel * P.dt)
-        dstep = lim.max_joint_acc * P.dt**2 if P.limit_acceleration else None
-        jstep = lim.max_joint_jerk * P.dt**3 if P.limit_jerk else None
-        return step, dstep, jstep
-
+    # ---- what a formulation may say -----------------------------------------------------------------
     def _refuses_sphere_overlap(self) -> bool:
         """Whether a measured state with a proxy sphere inside a box is refused (invalid_start): the seed's spheres
         are generous, but its NLP cannot start inside a box. A formulation whose rows let a sphere that starts
         inside stay as deep (not deeper) may say no; the FCL check of the start decides then."""
         return True
-
-    def _moving(self) -> bool:
-        """Whether the last commanded step moved (a stop ends with a zero step: the arm is declared at rest)."""
-        return bool(np.any(self._dq_prev != 0.0))
-
-    def _violation(self, knots: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> str | None:
-        """Why the knot path (m+1, 6) (knots[0] = the current state) breaks a hard constraint, or None."""
-        P = self.params
-        step, dstep, jstep = self._step_bounds()
-        return violation(
-            self.kin,
-            knots,
-            sph,
-            boxes,
-            step,
-            dstep,
-            jstep,
-            dq_prev=self._dq_prev,
-            dq_prev2=self._dq_prev2,
-            box_margin_m=P.box_margin_m,
-            substeps=P.constraint_substeps,
-        )
-
-    def _fallback_knots(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box], k: int) -> np.ndarray | None:
-        """Up to k remaining steps of the last feasible plan, from the measured state, if they still pass: its
-        knots, or else its steps taken from the measured state (the arm tracks a plan only to within its
-        controller's error, and the first step from there to the plan's next knot can break the acceleration
-        bound the plan's own steps keep: a RoboCup transfer ended there)."""
-        if self._plan is None:
-            return None
-        rest = self._plan[self._plan_idx + 1 : self._plan_idx + 1 + k]
-        if rest.shape[0] == 0:
-            return None
-        knots = np.vstack([q[None], rest])
-        why = self._violation(knots, sph, boxes)
-        if why is None:
-            return knots
-        steps = np.diff(self._plan[self._plan_idx : self._plan_idx + 1 + k], axis=0)
-        shifted = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
-        also = self._violation(shifted, sph, boxes)
-        if also is None:
-            return shifted
-        log.info("%s: the last feasible plan no longer passes (%s; its steps from here: %s)", self.name, why, also)
-        return None
-
-    def _stop_along_plan(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
-        """The last plan's next knots up to the first one the arm may stop at (`braking.can_stop_now`), then a
-        zero step, from the measured state, if they pass the constraint check; None without such a plan."""
-        _, dstep, jstep = self._step_bounds()
-        if can_stop_now(self._dq_prev2, self._dq_prev, dstep, jstep):
-            return np.vstack([q[None], q[None]])
-        if self._plan is None:
-            return None
-        knots = self._along(q, self._plan[self._plan_idx + 1 :], self._dq_prev2, self._dq_prev)
-        return knots if knots is not None and self._violation(knots, sph, boxes) is None else None
-
-    def _along(self, q: np.ndarray, rest: np.ndarray, d2: np.ndarray, d1: np.ndarray) -> np.ndarray | None:
-        """From `q`, reached by the steps `d2` then `d1`, the knots `rest` (k, 6) up to the first one the arm may
-        stop at (`braking.can_stop_now`), then a zero step; None when it may stop at none of them."""
-        _, dstep, jstep = self._step_bounds()
-        path = [q]
-        for nxt in rest:
-            d2, d1 = d1, nxt - path[-1]
-            path.append(nxt)
-            if can_stop_now(d2, d1, dstep, jstep):
-                return np.vstack([*path, path[-1]])
-        return None
-
-    def _stop_at_goal(self, q: np.ndarray, sph: np.ndarray, boxes: list[Box]) -> np.ndarray | None:
-        """How a moving arm within the goal tolerance comes to rest: of the stop along the last plan
-        (`_stop_along_plan`), the shortest stop (`_brake_knots`) and the stop kept free from the last segment's
-        end (`_kept_stop`), those free in the FCL scene (and passing the constraint check, when any does); the
-        shortest that ends within the tolerance, as the seed stops as soon as it is within it, else the shortest
-        (the loop then solves again from rest). With none free, the shortest stop or the plan's (the segment's
-        check then brakes as it can); None without any."""
-        along, brake = self._stop_along_plan(q, sph, boxes), self._brake_knots(q)
-        free = [
-            k
-            for k in (along, brake, *self._kept_stop(q))
-            if k is not None and self._collision(self._segment(k)) is None
-        ]
-        if not free:
-            return brake if brake is not None else along
-        checked = [k for k in free if self._violation(k, sph, boxes) is None] or free
-        there = [k for k in checked if np.linalg.norm(self._tracked(k[-1]) - self._target) <= self._tolerance]
-        return min(there or checked, key=len)
-
-    def _brake_knots(self, q: np.ndarray, hist: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
-        """The shortest stop from `q` and the two steps `hist` (d2, d1) that brought the arm there (default: the
-        executed ones; `braking.stopping_steps`), ending in a zero step, within the joint limits; None when there
-        is none."""
-        step, dstep, jstep = self._step_bounds()
-        d2, d1 = hist if hist is not None else (self._dq_prev2, self._dq_prev)
-        steps = stopping_steps(d2, d1, step, dstep, jstep)
-        if steps is None:
-            return None
-        knots = np.vstack([q[None], q[None] + np.cumsum(steps, axis=0)])
-        knots[-1] = knots[-2]  # the zero step, exactly
-        lim = self.kin.joint_limits
-        if np.any(knots < lim[:, 0]) or np.any(knots > lim[:, 1]):
-            return None
-        return knots
-
-    def _segment(self, knots: np.ndarray, before: tuple[np.ndarray, np.ndarray] | None = None) -> Trajectory:
-        """The knots (m+1, 6) as a trajectory at dt, with the knots' backward differences as its derivatives:
-        qd_i = (q_i - q_{i-1}) / dt and qdd_i = (qd_i - qd_{i-1}) / dt, for the first sample from the two steps
-        `before` (d2, d1) that brought the arm to knots[0] (default: the last two executed; zero at rest).
-        Declared and measured agree exactly, and a segment starts with the velocity and acceleration the
-        previous one ended with."""
-        dt = self.params.dt
-        d2, d1 = before if before is not None else (self._dq_prev2, self._dq_prev)
-        hist = np.vstack([d2[None], d1[None], np.diff(knots, axis=0)])
-        qd = hist[1:] / dt
-        qdd = np.diff(hist, axis=0) / dt**2
-        t = dt * np.arange(knots.shape[0])
-        return Trajectory(t, knots.copy(), qd, qdd)

@@ -1,4 +1,5 @@
-"""How `nmpc` brings a moving arm to rest within its step, acceleration and jerk bounds.
+"""How the MPCs' loop (`twin.planning.receding`) brings a moving arm to rest within its step, acceleration and
+jerk bounds.
 
 The planner's motion is a sequence of joint steps d_i = q_i - q_{i-1}, one per dt; its bounds are on the
 step (velocity), on its change (acceleration x dt^2) and on the change of that (jerk x dt^3). A stop is
