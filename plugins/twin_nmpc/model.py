@@ -244,7 +244,7 @@ def _table_rows(points_b: _Points, slack: ca.SX, table_z: ca.SX) -> list[ca.SX]:
 
 
 def _self_rows(frames_b: dict[int, ca.SX], pself: ca.SX, slots: int) -> list[ca.SX]:
-    """Self rows at qb (`twin_nmpc.selfrows`): per slot a tool sphere (offset in the TCP frame: the gripper's or the
+    """Self rows at qb (`twin.planning.selfrows`): per slot a tool sphere (offset in the TCP frame: the gripper's or the
     held object's) and an arm sphere (offset in DH frame 2 if `sel` is 1, else in frame 3), their centres'
     distance in units of 5 cm; which pair a slot holds and its bound are set per solve."""
     rows: list[ca.SX] = []
