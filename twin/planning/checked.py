@@ -781,17 +781,19 @@ def plan(
     *,
     scene: PlanningScene | None = None,
     registry: Registry | None = None,
+    robot: Robot | None = None,
 ) -> MotionResult:
-    """Plan one request with the planner named in `planner` (a config block or a name).
+    """Plan one request with the planner named in `planner` (a config block or a name), in `scene` (default:
+    the config's cell) for `robot` (default: built from `settings.robot`; pass the one `scene` was built for).
 
     Bad input (unknown name, bad parameter) raises a TwinError; "no solution" is a status in the result.
     """
     from twin.collision import PlanningScene
 
-    context = make_context(settings, registry)
+    context = make_context(settings, registry, robot)
     p = make_planner(planner, context)
     if scene is None:
-        scene = PlanningScene.from_settings(settings)
+        scene = PlanningScene.from_settings(settings, robot=context.robot)
     if isinstance(request.goal, PoseGoal) and request.goal.frame not in ("tcp", "flange"):
         raise InvalidRequestError(f"unknown goal frame {request.goal.frame!r}; allowed: tcp, flange")
     return p.plan(request, scene)
