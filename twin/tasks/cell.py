@@ -10,7 +10,6 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import Any, Protocol
 
 import numpy as np
@@ -31,9 +30,15 @@ from twin.planning import (
     make_context,
     make_planner,
 )
+from twin.tasks import jam
+from twin.tasks.gripper import GRIPPER_POLL_S, GraspCheck, GripperReading, GripStatus, top_down
+from twin.tasks.judge import DisplacementWatch, body_between_fingers
+from twin.tasks.recovery import back_off
+from twin.tasks.stage_failure import PATH_COLLIDES, StageFailed, clear_failure, note_failure, or_refusal
 from twin.types import CalibrationOutcome, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
 from twin.urdf_model import primitive_half_extents
 
+# StageFailed, the gripper's types and top_down are re-exported: the cell's face to tasks and plugins
 __all__ = [
     "STAGES",
     "STAGE_GROUPS",
@@ -79,52 +84,6 @@ _TURN_MARGIN_RAD = 0.05  # a posture's joints are turned only to angles this far
 # a joint turning more than `_LINE_MAX_STEP_RAD` between two of them is a branch change or a singularity
 _LINE_STEP_M = 0.02
 _LINE_MAX_STEP_RAD = 0.3
-# refusals that say the direct way runs into something (another way may not)
-_PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
-
-
-class StageFailed(Exception):
-    """A stage could not be done; the task logs the reason and moves on to the next object.
-
-    `failure`: the failure's name (a `twin.failures.FAILURES` key) when the stage knows it, as a motion
-    that failed does from its planner's result and the judge's verdict; None leaves it to the reason.
-    `planner`: the planner block that planned the failed motion (None when no motion failed: a grasp not
-    sensed, an object dropped). `moved`: whether the arm moved before the stage failed; a stage refused
-    in planning did not, so the task may still choose another way there."""
-
-    def __init__(
-        self, stage: str, reason: str, *, failure: str | None = None, planner: str | None = None, moved: bool = True
-    ):
-        super().__init__(f"{stage}: {reason}")
-        self.stage = stage
-        self.reason = reason
-        self.failure = failure
-        self.planner = planner
-        self.moved = moved
-
-
-class FailureRecord(Protocol):
-    """What a task keeps about an object's failed attempts (its `_Attempt` or `_Target`)."""
-
-    error: str | None
-    failure: str | None
-    stage: str | None
-    planner: str | None
-
-
-def note_failure(rec: FailureRecord, e: StageFailed, attempt: int) -> None:
-    """Keep a failed attempt's reason on `rec`. The first failure is the object's: a cube dropped in the
-    transfer and then lying where no grasp reaches failed in the transfer; later attempts' reasons are
-    added to the text ("...; attempt 2: descent: ...")."""
-    if rec.stage is None:
-        rec.error, rec.failure, rec.stage, rec.planner = str(e), e.failure, e.stage, e.planner
-    else:
-        rec.error = f"{rec.error}; attempt {attempt}: {e}"
-
-
-def clear_failure(rec: FailureRecord) -> None:
-    """The object was placed after all: no failure is its."""
-    rec.error = rec.failure = rec.stage = rec.planner = None
 
 
 def _arm_configuration(kin: URArm, q: np.ndarray) -> tuple[bool, bool]:
@@ -133,22 +92,6 @@ def _arm_configuration(kin: URArm, q: np.ndarray) -> tuple[bool, bool]:
     pan = float(q[0])
     reach = np.array([-math.cos(pan), -math.sin(pan)])  # with the pan at 0 the arm reaches towards -x
     return bool(float(reach @ kin.fk(q)[:2, 3]) > 0.0), bool(q[2] > 0.0)
-
-
-def _or_refusal(move: Callable[[], MotionResult]) -> MotionResult | StageFailed:
-    """`move()`'s result, or its StageFailed when the stage's planner refused the way because it runs into
-    something (planned, not moved: another way may not); any other failure is raised."""
-    try:
-        return move()
-    except StageFailed as e:
-        if e.moved or e.failure not in _PATH_COLLIDES:
-            raise
-        return e
-
-
-def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
-    """(4, 4) tcp pose at `xyz` pointing straight down, fingers closing along (cos yaw, sin yaw, 0)."""
-    return Pose.from_xyz_rpy(tuple(float(v) for v in xyz), (math.pi, 0.0, float(yaw))).matrix()
 
 
 def stage_block(settings: Settings, group: str, planner_override: str | None = None) -> PlannerBlock:
@@ -178,42 +121,6 @@ def stage_planners(settings: Settings, planner_override: str | None = None) -> d
             )
         out[group] = planner
     return out
-
-
-_GRIPPER_POLL_S = 0.02  # the gripper's status is polled this long; free fingers are moving within a step
-
-
-class GripStatus(Enum):
-    """What the gripper's finger position says about a grasp (a Robotiq 2F-85's "object detected" status)."""
-
-    HOLDING = "holding"  # the fingers stopped on something of the expected width, or still hold it
-    NOTHING = "nothing"  # the fingers closed (nearly) fully: nothing between them
-    WRONG_WIDTH = "wrong_width"  # they stopped on something, but not as wide as the object should be
-    LOST = "lost"  # the opening fell below the one sensed at the grasp: the object slipped out or dropped
-
-
-@dataclass(frozen=True)
-class GripperReading:
-    """The gripper's sensor readings: opening between the pads (finger encoders), m; whether both fingers
-    have stopped; mean finger motor effort, N."""
-
-    opening_m: float
-    settled: bool
-    effort_n: float
-
-
-@dataclass(frozen=True)
-class GraspCheck:
-    """A grasp judged from the gripper's readings alone; `reason` says why it is not HOLDING."""
-
-    status: GripStatus
-    opening_m: float
-    reason: str = ""
-    expect_width_m: tuple[float, float] | None = None  # what the task expected between the fingers, (min, max) m
-
-    @property
-    def holding(self) -> bool:
-        return self.status is GripStatus.HOLDING
 
 
 @dataclass(frozen=True)
@@ -285,9 +192,7 @@ class Cell:
         )
         self.grasp: GraspCheck | None = None  # the current grasp as sensed when it closed (None: not holding)
         self.current = ""  # what the task works on, shown beside the stage in progress displays
-        from twin.tasks.judge import DisplacementWatch  # judging only: the referees read it, no task does
-
-        self.watch = DisplacementWatch(self.world)
+        self.watch = DisplacementWatch(self.world)  # judging only: the referees read it, no task does
 
     def objects_done(self, done: int, total: int) -> None:
         """Tell the progress display (`on_objects`, `twin run`'s) how many of the `total` objects the task knows
@@ -327,8 +232,6 @@ class Cell:
         gripper inside an obstacle or object perceived a little off) is backed off from
         (`twin.tasks.recovery.back_off`: a few cm along the way that separates the pair, checked) and the
         stage is planned once more; when that fails, the reason names the pair and why backing off failed."""
-        from twin.tasks.recovery import back_off
-
         if self.on_stage:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
@@ -606,7 +509,7 @@ class Cell:
         in that branch, not in the one a pose goal may land in), by `move_joints_over`; when that finds no
         clear way there (planned, not moved), over the top in the same branch: straight up to
         `safe_height`, across to the arm above the hover (the IK solution nearest `q_hover`), straight down."""
-        done = _or_refusal(lambda: self.move_joints_over(stage, way.q_hover))
+        done = or_refusal(lambda: self.move_joints_over(stage, way.q_hover))
         if isinstance(done, MotionResult):
             return done
         above = np.array(way.hover, dtype=float)
@@ -642,7 +545,7 @@ class Cell:
         `safe_height`, across at that height with the stage's planner, and straight down to `T_tcp`;
         refused again (the arm's own links in the way: another planner's motion left it in an awkward
         configuration), by way of home."""
-        done = _or_refusal(lambda: self.move_pose(stage, T_tcp))
+        done = or_refusal(lambda: self.move_pose(stage, T_tcp))
         if isinstance(done, MotionResult):
             return done
         why = done.reason
@@ -651,7 +554,7 @@ class Cell:
         i = self._first_clear([[q0, q] for q in sols])
         if i is not None:
             log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
-            done = _or_refusal(lambda: self.move_joints(stage, sols[i]))
+            done = or_refusal(lambda: self.move_joints(stage, sols[i]))
             if isinstance(done, MotionResult):
                 return done
             why = done.reason
@@ -662,7 +565,7 @@ class Cell:
             self._rise_to_safe_height()
             result = self.move_pose(stage, above)
         except StageFailed as e:
-            if e.moved or e.failure not in _PATH_COLLIDES:
+            if e.moved or e.failure not in PATH_COLLIDES:
                 raise
             log.info("%s: over the top runs into something too (%s); by way of home", stage, e.reason)
             self.move_joints_over("home", np.asarray(self.settings.robot.home, dtype=float))
@@ -679,7 +582,7 @@ class Cell:
         the stage's planner plans the move, and then the move. The turn (1 cm clear before merely clear,
         `_first_clear`) and the move from there are planned before anything moves; none clear: the refusal
         stands."""
-        refused = _or_refusal(lambda: self.move_pose(stage, T_tcp))
+        refused = or_refusal(lambda: self.move_pose(stage, T_tcp))
         if isinstance(refused, MotionResult):
             return refused
         q0 = self.world.joint_positions()
@@ -719,7 +622,7 @@ class Cell:
         nearest where it is, the same posture without a needless full turn of a wrist (which swings the
         gripper through the arm) after a planner left a joint a turn away."""
         q = self.nearest_turn(np.asarray(q, dtype=float))
-        refused = _or_refusal(lambda: self.move_joints(stage, q))
+        refused = or_refusal(lambda: self.move_joints(stage, q))
         if isinstance(refused, MotionResult):
             return refused
         q0 = self.world.joint_positions()
@@ -862,8 +765,6 @@ class Cell:
         lie between the fingers (from the perceived class and orientation), no more than
         `gripper.width_over_tolerance_m` wider and no more than `gripper.width_under_tolerance_m` narrower.
         `force_n`, `speed_m_s`: a gentler grip than the gripper's defaults."""
-        from twin.tasks.judge import body_between_fingers  # the one ground-truth read here, kept in the judge
-
         g = self.settings.gripper
         self.world.close_gripper(force_n=force_n, speed_m_s=speed_m_s)
         self.settle(self.settings.task.settle_s)
@@ -871,7 +772,8 @@ class Cell:
         self.scene.set_gripper_opening(
             float(np.clip(r.opening_m, 0.0, self.scene.max_opening_m))
         )  # closed pads read a hair below 0
-        self.held_body = body_between_fingers(self.world)  # feeds the simulated contact monitor only
+        # the one ground-truth read here, kept in the judge: it feeds the simulated contact monitor only
+        self.held_body = body_between_fingers(self.world)
         self.grasp = None
         mm = 1000.0 * r.opening_m
         if r.opening_m <= g.object_min_opening_m:
@@ -906,7 +808,7 @@ class Cell:
         width less `gripper.width_under_tolerance_m`): a box caught across its edges that turns square in
         the fingers narrows the opening by up to a third of its width and is still held."""
         g = self.settings.gripper
-        self.settle(_GRIPPER_POLL_S)  # fingers whose object just left need a moment to start closing
+        self.settle(GRIPPER_POLL_S)  # fingers whose object just left need a moment to start closing
         r = self.read_gripper()
         if self.grasp is None:
             return GraspCheck(GripStatus.NOTHING, r.opening_m, "no grasp closed on an object")
@@ -944,8 +846,6 @@ class Cell:
         something there, or (without a wrist camera) the stop that led here naming a finger on a loose
         object while the gripper should have been empty. What is stuck is set down on what lies below and
         let go again, a bounded number of tries; the run goes on either way."""
-        from twin.tasks.jam import free_jam, sense_jam
-
         last = self.records[-1] if self.records else None
         empty = self.grasp is None and self.scene.attached is None  # nothing should have been in the fingers
         stop = last.reason if last is not None and last.status == Status.EXECUTION_STOPPED.value and empty else None
@@ -960,9 +860,9 @@ class Cell:
         except StageFailed:
             log.info("recovery: could not rise from %s", np.round(T[:3, 3], 3).tolist())
             risen = False  # still low: what the wrist camera sees below may be what it let go
-        reading = sense_jam(self, stop_reason=stop, camera=risen)
+        reading = jam.sense_jam(self, stop_reason=stop, camera=risen)
         if reading.jammed:
-            free_jam(self, self.kin.fk(self.world.joint_positions()), hang_m=hang, reading=reading)
+            jam.free_jam(self, self.kin.fk(self.world.joint_positions()), hang_m=hang, reading=reading)
 
     # ---- bookkeeping ----------------------------------------------------------------------------
     def metrics(self) -> dict[str, Any]:

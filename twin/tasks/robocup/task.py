@@ -13,7 +13,6 @@ estimate was and whether it ended in its bin is for the judge (twin.tasks.judge)
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import math
 from collections.abc import Iterator
@@ -29,13 +28,14 @@ from twin.perception.capture import Capture, capture_frame, prefetch_next_captur
 from twin.perception.pipeline import make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
+from twin.tasks.gripper import gripper_boxes
 from twin.tasks.jam import clear_after_release
 from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
 from twin.tasks.robocup.calibration import calibrate_hand_eye, relook_target
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import ObjectOutcome
-from twin.urdf_model import RobotModel, primitive_half_extents, read_fixture_shapes
+from twin.urdf_model import read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
@@ -385,38 +385,6 @@ def _lift_speed(cell: Cell, share: float) -> Iterator[None]:
         yield
     finally:
         cell.limits = limits
-
-
-@functools.lru_cache(maxsize=4)
-def _robot_model(urdf: str) -> RobotModel:
-    return RobotModel.from_urdf(urdf)
-
-
-def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(lo (3,), hi (3,)) in the tcp frame of every collision shape of the gripper (the links below tool0)
-    at a finger opening, from the robot's URDF. The tcp's z axis points away from the flange, so when
-    grasping from above a larger z is lower in the world."""
-    model = _robot_model(str(settings.resolve(settings.robot.urdf)))
-    poses = model.link_poses(np.zeros((1, 6)), finger_opening=opening_m)
-    T_inv = np.linalg.inv(poses["tcp"][0])
-    out = []
-    for name in model.link_names:
-        up: str | None = name
-        while up is not None and up != "tool0":
-            up = model.parent_link(up)
-        if up is None:  # not on the gripper
-            continue
-        for shape in model.links[name].shapes:
-            try:
-                half = primitive_half_extents(shape.kind, shape.size)
-            except ValueError:
-                raise ConfigError(
-                    f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only"
-                ) from None
-            T = T_inv @ poses[name][0] @ shape.origin
-            h = np.abs(T[:3, :3]) @ half
-            out.append((T[:3, 3] - h, T[:3, 3] + h))
-    return out
 
 
 def _aligned(q: np.ndarray, x: float, y: float) -> np.ndarray:
