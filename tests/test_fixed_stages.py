@@ -118,10 +118,10 @@ def test_a_way_that_keeps_a_centimetre_clear_is_taken_before_a_nearer_one_that_g
             return float(cell.scene.min_distance(home, include_self=False).distance)
 
         assert abs(box_below(0.003) - 0.003) < 5e-4
-        assert cell._first_clear([[home], [turned]]) == 1  # 3 mm clear: the other way, 1 cm clear, first
-        assert cell._first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
+        assert cell.ways.first_clear([[home], [turned]]) == 1  # 3 mm clear: the other way, 1 cm clear, first
+        assert cell.ways.first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
         assert box_below(-0.003) < 0.0
-        assert cell._first_clear([[home]]) is None
+        assert cell.ways.first_clear([[home]]) is None
 
 
 def test_a_place_move_refused_in_the_branch_a_transfer_left_turns_the_arm_where_it_is_first():

@@ -35,7 +35,9 @@ from twin.perception.aruco import MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture, wrist_camera_offset
 from twin.perception.mount import error_bound_m, level_on_table, table_disagreement, table_plane
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, marker_pose_in_base
-from twin.tasks.cell import OVER_MARGIN_M, Cell, StageFailed
+from twin.tasks.cell import Cell
+from twin.tasks.stage_failure import StageFailed
+from twin.tasks.ways import OVER_MARGIN_M
 from twin.types import CalibrationOutcome
 
 if TYPE_CHECKING:
