@@ -227,7 +227,8 @@ def test_the_task_comparison_runs_every_planner_on_the_task_seeds_it_says():
 def test_a_placed_cube_knocked_out_by_a_later_motion_is_lost_to_that_motion():
     from types import SimpleNamespace
 
-    from twin.tasks.judge import DisplacementWatch, WarehouseReferee
+    from twin.tasks.judge import DisplacementWatch
+    from twin.tasks.warehouse.referee import WarehouseReferee
 
     settings = load_config(ROOT / "configs/warehouse.yaml")
     with World(settings, seed=0, renderer="tiny") as world:
