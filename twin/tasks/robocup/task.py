@@ -7,7 +7,7 @@ object is retried from a fresh perception (`retries` times), then skipped with i
 
 The task decides with what a real cell senses: camera frames, joint encoders and the gripper's finger
 position (grasped, slipped, dropped: `Cell.close_gripper`, `Cell.check_holding`). Which true object an
-estimate was and whether it ended in its bin is for the judge (twin.tasks.judge) alone.
+estimate was and whether it ended in its bin is for the judge (twin.tasks.robocup.referee) alone.
 """
 
 from __future__ import annotations

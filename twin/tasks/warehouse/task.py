@@ -4,7 +4,7 @@ at the drop location of its colour.
 
 The task decides with what a real cell senses: the camera frame, joint encoders and the gripper's finger
 position (grasped, slipped, dropped). Which true cube a perceived one was and whether it ended in its drop
-zone is for the judge (twin.tasks.judge) alone.
+zone is for the judge (twin.tasks.warehouse.referee) alone.
 """
 
 from __future__ import annotations
