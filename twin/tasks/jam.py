@@ -45,6 +45,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from twin.camera import Intrinsics, true_camera_pose
+from twin.perception.noise import apply_sensor_noise
 from twin.tasks.gripper import gripper_boxes, top_down
 from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
 from twin.tasks.stage_failure import StageFailed
@@ -52,7 +54,6 @@ from twin.timing import stage
 from twin.urdf_model import primitive_half_extents
 
 if TYPE_CHECKING:
-    from twin.camera import Intrinsics
     from twin.tasks.cell import Cell
 
 __all__ = [
@@ -351,8 +352,6 @@ _geometry: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _small_intrinsics(cell: Cell) -> Intrinsics:
-    from twin.camera import Intrinsics
-
     cam = cell.settings.camera
     k = VIEW_DOWNSCALE
     return Intrinsics(max(1, cam.width // k), max(1, cam.height // k), cam.fx / k, cam.fy / k)
@@ -414,9 +413,6 @@ def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple
 def _camera_share(cell: Cell, opening_m: float) -> tuple[float, int]:
     """(share of the pixels between the fingers that show something there, how many pixels were read):
     a small depth frame from the wrist camera's real pose through the camera's sensor model."""
-    from twin.camera import true_camera_pose
-    from twin.perception.noise import apply_sensor_noise
-
     world, cam = cell.world, cell.settings.camera
     with stage("perception.jam_check"):
         idx, limit = _view_geometry(cell, opening_m)
