@@ -137,15 +137,15 @@ def test_the_ik_configurations_split_by_shoulder_and_elbow():
     however much more room another has (a campaign's marker hover took the thrown-over shoulder for its
     centimetre of room, and the transfers after it folded the gripper into the forearm)."""
     from twin.kinematics import UR5e
-    from twin.tasks.cell import _arm_configuration
+    from twin.tasks.ways import arm_configuration
 
     kin = UR5e()
     sols = kin.ik(top_down((-0.45, 0.1, 0.35), 0.3), all_wraps=False)
-    configs = [_arm_configuration(kin, q) for q in sols]
+    configs = [arm_configuration(kin, q) for q in sols]
     assert sorted(set(configs)) == [(False, False), (False, True), (True, False), (True, True)]
     assert all(configs.count(c) == 2 for c in set(configs))
     capture = np.array(load_config(ROOT / "configs/robocup.yaml").camera.capture_pose)
-    assert _arm_configuration(kin, capture) == (True, True)  # in front, elbow bent positive
+    assert arm_configuration(kin, capture) == (True, True)  # in front, elbow bent positive
 
 
 def test_a_way_down_with_no_clear_way_there_is_the_last_resort():

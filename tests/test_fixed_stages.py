@@ -118,10 +118,10 @@ def test_a_way_that_keeps_a_centimetre_clear_is_taken_before_a_nearer_one_that_g
             return float(cell.scene.min_distance(home, include_self=False).distance)
 
         assert abs(box_below(0.003) - 0.003) < 5e-4
-        assert cell._first_clear([[home], [turned]]) == 1  # 3 mm clear: the other way, 1 cm clear, first
-        assert cell._first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
+        assert cell.ways.first_clear([[home], [turned]]) == 1  # 3 mm clear: the other way, 1 cm clear, first
+        assert cell.ways.first_clear([[home], [home, home]]) == 0  # none keeps 1 cm: the first clear at all
         assert box_below(-0.003) < 0.0
-        assert cell._first_clear([[home]]) is None
+        assert cell.ways.first_clear([[home]]) is None
 
 
 def test_a_place_move_refused_in_the_branch_a_transfer_left_turns_the_arm_where_it_is_first():
@@ -227,7 +227,8 @@ def test_the_task_comparison_runs_every_planner_on_the_task_seeds_it_says():
 def test_a_placed_cube_knocked_out_by_a_later_motion_is_lost_to_that_motion():
     from types import SimpleNamespace
 
-    from twin.tasks.judge import DisplacementWatch, WarehouseReferee
+    from twin.tasks.judge import DisplacementWatch
+    from twin.tasks.warehouse.referee import WarehouseReferee
 
     settings = load_config(ROOT / "configs/warehouse.yaml")
     with World(settings, seed=0, renderer="tiny") as world:

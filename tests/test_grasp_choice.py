@@ -15,6 +15,7 @@ from twin.config import load_config
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks import run_task
 from twin.tasks.cell import Cell, GraspCheck, GripStatus
+from twin.tasks.gripper import gripper_boxes
 from twin.tasks.robocup.perception import ObjectEstimate
 from twin.tasks.robocup.task import (
     STROKE_MARGIN_M,
@@ -116,7 +117,7 @@ def test_the_deepest_grasp_keeps_the_fingertips_off_the_table_and_the_palm_off_t
         z = s.perception.robocup.grasp[f"{cls}_{orient}"].z_grasp_m  # the table at 0
         low = robocup._lowest_tcp(s, est, z, STROKE_M)
         assert low <= z + 1e-9
-        boxes = robocup.gripper_boxes(s, STROKE_M)
+        boxes = gripper_boxes(s, STROKE_M)
         tip = max(hi[2] for _, hi in boxes)
         assert low - tip >= robocup._TIP_CLEARANCE_M - 1e-9  # fingertips above the table
         height = OBJECT_TEMPLATES[cls].height(orient == "horizontal")

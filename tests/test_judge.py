@@ -16,15 +16,15 @@ import pytest
 from twin.config import load_config
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.judge import (
-    RobocupReferee,
     Verdict,
-    WarehouseReferee,
     bin_verdict,
     judge_in_bin,
     judge_in_zone,
     object_bounds,
 )
 from twin.tasks.robocup import BinGeometry, bin_geometries, read_bin_geometry
+from twin.tasks.robocup.referee import RobocupReferee
+from twin.tasks.warehouse.referee import WarehouseReferee
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import Pose
 from twin.world import ObjectState, World

@@ -136,10 +136,10 @@ _LAZY: dict[str, str] = {
     "OBJECT_TEMPLATES": "twin.scene_layout",
     # tasks: the cell a task drives, and the judge of its outcome (physics ground truth)
     "Cell": "twin.tasks.cell",
-    "StageFailed": "twin.tasks.cell",
-    "GripStatus": "twin.tasks.cell",
-    "GraspCheck": "twin.tasks.cell",
-    "top_down": "twin.tasks.cell",
+    "StageFailed": "twin.tasks.stage_failure",
+    "GripStatus": "twin.tasks.gripper",
+    "GraspCheck": "twin.tasks.gripper",
+    "top_down": "twin.tasks.gripper",
     "ObjectOutcome": "twin.types",
     "Verdict": "twin.tasks.judge",
     "judge_in_zone": "twin.tasks.judge",
@@ -304,8 +304,10 @@ if TYPE_CHECKING:
     from twin.planning.selfrows import SelfRows, link_groups, pair_gaps, self_pairs, self_rows, self_violation
     from twin.registry import Kind, PluginContext, Registry
     from twin.scene_layout import OBJECT_TEMPLATES
-    from twin.tasks.cell import Cell, GraspCheck, GripStatus, StageFailed, top_down
+    from twin.tasks.cell import Cell
+    from twin.tasks.gripper import GraspCheck, GripStatus, top_down
     from twin.tasks.judge import Verdict, judge_in_bin, judge_in_zone
+    from twin.tasks.stage_failure import StageFailed
     from twin.timing import stage
     from twin.transforms import (
         matrix_to_quat,

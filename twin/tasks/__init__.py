@@ -5,8 +5,9 @@ object by physics ground truth at the end. Tasks are plugins (hook `twin_registe
 name in `settings.task.kind`; the built-in ones are `robocup` and `warehouse` (`twin.tasks.builtin`).
 
 The tasks decide with what a real cell senses (camera frames, joint encoders, the gripper's finger
-position); the simulator's ground truth is read only by `twin.tasks.judge` (verdicts, metrics, the
-labelled oracle detector's hand-off).
+position); the simulator's ground truth is read only by the judging: `twin.tasks.judge` and each task's
+referee (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`: verdicts, metrics, the labelled oracle
+detector's hand-off).
 """
 
 from __future__ import annotations

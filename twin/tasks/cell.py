@@ -2,15 +2,18 @@
 
 Tasks speak in stages ("hover", "descent", "transfer", ...). Each stage maps to a planner block of the
 config (`planners.<group>`), so swapping a planner is a config change; `--planner` replaces `transfer`.
+
+The cell senses (joints, gripper, camera frames for the trace), grasps, and executes checked motions; what it
+decides with lives beside it: the choice of a way before moving (`twin.tasks.ways`), the ways round a refused
+motion (`twin.tasks.detours`), a grasp judged from the finger position (`twin.tasks.gripper`), a stage's
+failure (`twin.tasks.stage_failure`). Its methods stay the one face a task and a plugin use.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import Any, Protocol
 
 import numpy as np
@@ -21,30 +24,49 @@ from twin.config import PlannerBlock, Settings
 from twin.errors import ConfigError, PluginCrashed
 from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
-from twin.kinematics import URArm
 from twin.limit_check import RATIO_METRICS
 from twin.planning import (
     CheckedPlanner,
-    colliding_pair,
     describe_goal_kinds,
     limits_from_settings,
     make_context,
     make_planner,
 )
+from twin.tasks import detours, jam
+from twin.tasks.gripper import (
+    GRIPPER_POLL_S,
+    GraspCheck,
+    GripperReading,
+    GripStatus,
+    grasp_check,
+    holding_check,
+    top_down,
+)
+from twin.tasks.judge import DisplacementWatch, body_between_fingers
+from twin.tasks.recovery import back_off
+from twin.tasks.stage_failure import StageFailed, clear_failure, note_failure
+from twin.tasks.ways import CHOOSE_CLEARANCE_M, OVER_MARGIN_M, WayChooser, WayDown
 from twin.types import CalibrationOutcome, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status
-from twin.urdf_model import primitive_half_extents
 
+# StageFailed, the gripper's types, top_down, WayDown and the clearances are re-exported: the cell's face to
+# tasks and plugins (`twin.plugin`), wherever they live
 __all__ = [
+    "CHOOSE_CLEARANCE_M",
+    "DEFAULT_PLANNERS",
+    "OVER_MARGIN_M",
     "STAGES",
     "STAGE_GROUPS",
     "Cell",
     "GraspCheck",
     "GripStatus",
     "GripperReading",
+    "RunTrace",
+    "Sighting",
     "StageFailed",
     "WayDown",
     "clear_failure",
     "note_failure",
+    "planner_metrics",
     "stage_block",
     "stage_planners",
     "top_down",
@@ -69,86 +91,6 @@ STAGE_GROUPS = {stage: group for stage, (group, _) in STAGES.items()}
 DEFAULT_PLANNERS = {"movej": "ruckig.movej", "movel": "toppra.movel", "transfer": "ruckig.movej"}
 # stages in which the fingers work at an object: a finger touching a loose object is not a fault there
 _GRASPING_STAGES = frozenset({"descent", "ascent", "place"})
-# a fixed stage's choice (a grasp yaw) is clear when the gripper keeps this far from the planning scene:
-# the stage planners' own margin is below it, so a clear choice is not refused for a hair
-CHOOSE_CLEARANCE_M = 0.01
-# over the top: the tcp's path across passes this far above the highest thing in the planning scene
-OVER_MARGIN_M = 0.05
-_TURN_MARGIN_RAD = 0.05  # a posture's joints are turned only to angles this far inside their limits
-# a straight way down is followed through IK waypoints this far apart (a movel planner's own first spacing);
-# a joint turning more than `_LINE_MAX_STEP_RAD` between two of them is a branch change or a singularity
-_LINE_STEP_M = 0.02
-_LINE_MAX_STEP_RAD = 0.3
-# refusals that say the direct way runs into something (another way may not)
-_PATH_COLLIDES = frozenset({"collision", "final_check_collision"})
-
-
-class StageFailed(Exception):
-    """A stage could not be done; the task logs the reason and moves on to the next object.
-
-    `failure`: the failure's name (a `twin.failures.FAILURES` key) when the stage knows it, as a motion
-    that failed does from its planner's result and the judge's verdict; None leaves it to the reason.
-    `planner`: the planner block that planned the failed motion (None when no motion failed: a grasp not
-    sensed, an object dropped). `moved`: whether the arm moved before the stage failed; a stage refused
-    in planning did not, so the task may still choose another way there."""
-
-    def __init__(
-        self, stage: str, reason: str, *, failure: str | None = None, planner: str | None = None, moved: bool = True
-    ):
-        super().__init__(f"{stage}: {reason}")
-        self.stage = stage
-        self.reason = reason
-        self.failure = failure
-        self.planner = planner
-        self.moved = moved
-
-
-class FailureRecord(Protocol):
-    """What a task keeps about an object's failed attempts (its `_Attempt` or `_Target`)."""
-
-    error: str | None
-    failure: str | None
-    stage: str | None
-    planner: str | None
-
-
-def note_failure(rec: FailureRecord, e: StageFailed, attempt: int) -> None:
-    """Keep a failed attempt's reason on `rec`. The first failure is the object's: a cube dropped in the
-    transfer and then lying where no grasp reaches failed in the transfer; later attempts' reasons are
-    added to the text ("...; attempt 2: descent: ...")."""
-    if rec.stage is None:
-        rec.error, rec.failure, rec.stage, rec.planner = str(e), e.failure, e.stage, e.planner
-    else:
-        rec.error = f"{rec.error}; attempt {attempt}: {e}"
-
-
-def clear_failure(rec: FailureRecord) -> None:
-    """The object was placed after all: no failure is its."""
-    rec.error = rec.failure = rec.stage = rec.planner = None
-
-
-def _arm_configuration(kin: URArm, q: np.ndarray) -> tuple[bool, bool]:
-    """Which of the arm's IK configurations q (6,) is, as (the tcp in front of the shoulder: along the way the pan
-    points the arm, not thrown over behind it; the elbow joint bent positive). Wrist flips do not count."""
-    pan = float(q[0])
-    reach = np.array([-math.cos(pan), -math.sin(pan)])  # with the pan at 0 the arm reaches towards -x
-    return bool(float(reach @ kin.fk(q)[:2, 3]) > 0.0), bool(q[2] > 0.0)
-
-
-def _or_refusal(move: Callable[[], MotionResult]) -> MotionResult | StageFailed:
-    """`move()`'s result, or its StageFailed when the stage's planner refused the way because it runs into
-    something (planned, not moved: another way may not); any other failure is raised."""
-    try:
-        return move()
-    except StageFailed as e:
-        if e.moved or e.failure not in _PATH_COLLIDES:
-            raise
-        return e
-
-
-def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
-    """(4, 4) tcp pose at `xyz` pointing straight down, fingers closing along (cos yaw, sin yaw, 0)."""
-    return Pose.from_xyz_rpy(tuple(float(v) for v in xyz), (math.pi, 0.0, float(yaw))).matrix()
 
 
 def stage_block(settings: Settings, group: str, planner_override: str | None = None) -> PlannerBlock:
@@ -180,42 +122,6 @@ def stage_planners(settings: Settings, planner_override: str | None = None) -> d
     return out
 
 
-_GRIPPER_POLL_S = 0.02  # the gripper's status is polled this long; free fingers are moving within a step
-
-
-class GripStatus(Enum):
-    """What the gripper's finger position says about a grasp (a Robotiq 2F-85's "object detected" status)."""
-
-    HOLDING = "holding"  # the fingers stopped on something of the expected width, or still hold it
-    NOTHING = "nothing"  # the fingers closed (nearly) fully: nothing between them
-    WRONG_WIDTH = "wrong_width"  # they stopped on something, but not as wide as the object should be
-    LOST = "lost"  # the opening fell below the one sensed at the grasp: the object slipped out or dropped
-
-
-@dataclass(frozen=True)
-class GripperReading:
-    """The gripper's sensor readings: opening between the pads (finger encoders), m; whether both fingers
-    have stopped; mean finger motor effort, N."""
-
-    opening_m: float
-    settled: bool
-    effort_n: float
-
-
-@dataclass(frozen=True)
-class GraspCheck:
-    """A grasp judged from the gripper's readings alone; `reason` says why it is not HOLDING."""
-
-    status: GripStatus
-    opening_m: float
-    reason: str = ""
-    expect_width_m: tuple[float, float] | None = None  # what the task expected between the fingers, (min, max) m
-
-    @property
-    def holding(self) -> bool:
-        return self.status is GripStatus.HOLDING
-
-
 @dataclass(frozen=True)
 class Sighting:
     """One capture and what a task made of it: the frame, the camera pose it used (base frame), each object it saw
@@ -227,22 +133,6 @@ class Sighting:
     boxes: Sequence[tuple[str, np.ndarray, np.ndarray]] = ()
 
 
-@dataclass(frozen=True, eq=False)
-class WayDown:
-    """A straight way down to a top-down tcp pose, chosen before anything moves (`Cell.choose_way_down`):
-    the yaw; the tcp at the hover and at the bottom, (4, 4) each; the arm at the hover `q_hover` (6,) in the
-    IK branch whose way down is clear for the whole arm; the joint path of that way down `path` (k, 6),
-    hover first, as the movel stage follows it; and whether it keeps `CHOOSE_CLEARANCE_M` from the
-    planning scene all along (`roomy`) or is merely clear."""
-
-    yaw: float
-    hover: np.ndarray
-    target: np.ndarray
-    q_hover: np.ndarray
-    path: np.ndarray
-    roomy: bool
-
-
 class RunTrace(Protocol):
     """What a run's recording (`twin.rerun_log.RerunRecording`) is told by the cell: every stage it planned, and
     what every capture saw (`Cell.perceived`)."""
@@ -252,6 +142,41 @@ class RunTrace(Protocol):
     ) -> None: ...
 
     def perceived(self, sim_time_s: float, sighting: Sighting) -> None: ...
+
+
+def planner_metrics(records: Sequence[MotionRecord]) -> dict[str, Any]:
+    """Planner metrics over a run's motions `records`: per planner, motions, successes, planning and motion
+    time, solves, steps a receding-horizon planner followed without a solve (`fallback_steps`), motions stopped by an
+    unexpected contact, and the largest joint velocity, acceleration and jerk over their limits that the
+    judge measured in any of its motions (`max_vel_ratio`, ...; None when it judged none)."""
+    out: dict[str, Any] = {}
+    keys = (
+        "motions",
+        "succeeded",
+        "planning_time_s",
+        "motion_time_s",
+        "solves",
+        "fallback_steps",
+        "unexpected_contacts",
+        "collisions",
+    )
+    for r in records:
+        m = out.setdefault(r.planner, dict.fromkeys(keys, 0))
+        m["motions"] += 1
+        m["succeeded"] += r.status == "success"
+        m["planning_time_s"] += r.planning_time_s
+        m["motion_time_s"] += r.duration_s
+        m["solves"] += r.solves
+        m["fallback_steps"] += r.fallback_steps
+        m["unexpected_contacts"] += r.unexpected_contacts
+        m["collisions"] += r.status == "collision"
+        for kind, key in RATIO_METRICS.items():
+            if kind in r.limit_ratios:
+                m[key] = max(m.get(key) or 0.0, r.limit_ratios[kind])
+    for m in out.values():
+        for key in RATIO_METRICS.values():
+            m.setdefault(key, None)
+    return out
 
 
 @dataclass
@@ -285,9 +210,9 @@ class Cell:
         )
         self.grasp: GraspCheck | None = None  # the current grasp as sensed when it closed (None: not holding)
         self.current = ""  # what the task works on, shown beside the stage in progress displays
-        from twin.tasks.judge import DisplacementWatch  # judging only: the referees read it, no task does
-
-        self.watch = DisplacementWatch(self.world)
+        self.watch = DisplacementWatch(self.world)  # judging only: the referees read it, no task does
+        # the choices of a way before moving, in this cell's own scene and kinematics
+        self.ways = WayChooser(self.kin, self.scene, float(self.settings.collision.check_resolution_rad))
 
     def objects_done(self, done: int, total: int) -> None:
         """Tell the progress display (`on_objects`, `twin run`'s) how many of the `total` objects the task knows
@@ -301,6 +226,10 @@ class Cell:
 
     def planner(self, group: str) -> CheckedPlanner:
         return self.planners[group]
+
+    def stage_planner(self, stage: str) -> CheckedPlanner:
+        """The planner of `stage`'s group (`STAGE_GROUPS`)."""
+        return self.planners[STAGE_GROUPS[stage]]
 
     def perceived(
         self,
@@ -327,8 +256,6 @@ class Cell:
         gripper inside an obstacle or object perceived a little off) is backed off from
         (`twin.tasks.recovery.back_off`: a few cm along the way that separates the pair, checked) and the
         stage is planned once more; when that fails, the reason names the pair and why backing off failed."""
-        from twin.tasks.recovery import back_off
-
         if self.on_stage:
             self.on_stage(f"{self.current}: {stage}" if self.current else stage)
         group = STAGE_GROUPS[stage]
@@ -399,9 +326,10 @@ class Cell:
     def move_pose(self, stage: str, T_tcp: np.ndarray, **kw: Any) -> MotionResult:
         """Move the tcp to `T_tcp` (4, 4); a stage that asks for a position only (the transfer) gets the
         orientation free and `task.transfer_tolerance_m` on the position."""
-        return self.move(stage, self._pose_goal(stage, T_tcp), **kw)
+        return self.move(stage, self.pose_goal(stage, T_tcp), **kw)
 
-    def _pose_goal(self, stage: str, T_tcp: np.ndarray) -> PoseGoal:
+    def pose_goal(self, stage: str, T_tcp: np.ndarray) -> PoseGoal:
+        """The goal `move_pose` asks `stage`'s planner for: exact, or the position within a tolerance."""
         pose = Pose.from_matrix(T_tcp)
         if STAGES[stage][1] == "position":
             return PoseGoal(
@@ -412,18 +340,10 @@ class Cell:
     def move_joints(self, stage: str, q: np.ndarray, **kw: Any) -> MotionResult:
         return self.move(stage, JointGoal(np.asarray(q, dtype=float)), **kw)
 
-    # ---- choosing before moving -----------------------------------------------------------------
-    # A stage the compared planner does not plan must not fail where an equivalent choice would not: each
-    # picks, in the planning scene, a grasp yaw that is clear, and goes over the top of the scene when its
-    # planner refuses the direct way. Only planning is tried; nothing moves until a choice is made.
+    # ---- choosing before moving (`twin.tasks.ways`, from the measured joints) ----------------------
     def clearance_at(self, T_tcp: np.ndarray) -> float:
-        """Signed distance (m) from the planning scene of the arm with its tcp at `T_tcp` (4, 4), in the
-        clearest of its IK branches (which one a planner takes there is its choice; the gripper, and what
-        it holds, stand the same in every one); -inf when out of reach."""
-        sols = self.kin.ik(T_tcp, all_wraps=False)
-        if len(sols) == 0:
-            return -math.inf
-        return max(float(self.scene.min_distance(q, include_self=False).distance) for q in sols)
+        """`WayChooser.clearance_at`: the arm's distance (m) from the planning scene with its tcp at `T_tcp`."""
+        return self.ways.clearance_at(T_tcp)
 
     def choose_top_down_yaw(
         self,
@@ -432,59 +352,13 @@ class Cell:
         *,
         min_clearance_m: float = CHOOSE_CLEARANCE_M,
     ) -> tuple[float, float]:
-        """(yaw, clearance m): the first of `yaws` (in order of preference) at which the tcp pointing down
-        stays `min_clearance_m` clear of the planning scene at every one of `points` (e.g. a grasp, the
-        hover above it and the way between), else the one with the most clearance."""
-        if not yaws:
-            raise ValueError("choose_top_down_yaw needs at least one yaw")
-        best, best_c = yaws[0], -math.inf
-        for yaw in yaws:
-            c = min(self.clearance_at(top_down(p, yaw)) for p in points)
-            if c >= min_clearance_m:
-                return yaw, c
-            if c > best_c + 1e-4:
-                best, best_c = yaw, c
-        log.info(
-            "no yaw keeps the gripper %.0f mm clear of the planning scene; the clearest, %.0f deg, keeps %.1f mm",
-            1e3 * min_clearance_m,
-            math.degrees(best),
-            1e3 * best_c,
-        )
-        return best, best_c
+        """(yaw, clearance m): the first of `yaws` at which the top-down gripper keeps `min_clearance_m` from
+        the planning scene at every one of `points`, else the clearest (`WayChooser.choose_top_down_yaw`)."""
+        return self.ways.choose_top_down_yaw(points, yaws, min_clearance_m=min_clearance_m)
 
     def line_paths(self, starts: Sequence[np.ndarray], T0: np.ndarray, T1: np.ndarray) -> list[np.ndarray | None]:
-        """The joint path (k, 6) that a straight tcp move from `T0` to `T1` (4, 4, the same orientation: a way
-        straight down or up) follows from each of `starts` (the arm at `T0`, (6,) each): IK waypoints
-        `_LINE_STEP_M` apart, each the solution nearest the one before (at its nearest turn), as the movel
-        stages' planners keep the start's IK branch. None for a start from which the line leaves reach or
-        the joint limits, or a joint jumps (a branch change, a singularity): ways those planners refuse.
-        One IK per waypoint serves every start."""
-        T0, T1 = np.asarray(T0, dtype=float), np.asarray(T1, dtype=float)
-        if np.abs(T0[:3, :3] - T1[:3, :3]).max() > 1e-6:
-            raise ValueError("line_paths follows a straight move of one orientation; T0 and T1 turn")
-        n = max(1, math.ceil(float(np.linalg.norm(T1[:3, 3] - T0[:3, 3])) / _LINE_STEP_M))
-        lo, hi = self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1]
-        paths: list[list[np.ndarray] | None] = [[np.asarray(q, dtype=float)] for q in starts]
-        for i in range(1, n + 1):
-            T = T0.copy()
-            T[:3, 3] = T0[:3, 3] + (i / n) * (T1[:3, 3] - T0[:3, 3])
-            sols = self.kin.ik(T, all_wraps=False)
-            for k, path in enumerate(paths):
-                if path is None:
-                    continue
-                if len(sols) == 0:
-                    paths[k] = None
-                    continue
-                prev = path[-1]
-                near = sols + 2.0 * math.pi * np.round((prev - sols) / (2.0 * math.pi))
-                step = np.abs(near - prev).max(axis=1)
-                j = int(np.argmin(step))
-                q = near[j]
-                if step[j] > _LINE_MAX_STEP_RAD or np.any(q < lo) or np.any(q > hi):
-                    paths[k] = None
-                else:
-                    path.append(q)
-        return [None if p is None else np.array(p) for p in paths]
+        """The joint paths of a straight tcp move from `T0` to `T1` from each of `starts` (`WayChooser.line_paths`)."""
+        return self.ways.line_paths(starts, T0, T1)
 
     def choose_way_down(
         self,
@@ -508,168 +382,45 @@ class Cell:
         The gripper alone may be clear where the arm is not: a cube far behind a wall is reached with the
         upper arm low over it, in some branches into it (`Cell.choose_top_down_yaw` checks the gripper).
         None clear: StageFailed (planned, not moved) naming what runs into what."""
-        q0 = self.world.joint_positions()
-        res = float(self.settings.collision.check_resolution_rad)
-        planner = self.planner(STAGE_GROUPS[stage])
-        tried: dict[float, list[tuple[np.ndarray, np.ndarray]]] = {}
+        return self.ways.choose_way_down(
+            self.world.joint_positions(),
+            target,
+            hover,
+            yaws,
+            planner=self.stage_planner(stage),
+            planner_name=self.block(STAGE_GROUPS[stage]).name,
+            limits=self.limits,
+            seed=self.world.seed,
+            stage=stage,
+        )
 
-        def ways(yaw: float) -> list[tuple[np.ndarray, np.ndarray]]:
-            """(q at the hover, path down) of every branch whose way down is within reach, nearest first."""
-            if yaw not in tried:
-                Th, Tt = top_down(hover, yaw), top_down(target, yaw)
-                sols = [q for q in self._branches(Th) if self.kin.within_limits(q)]
-                paths = self.line_paths(sols, Th, Tt)
-                tried[yaw] = [(q, p) for q, p in zip(sols, paths, strict=True) if p is not None]
-            return tried[yaw]
+    def safe_height(self) -> float:
+        """A tcp height from which the gripper, and what it holds, passes over everything in the planning
+        scene (`WayChooser.safe_height`)."""
+        return self.ways.safe_height()
 
-        refused: dict[int, str] = {}  # the planner's refusals, by id of the way's q_hover: not planned twice
-        padded = self.scene.padded(CHOOSE_CLEARANCE_M)
-        raised = self._raised(q0)
+    def nearest_turn(self, q: np.ndarray) -> np.ndarray:
+        """`q` (6,) with each joint turned by whole turns (within its limits) to the angle nearest the
+        measured one: the same posture, reached without a needless full turn (`WayChooser.nearest_turn`)."""
+        return self.ways.nearest_turn(q, self.world.joint_positions())
 
-        def reachable(q_hover: np.ndarray, scene: PlanningScene) -> bool:
-            """Whether `reach_hover` has a way from here to `q_hover` that is free in `scene`: the straight
-            joint move, or one of `move_joints_over`'s other ways."""
-            q = self.nearest_turn(q_hover)
-            legs = [[q0, q]] + [[q0, *via, q] for _, via, _ in self._other_ways(q0, q, raised)]
-            return any(scene.check_path(np.array(way), resolution_rad=res).free for way in legs)
-
-        def first(same_arm: bool, scene: PlanningScene, there: bool) -> WayDown | None:
-            """The first way (yaw in order, branch nearest first) among the branches in the arm's present
-            configuration (`same_arm`: `_arm_configuration`) or among the others, whose way down (and, `there`,
-            whose move there) is free in `scene`, and which the stage's planner plans."""
-            for yaw in yaws:
-                for q_hover, path in ways(yaw):
-                    if (_arm_configuration(self.kin, q_hover) == arm0) is not same_arm or id(q_hover) in refused:
-                        continue
-                    if there and not reachable(q_hover, scene):
-                        continue
-                    if not scene.check_path(path, resolution_rad=res).free:
-                        continue
-                    way = WayDown(
-                        float(yaw), top_down(hover, yaw), top_down(target, yaw), q_hover, path, scene is padded
-                    )
-                    goal = PoseGoal(Pose.from_matrix(way.target))
-                    plan = planner.plan(MotionRequest(q_hover, goal, self.limits, seed=self.world.seed), self.scene)
-                    if plan.status is Status.SUCCESS:
-                        return way
-                    refused[id(q_hover)] = f"{plan.status.value}: {plan.reason}"
-            return None
-
-        arm0 = _arm_configuration(self.kin, q0)
-        # the arm as it is before the arm thrown over: a flipped shoulder or elbow 1 cm clear of a neighbour at the
-        # hover leaves the transfers after it a folded wrist to carry into the bins (its gripper into its forearm)
-        # a way down with no clear way there is the last resort, in either configuration: reach_hover would
-        # refuse it, after the task has committed to it
-        order = [(same, scene, True) for same in (True, False) for scene in (padded, self.scene)]
-        order += [(same, scene, False) for same in (True, False) for scene in (padded, self.scene)]
-        for same_arm, scene, there in order:
-            found = first(same_arm, scene, there)
-            if found is not None:
-                return found
-        raise self._no_way_down(stage, target, yaws, tried, list(refused.values()))
-
-    def _no_way_down(
-        self,
-        stage: str,
-        target: np.ndarray | tuple[float, float, float],
-        yaws: Sequence[float],
-        tried: dict[float, list[tuple[np.ndarray, np.ndarray]]],
-        refused: list[str],
-    ) -> StageFailed:
-        """Why `choose_way_down` found no way: what runs into what, counted over the ways it tried."""
-        pairs: dict[str, int] = {}
-        for ways in tried.values():
-            for _, path in ways:
-                hit = self.scene.check_path(path, resolution_rad=float(self.settings.collision.check_resolution_rad))
-                if hit.q is not None:
-                    pair = colliding_pair(self.scene, hit.q)
-                    pairs[pair] = pairs.get(pair, 0) + 1
-        n = sum(len(w) for w in tried.values())
-        what = ", ".join(f"{p} in {k}" for p, k in sorted(pairs.items(), key=lambda kv: -kv[1]))
-        if refused:
-            what = ", ".join(filter(None, [what, f"{len(refused)} refused by the planner ({refused[0]})"]))
-        xyz = ", ".join(f"{float(v):.3f}" for v in target)
-        if n == 0:  # no branch of any yaw follows the line: out of reach, past a joint limit or a singularity
-            reason = f"no way down to ({xyz}) is within reach: in no IK branch of {len(yaws)} yaws"
-            failure = "ik_failure"
-        else:
-            reason = (
-                f"no way down to ({xyz}) is clear for the whole arm: {n} ways tried ({len(yaws)} yaws x their "
-                f"IK branches within reach)" + (f"; {what}" if what else "")
-            )
-            failure = "collision"
-        log.info("%s: %s", stage, reason)
-        return StageFailed(stage, reason, failure=failure, planner=self.block(STAGE_GROUPS[stage]).name, moved=False)
-
+    # ---- the ways round a refused motion (`twin.tasks.detours`) ------------------------------------
     def reach_hover(self, way: WayDown, *, stage: str = "hover") -> MotionResult:
         """Move to `way`'s hover in the IK branch it was chosen in (a joint goal: its way down was checked
         in that branch, not in the one a pose goal may land in), by `move_joints_over`; when that finds no
         clear way there (planned, not moved), over the top in the same branch: straight up to
         `safe_height`, across to the arm above the hover (the IK solution nearest `q_hover`), straight down."""
-        done = _or_refusal(lambda: self.move_joints_over(stage, way.q_hover))
-        if isinstance(done, MotionResult):
-            return done
-        above = np.array(way.hover, dtype=float)
-        above[2, 3] = max(above[2, 3], self.safe_height())
-        sols = [self.nearest_turn(q) for q in self.kin.ik(above, all_wraps=False)]
-        if above[2, 3] <= way.hover[2, 3] or not sols:
-            raise done
-        q_above = min(sols, key=lambda q: float(np.abs(q - way.q_hover).max()))
-        log.info("%s: no clear way to the chosen hover (%s); over the top", stage, done.reason)
-        self._rise_to_safe_height()
-        self.move_joints_over(stage, q_above)
-        return self.move_pose("descent", way.hover)
-
-    def safe_height(self) -> float:
-        """A tcp height from which the gripper, and what it holds, passes over everything in the planning
-        scene: the top of its highest object, plus what hangs below the tcp, plus `OVER_MARGIN_M`."""
-        top = 0.0
-        for shapes in self.scene.environment_shapes().values():
-            for kind, size, T in shapes:
-                top = max(top, float(T[2, 3] + np.abs(T[2, :3]) @ primitive_half_extents(kind, size)))
-        hang = 0.0
-        held = self.scene.attached_box()
-        if held is not None:
-            _, held_size, T_held = held
-            hang = float(T_held[2, 3] + np.abs(T_held[2, :3]) @ (held_size / 2.0))  # the tcp's z points down
-        return top + max(hang, 0.0) + OVER_MARGIN_M
+        return detours.reach_hover(self, way, stage)
 
     def move_pose_over(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
         """`move_pose`, and when the stage's planner refuses the direct way because it runs into something
         (planned, not moved): to the arm configuration at `T_tcp` (an IK branch, at the turn of each joint
         nearest where it is) whose straight joint motion from here is clear, nearest first, 1 cm clear
-        before merely clear (`_first_clear`); else over the top: straight up to
+        before merely clear (`WayChooser.first_clear`); else over the top: straight up to
         `safe_height`, across at that height with the stage's planner, and straight down to `T_tcp`;
         refused again (the arm's own links in the way: another planner's motion left it in an awkward
         configuration), by way of home."""
-        done = _or_refusal(lambda: self.move_pose(stage, T_tcp))
-        if isinstance(done, MotionResult):
-            return done
-        why = done.reason
-        q0 = self.world.joint_positions()
-        sols = self._branches(T_tcp)
-        i = self._first_clear([[q0, q] for q in sols])
-        if i is not None:
-            log.info("%s: the direct way runs into something (%s); going to a clear configuration", stage, why)
-            done = _or_refusal(lambda: self.move_joints(stage, sols[i]))
-            if isinstance(done, MotionResult):
-                return done
-            why = done.reason
-        log.info("%s: the direct way runs into something (%s); going over the top", stage, why)
-        above = np.array(T_tcp, dtype=float)
-        above[2, 3] = max(above[2, 3], self.safe_height())
-        try:
-            self._rise_to_safe_height()
-            result = self.move_pose(stage, above)
-        except StageFailed as e:
-            if e.moved or e.failure not in _PATH_COLLIDES:
-                raise
-            log.info("%s: over the top runs into something too (%s); by way of home", stage, e.reason)
-            self.move_joints_over("home", np.asarray(self.settings.robot.home, dtype=float))
-            result = self.move_pose(stage, above)
-        if above[2, 3] > T_tcp[2, 3]:
-            result = self.move_pose("descent", T_tcp)
-        return result
+        return detours.move_pose_over(self, stage, T_tcp)
 
     def move_pose_turned(self, stage: str, T_tcp: np.ndarray) -> MotionResult:
         """`move_pose` (a short straight move, e.g. lowering into a bin), and when the stage's planner refuses
@@ -677,152 +428,28 @@ class Cell:
         bin wall, in the IK branch another planner's motion left it in): the arm turned first, where it is,
         to another configuration of the same tcp pose (an IK branch at the joints' nearest turns) from which
         the stage's planner plans the move, and then the move. The turn (1 cm clear before merely clear,
-        `_first_clear`) and the move from there are planned before anything moves; none clear: the refusal
-        stands."""
-        refused = _or_refusal(lambda: self.move_pose(stage, T_tcp))
-        if isinstance(refused, MotionResult):
-            return refused
-        q0 = self.world.joint_positions()
-        turns = [q for q in self._branches(self.kin.fk(q0)) if float(np.abs(q - q0).max()) > 1e-3]
-        planner, goal = self.planner(STAGE_GROUPS[stage]), self._pose_goal(stage, T_tcp)
-        turns = [
-            q
-            for q in turns
-            if planner.plan(MotionRequest(q, goal, self.limits, seed=self.world.seed), self.scene).status
-            is Status.SUCCESS
-        ]
-        i = self._first_clear([[q0, q] for q in turns])
-        if i is None:
-            raise refused
-        log.info("%s: the way runs into something (%s); turning the arm where it is first", stage, refused.reason)
-        self.move_joints("align", turns[i])
-        return self.move_pose(stage, T_tcp)
-
-    def _branches(self, T_tcp: np.ndarray) -> list[np.ndarray]:
-        """The arm configurations (6,) at `T_tcp` (4, 4): each IK branch once, at the turn of each joint
-        nearest where it is (a way that swings a wrist a full turn to keep clear leaves the arm a turn from
-        where the next planner expects it), nearest first."""
-        q0 = self.world.joint_positions()
-        return sorted(
-            (self.nearest_turn(q) for q in self.kin.ik(T_tcp, all_wraps=False)),
-            key=lambda q: float(np.abs(q - q0).max()),
-        )
+        `WayChooser.first_clear`) and the move from there are planned before anything moves; none clear: the
+        refusal stands."""
+        return detours.move_pose_turned(self, stage, T_tcp)
 
     def move_joints_over(self, stage: str, q: np.ndarray) -> MotionResult:
         """`move_joints`, and when the stage's planner refuses the direct way because it runs into
         something (planned, not moved), by the first of a few other ways whose straight joint legs are
         clear in the planning scene (checked before anything moves): the wrist joints first, the arm
         joints first, straight up to `safe_height` first, up and then the wrist, or through the upright
-        posture. A way that is not clear is never started; none clear: the refusal stands.
+        posture (`twin.tasks.ways.other_ways`). A way that is not clear is never started; none clear: the
+        refusal stands.
 
         `q` is a posture: each joint goes to the turn of its angle (q + 2 pi k, within the joint's limits)
         nearest where it is, the same posture without a needless full turn of a wrist (which swings the
         gripper through the arm) after a planner left a joint a turn away."""
-        q = self.nearest_turn(np.asarray(q, dtype=float))
-        refused = _or_refusal(lambda: self.move_joints(stage, q))
-        if isinstance(refused, MotionResult):
-            return refused
-        q0 = self.world.joint_positions()
-        ways = self._other_ways(q0, q, self._raised(q0))
-        i = self._first_clear([[q0, *via, q] for _, via, _ in ways])
-        if i is not None:
-            name, via, rises = ways[i]
-            log.info("%s: the direct way runs into something (%s); going %s", stage, refused.reason, name)
-            if rises:
-                self._rise_to_safe_height()
-            for qv in via[1:] if rises else via:
-                self.move_joints(stage, qv)
-            return self.move_joints(stage, q)
-        log.info(
-            "%s: the direct way runs into something and no other way is clear from %s",
-            stage,
-            np.round(q0, 3).tolist(),
-        )
-        raise refused
-
-    def _other_ways(
-        self, q0: np.ndarray, q: np.ndarray, raised: np.ndarray | None
-    ) -> list[tuple[str, list[np.ndarray], bool]]:
-        """The ways `move_joints_over` tries from `q0` to `q` when the straight joint move is refused, in
-        order: (name, the joints it passes through, whether its first leg is the rise straight up to
-        `raised`, `_raised(q0)`)."""
-        ways: list[tuple[str, list[np.ndarray], bool]] = [
-            ("wrist first", [np.concatenate([q0[:3], q[3:]])], False),
-            ("arm first", [np.concatenate([q[:3], q0[3:]])], False),
-        ]
-        if raised is not None:
-            ways += [
-                ("up first", [raised], True),
-                ("up, then the wrist", [raised, np.concatenate([raised[:3], q[3:]])], True),
-            ]
-        # the arm straight up (the "candle" posture): from it the elbow and wrist unfold either way, which a
-        # straight joint motion between two elbow branches cannot do without folding through itself
-        upright = np.array([q0[0], -math.pi / 2, 0.0, -math.pi / 2, 0.0, q0[5]])
-        ways.append(("through the upright posture", [upright], False))
-        return ways
+        return detours.move_joints_over(self, stage, q)
 
     def reach_posture(self, stage: str, q: np.ndarray) -> MotionResult:
         """`move_joints_over` (home, the capture pose), and when a contact stops it on the way (an object
         still stuck to a finger after a release touches something): let go, rise, free what is stuck
         (`recover`: the stop that led there names the finger) and try once more."""
-        try:
-            return self.move_joints_over(stage, q)
-        except StageFailed as e:
-            if e.failure != "execution_contact":
-                raise
-            log.info("%s: stopped on the way (%s); recovering and trying again", stage, e.reason)
-        self.recover()
-        return self.move_joints_over(stage, q)
-
-    def _first_clear(self, ways: Sequence[Sequence[np.ndarray]]) -> int | None:
-        """The index of the first of `ways` (each the joints its straight legs pass through, in order of
-        preference) that keeps `CHOOSE_CLEARANCE_M` from the planning scene all along (checked every 0.01
-        rad, as the stage planners check), else of the first that is clear at all, else None. A way that
-        only grazes the modelled scene meets the real one: perception's box is a few mm off and the arm,
-        tracking a fast motion, a few mm off its plan (measured: a way 0.1 mm clear in planning, 1.9 mm of
-        the real obstacle, stopped by the upper arm touching it)."""
-        padded = self.scene.padded(CHOOSE_CLEARANCE_M)
-        for scene in (padded, self.scene):
-            for i, way in enumerate(ways):
-                if scene.check_path(np.array(way)).free:
-                    return i
-        return None
-
-    def nearest_turn(self, q: np.ndarray) -> np.ndarray:
-        """`q` (6,) with each joint turned by whole turns (within its limits, `_TURN_MARGIN_RAD` inside them:
-        a joint that arrives a hair past a limit is a start every planner refuses) to the angle nearest the
-        measured one: the same posture, reached without a needless full turn."""
-        q0 = self.world.joint_positions()
-        lo, hi = self.kin.joint_limits[:, 0], self.kin.joint_limits[:, 1]
-        out = np.array(q, dtype=float)
-        for j in range(len(out)):
-            turns = out[j] + 2.0 * math.pi * np.arange(-2, 3)
-            turns = turns[(turns >= lo[j] + _TURN_MARGIN_RAD) & (turns <= hi[j] - _TURN_MARGIN_RAD)]
-            if len(turns):
-                out[j] = float(turns[np.argmin(np.abs(turns - q0[j]))])
-        return out
-
-    def _raised(self, q: np.ndarray) -> np.ndarray | None:
-        """The joints (6,) with the tcp straight above where it is at `q`, at `safe_height` (the IK solution
-        nearest `q`); None when it is there already or that is out of reach."""
-        T = self.kin.fk(q)
-        z = self.safe_height()
-        if T[2, 3] >= z:
-            return None
-        T[2, 3] = z
-        sols = self.kin.ik(T)
-        if len(sols) == 0:
-            return None
-        return np.asarray(sols[int(np.argmin(np.abs(sols - q).sum(axis=1)))], dtype=float)
-
-    def _rise_to_safe_height(self) -> float:
-        """Move the tcp straight up to `safe_height` (no move when it is there already); that height."""
-        z = self.safe_height()
-        T = self.kin.fk(self.world.joint_positions())
-        if T[2, 3] < z:
-            T[2, 3] = z
-            self.move_pose("ascent", T)
-        return z
+        return detours.reach_posture(self, stage, q)
 
     # ---- gripper --------------------------------------------------------------------------------
     def settle(self, seconds: float) -> None:
@@ -856,72 +483,34 @@ class Cell:
         force_n: float | None = None,
         speed_m_s: float | None = None,
     ) -> GraspCheck:
-        """Close force-limited, settle, and judge the grasp by the finger position alone, as the 2F-85's
-        "object detected" status does: holding when the fingers stopped clearly above fully closed
-        (`gripper.object_min_opening_m`) and, when the task knows the width range (min, max) m that should
-        lie between the fingers (from the perceived class and orientation), no more than
-        `gripper.width_over_tolerance_m` wider and no more than `gripper.width_under_tolerance_m` narrower.
-        `force_n`, `speed_m_s`: a gentler grip than the gripper's defaults."""
-        from twin.tasks.judge import body_between_fingers  # the one ground-truth read here, kept in the judge
-
-        g = self.settings.gripper
+        """Close force-limited, settle, and judge the grasp by the finger position alone
+        (`twin.tasks.gripper.grasp_check`, against the width range (min, max) m the task expects between the
+        fingers, from the perceived class and orientation). `force_n`, `speed_m_s`: a gentler grip than the
+        gripper's defaults."""
         self.world.close_gripper(force_n=force_n, speed_m_s=speed_m_s)
         self.settle(self.settings.task.settle_s)
         r = self.read_gripper(speed_m_s=speed_m_s)
         self.scene.set_gripper_opening(
             float(np.clip(r.opening_m, 0.0, self.scene.max_opening_m))
         )  # closed pads read a hair below 0
-        self.held_body = body_between_fingers(self.world)  # feeds the simulated contact monitor only
-        self.grasp = None
-        mm = 1000.0 * r.opening_m
-        if r.opening_m <= g.object_min_opening_m:
-            check = GraspCheck(
-                GripStatus.NOTHING,
-                r.opening_m,
-                f"nothing between the fingers after closing (they closed to {mm:.1f} mm)",
-                expect_width_m,
-            )
-        elif expect_width_m is not None and not (
-            expect_width_m[0] - g.width_under_tolerance_m <= r.opening_m <= expect_width_m[1] + g.width_over_tolerance_m
-        ):
-            lo, hi = (1000.0 * w for w in expect_width_m)
-            want = f"{lo:.0f} mm" if abs(hi - lo) < 0.5 else f"{lo:.0f}-{hi:.0f} mm"
-            check = GraspCheck(
-                GripStatus.WRONG_WIDTH,
-                r.opening_m,
-                f"the fingers stopped at {mm:.1f} mm, but the object should be {want} across "
-                f"(-{1000 * g.width_under_tolerance_m:.0f}/+{1000 * g.width_over_tolerance_m:.0f} mm)",
-                expect_width_m,
-            )
-        else:
-            check = GraspCheck(GripStatus.HOLDING, r.opening_m, "", expect_width_m)
-            self.grasp = check
-        log.debug("grasp: %s at %.1f mm (effort %.0f N, settled %s)", check.status.value, mm, r.effort_n, r.settled)
+        # the one ground-truth read here, kept in the judge: it feeds the simulated contact monitor only
+        self.held_body = body_between_fingers(self.world)
+        check = grasp_check(r, expect_width_m, self.settings.gripper)
+        self.grasp = check if check.status is GripStatus.HOLDING else None
+        log.debug(
+            "grasp: %s at %.1f mm (effort %.0f N, settled %s)",
+            check.status.value,
+            1000.0 * r.opening_m,
+            r.effort_n,
+            r.settled,
+        )
         return check
 
     def check_holding(self) -> GraspCheck:
-        """Is the grasped object still between the fingers? The force-limited fingers keep closing when it
-        leaves, so it is lost when the opening fell more than `gripper.slip_tolerance_m` below the opening
-        sensed at the grasp and also below the narrowest the object itself can be held at (its expected
-        width less `gripper.width_under_tolerance_m`): a box caught across its edges that turns square in
-        the fingers narrows the opening by up to a third of its width and is still held."""
-        g = self.settings.gripper
-        self.settle(_GRIPPER_POLL_S)  # fingers whose object just left need a moment to start closing
-        r = self.read_gripper()
-        if self.grasp is None:
-            return GraspCheck(GripStatus.NOTHING, r.opening_m, "no grasp closed on an object")
-        floor = self.grasp.opening_m - g.slip_tolerance_m
-        if self.grasp.expect_width_m is not None:
-            floor = min(floor, self.grasp.expect_width_m[0] - g.width_under_tolerance_m)
-        if r.opening_m < floor:
-            return GraspCheck(
-                GripStatus.LOST,
-                r.opening_m,
-                f"the fingers closed from {1000 * self.grasp.opening_m:.1f} mm at the grasp to "
-                f"{1000 * r.opening_m:.1f} mm",
-                self.grasp.expect_width_m,
-            )
-        return GraspCheck(GripStatus.HOLDING, r.opening_m, "", self.grasp.expect_width_m)
+        """Is the grasped object still between the fingers? Judged from the finger position after a short
+        poll (fingers whose object just left need a moment to start closing): `twin.tasks.gripper.holding_check`."""
+        self.settle(GRIPPER_POLL_S)
+        return holding_check(self.read_gripper(), self.grasp, self.settings.gripper)
 
     def attach(self, name: str, size: np.ndarray, *, below_tcp_m: float = 0.0) -> None:
         """Tell the planning scene the gripper holds a box of `size` (3,), its centre `below_tcp_m` under
@@ -944,8 +533,6 @@ class Cell:
         something there, or (without a wrist camera) the stop that led here naming a finger on a loose
         object while the gripper should have been empty. What is stuck is set down on what lies below and
         let go again, a bounded number of tries; the run goes on either way."""
-        from twin.tasks.jam import free_jam, sense_jam
-
         last = self.records[-1] if self.records else None
         empty = self.grasp is None and self.scene.attached is None  # nothing should have been in the fingers
         stop = last.reason if last is not None and last.status == Status.EXECUTION_STOPPED.value and empty else None
@@ -960,41 +547,13 @@ class Cell:
         except StageFailed:
             log.info("recovery: could not rise from %s", np.round(T[:3, 3], 3).tolist())
             risen = False  # still low: what the wrist camera sees below may be what it let go
-        reading = sense_jam(self, stop_reason=stop, camera=risen)
+        reading = jam.sense_jam(self, stop_reason=stop, camera=risen)
         if reading.jammed:
-            free_jam(self, self.kin.fk(self.world.joint_positions()), hang_m=hang, reading=reading)
+            jam.free_jam(self, self.kin.fk(self.world.joint_positions()), hang_m=hang, reading=reading)
+
+    # ---- bookkeeping ----------------------------------------------------------------------------
 
     # ---- bookkeeping ----------------------------------------------------------------------------
     def metrics(self) -> dict[str, Any]:
-        """Planner metrics over the run: per planner, motions, successes, planning and motion time, solves,
-        steps a receding-horizon planner followed without a solve (`fallback_steps`), motions stopped by an
-        unexpected contact, and the largest joint velocity, acceleration and jerk over their limits that the
-        judge measured in any of its motions (`max_vel_ratio`, ...; None when it judged none)."""
-        out: dict[str, Any] = {}
-        keys = (
-            "motions",
-            "succeeded",
-            "planning_time_s",
-            "motion_time_s",
-            "solves",
-            "fallback_steps",
-            "unexpected_contacts",
-            "collisions",
-        )
-        for r in self.records:
-            m = out.setdefault(r.planner, dict.fromkeys(keys, 0))
-            m["motions"] += 1
-            m["succeeded"] += r.status == "success"
-            m["planning_time_s"] += r.planning_time_s
-            m["motion_time_s"] += r.duration_s
-            m["solves"] += r.solves
-            m["fallback_steps"] += r.fallback_steps
-            m["unexpected_contacts"] += r.unexpected_contacts
-            m["collisions"] += r.status == "collision"
-            for kind, key in RATIO_METRICS.items():
-                if kind in r.limit_ratios:
-                    m[key] = max(m.get(key) or 0.0, r.limit_ratios[kind])
-        for m in out.values():
-            for key in RATIO_METRICS.values():
-                m.setdefault(key, None)
-        return out
+        """Planner metrics over the run (`planner_metrics` of the motions done so far)."""
+        return planner_metrics(self.records)

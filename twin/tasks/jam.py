@@ -45,12 +45,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from twin.tasks.cell import StageFailed, top_down
+from twin.camera import Intrinsics, true_camera_pose
+from twin.perception.noise import apply_sensor_noise
+from twin.tasks.gripper import gripper_boxes, top_down
+from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
+from twin.tasks.stage_failure import StageFailed
 from twin.timing import stage
 from twin.urdf_model import primitive_half_extents
 
 if TYPE_CHECKING:
-    from twin.camera import Intrinsics
     from twin.tasks.cell import Cell
 
 __all__ = [
@@ -223,8 +226,6 @@ def free_jam(
         ("press it down with the fingertips at the surface", lambda: _set_down(cell, look_pose, surface_z, None)),
         ("shake the wrist", lambda: _shake(cell)),
     ]
-    from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
-
     done = 0
     for name, act in actions[: max(0, tries)]:
         if not reading.jammed:
@@ -295,7 +296,7 @@ def clear_after_release(
 # ---- freeing moves ---------------------------------------------------------------------------------
 def _tip_below_tcp(cell: Cell) -> float:
     """How far the fingertips reach past the tcp along the fingers (m), from the gripper's URDF boxes."""
-    boxes = _gripper_boxes(cell, cell.settings.gripper.max_opening_m)
+    boxes = gripper_boxes(cell.settings, cell.settings.gripper.max_opening_m)
     return max(0.0, *(float(hi[2]) for _, hi in boxes))
 
 
@@ -350,15 +351,7 @@ def _at(cell: Cell, T: np.ndarray, tol_m: float = 1e-3) -> bool:
 _geometry: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def _gripper_boxes(cell: Cell, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    from twin.tasks.robocup.task import gripper_boxes
-
-    return gripper_boxes(cell.settings, opening_m)
-
-
 def _small_intrinsics(cell: Cell) -> Intrinsics:
-    from twin.camera import Intrinsics
-
     cam = cell.settings.camera
     k = VIEW_DOWNSCALE
     return Intrinsics(max(1, cam.width // k), max(1, cam.height // k), cam.fx / k, cam.fy / k)
@@ -389,7 +382,7 @@ def _view_geometry(cell: Cell, opening_m: float) -> tuple[np.ndarray, np.ndarray
     )  # t along these = depth along the optical axis
     d = d_cam @ T_tcp_cam[:3, :3].T
     o = T_tcp_cam[:3, 3]
-    boxes = _gripper_boxes(cell, opening_m)
+    boxes = gripper_boxes(cell.settings, opening_m)
     body_bottom = max(float(hi[2]) for lo, hi in boxes if lo[0] < 0.0 < hi[0])  # the gripper body spans x = 0
     tips = max(float(hi[2]) for _, hi in boxes)
     half_x = max(0.0, opening_m / 2.0 - X_MARGIN_M)
@@ -420,9 +413,6 @@ def _slab(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple
 def _camera_share(cell: Cell, opening_m: float) -> tuple[float, int]:
     """(share of the pixels between the fingers that show something there, how many pixels were read):
     a small depth frame from the wrist camera's real pose through the camera's sensor model."""
-    from twin.camera import true_camera_pose
-    from twin.perception.noise import apply_sensor_noise
-
     world, cam = cell.world, cell.settings.camera
     with stage("perception.jam_check"):
         idx, limit = _view_geometry(cell, opening_m)

@@ -1,13 +1,16 @@
-"""Judging and metrics of task runs: the one module of twin.tasks that reads the simulator's ground truth.
+"""Judging and metrics of task runs: what reads the simulator's ground truth, here and in each task's referee.
 
 A real cell knows only what it senses (joint encoders, the gripper's finger position, camera frames), so
-the tasks decide with those alone. What only the simulator knows lives here, in three roles:
+the tasks decide with those alone. What only the simulator knows lives here (and, per task, in its
+referee), in four roles:
 
 - **Judging**: was an object placed? The rule is strict. In a bin: after settling, at rest and wholly
   inside the bin's inner volume (between the inner wall faces, above the floor, its bottom below the
   rim's top), from the object's true pose and exact geometry. In a warehouse drop zone: at rest on the
   table (its bottom within a few mm of the table top) with its centre inside the zone.
 - **Metrics**: which true object an estimate was (pose error, per-object cycle time).
+- **Referees**: what every task's referee shares (`Referee`, the displacements each motion caused); each
+  task's own referee lives in its package (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`).
 - **Simulator plumbing** that must not feed a task's decisions: the body between the fingers for the
   simulated contact monitor, and the ground truth handed to a detector labelled ORACLE.
 """
@@ -17,20 +20,17 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from twin.perception.detection import needs_ground_truth, with_ground_truth
+from twin.perception.detection import needs_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES
-from twin.types import ObjectOutcome, quat_to_matrix
+from twin.types import quat_to_matrix
 
 if TYPE_CHECKING:
-    from twin.camera import RGBDFrame
     from twin.config import Settings
-    from twin.perception.detection import Detector
-    from twin.tasks.robocup import BinGeometry
-    from twin.tasks.robocup.perception import RobocupResult
+    from twin.tasks.robocup.bins import BinGeometry
     from twin.world import ObjectState, World
 
 __all__ = [
@@ -40,17 +40,20 @@ __all__ = [
     "REST_LINEAR_M_S",
     "SETTLE_MAX_S",
     "TABLE_REST_TOL_M",
-    "RobocupReferee",
+    "Displacement",
+    "DisplacementWatch",
+    "Referee",
     "Verdict",
-    "WarehouseReferee",
     "bin_verdict",
     "body_between_fingers",
     "judge_in_bin",
     "judge_in_zone",
+    "knocked_error",
+    "nearest_object",
     "object_bounds",
     "oracle_ground_truth",
-    "perceive_robocup_scene",
     "settle_until_rest",
+    "stage_of",
     "zone_verdict",
 ]
 
@@ -169,25 +172,12 @@ def settle_until_rest(world: World, *, max_s: float = SETTLE_MAX_S) -> None:
         world.step(chunk)
 
 
-def _nearest(truth: Iterable[ObjectState], xy: np.ndarray) -> int | None:
+def nearest_object(truth: Iterable[ObjectState], xy: np.ndarray) -> int | None:
     best = min(((float(np.linalg.norm(o.position[:2] - xy[:2])), o.id) for o in truth), default=(math.inf, -1))
     return best[1] if best[0] < MATCH_RADIUS_M else None
 
 
-# ---- RoboCup --------------------------------------------------------------------------------------
-class RobocupTarget(Protocol):
-    """What the RoboCup task records about one object it worked on (twin.tasks.robocup._Target)."""
-
-    error: str | None
-    failure: str | None
-    stage: str | None
-    planner: str | None
-    done: bool
-    cycle_time_s: float
-    first_estimate: np.ndarray | None
-    true_ids: set[int]
-
-
+# ---- what every referee shares ------------------------------------------------------------------
 @dataclass(frozen=True)
 class Displacement:
     """A loose object the gripper did not hold moved `distance_m` during one motion (`stage`, `planner`);
@@ -234,170 +224,32 @@ class DisplacementWatch:
         return hits[-1] if hits else None
 
 
-def _knocked_error(knock: Displacement, verdict_reason: str) -> str:
+def knocked_error(knock: Displacement, verdict_reason: str) -> str:
     return (
         f"{knock.stage}: {knock.planner}: the motion moved it {100 * knock.distance_m:.0f} cm after it was "
         f"let go; {verdict_reason}"
     )
 
 
-class RobocupReferee:
-    """Ground truth of one RoboCup run: the true objects at the start, which of them each estimate was
-    (metrics), and the verdict on each at the end. The task hands it its records; it never answers a
-    question the task could act on."""
-
-    def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:
-        from twin.tasks.robocup import bin_geometries  # the task's rules: which bin, what a bin looks like
-
-        self.world = world
-        self.settings = settings
-        self.watch = watch
-        self.truth = {o.id: o for o in world.objects()}
-        self.bins = bin_geometries(settings)
-
-    def match(self, position: np.ndarray) -> set[int]:
-        """Metrics: the true object an estimate at `position` (3,) was, as a set of none or one id."""
-        oid = _nearest(self.world.objects(), np.asarray(position, dtype=float))
-        return set() if oid is None else {oid}
-
-    def outcomes(self, targets: Sequence[RobocupTarget], *, stopped: str | None = None) -> list[ObjectOutcome]:
-        """One outcome per true object; errors read "<stage>: <why>". `stopped`: why the run ended early."""
-        from twin.tasks.robocup import bin_for
-
-        settle_until_rest(self.world)
-        out = []
-        for oid, o0 in self.truth.items():
-            bin_name = bin_for(o0.cls, o0.color, self.settings)
-            mine = [t for t in targets if oid in t.true_ids]
-            bin_ = self.bins.get(bin_name)
-            verdict = (
-                judge_in_bin(self.world, oid, bin_)
-                if bin_ is not None
-                else Verdict(False, f"there is no fixture {bin_name!r}")
-            )
-            failure = stage = planner = None
-            if verdict.placed:
-                err = None
-            elif not mine:
-                err = "perception: never seen on the table" + (f" (the run stopped: {stopped})" if stopped else "")
-            elif mine[-1].error or (not mine[-1].done and any(t.error for t in mine)):
-                # seen again elsewhere after a failure (dropped, knocked), the object is a new target to the
-                # task; its first failure is still the object's, the later targets' are added to the text
-                failed = [t for t in mine if t.error]
-                origin = failed[0]
-                err, failure, stage, planner = origin.error, origin.failure, origin.stage, origin.planner
-                err = "; then: ".join([str(err), *(str(t.error) for t in failed[1:])])
-            elif mine[-1].done and (knock := self.watch and self.watch.knocked(oid)):
-                err = _knocked_error(knock, f"{verdict.reason}{self._elsewhere(oid, bin_name)}")
-                failure, stage, planner = "execution_contact", knock.stage, knock.planner
-            elif mine[-1].done:
-                err = f"place: released, but {verdict.reason}{self._elsewhere(oid, bin_name)}"
-            else:
-                err = "task: attempted, but neither placed nor failed" + (
-                    f" (the run stopped: {stopped})" if stopped else ""
-                )
-            first = mine[0].first_estimate if mine else None
-            out.append(
-                ObjectOutcome(
-                    id=o0.name,
-                    cls=o0.cls,
-                    color=o0.color,
-                    target_bin=bin_name,
-                    placed=verdict.placed,
-                    error=err,
-                    failure=failure,
-                    stage=stage or _stage_of(err),
-                    planner=planner,
-                    cycle_time_s=sum(t.cycle_time_s for t in mine),
-                    pose_error_m=float(np.linalg.norm(first[:2] - o0.position[:2])) if first is not None else None,
-                )
-            )
-        return out
-
-    def _elsewhere(self, oid: int, target: str) -> str:
-        for name, b in self.bins.items():
-            if name != target and judge_in_bin(self.world, oid, b).placed:
-                return f" (it is in {name})"
-        return ""
-
-
-# ---- warehouse ------------------------------------------------------------------------------------
-class WarehouseAttempt(Protocol):
-    """What the warehouse task records about one cube it worked on (twin.tasks.warehouse._Attempt)."""
-
-    cube: Any  # twin.perception.warehouse.LabeledCube
-    true_id: int | None
-    error: str | None
-    failure: str | None
-    stage: str | None
-    planner: str | None
-    cycle_time_s: float
-
-
-class WarehouseReferee:
-    """Ground truth of one warehouse run: the true cubes at the start, which one each perceived cube was,
-    and the verdict on each at the end."""
-
-    def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:
-        self.world = world
-        self.settings = settings
-        self.watch = watch
-        self.truth = {o.id: o for o in world.objects()}
-
-    def match(self, centroid: np.ndarray) -> int | None:
-        """Metrics: the true cube a perceived centroid (3,) was, or None."""
-        return _nearest(self.truth.values(), np.asarray(centroid, dtype=float))
-
-    def outcomes(self, attempts: Sequence[WarehouseAttempt]) -> list[ObjectOutcome]:
-        """One outcome per true cube; errors read "<stage>: <why>"."""
-        task = self.settings.task.warehouse
-        settle_until_rest(self.world)
-        by_true = {a.true_id: a for a in attempts if a.true_id is not None}
-        out = []
-        for oid, o0 in self.truth.items():
-            zone = task.drop_zones.get(o0.color or "")
-            verdict = (
-                judge_in_zone(self.world, oid, zone, task.drop_radius_m)
-                if zone is not None
-                else Verdict(False, "no drop zone")
-            )
-            att = by_true.get(oid)
-            failure = stage = planner = None
-            if verdict.placed:
-                err = None
-            elif att is None:
-                err = "perception: never seen on the table"
-            elif att.error:
-                err, failure, stage, planner = att.error, att.failure, att.stage, att.planner
-            elif knock := self.watch and self.watch.knocked(oid):
-                err = _knocked_error(knock, verdict.reason)
-                failure, stage, planner = "execution_contact", knock.stage, knock.planner
-            else:
-                err = f"place: released, but {verdict.reason}"
-            out.append(
-                ObjectOutcome(
-                    id=o0.name,
-                    cls=o0.cls,
-                    color=o0.color,
-                    target_bin=f"drop_{o0.color}",
-                    placed=verdict.placed,
-                    error=err,
-                    failure=failure,
-                    stage=stage or _stage_of(err),
-                    planner=planner,
-                    cycle_time_s=att.cycle_time_s if att else 0.0,
-                    pose_error_m=float(np.linalg.norm(att.cube.centroid[:2] - o0.position[:2])) if att else None,
-                )
-            )
-        return out
-
-
-def _stage_of(error: str | None) -> str | None:
+def stage_of(error: str | None) -> str | None:
     """The stage an outcome's error names ("<stage>: <why>"), for an error no failed stage gave."""
     if not error:
         return None
     head, sep, _ = error.partition(":")
     return head if sep and head and " " not in head else None
+
+
+class Referee:
+    """Ground truth of one run, the part every task's referee shares: the world, the settings, the true
+    objects at the start (`truth`, by body id) and the motions' displacements (`watch`, `Cell.watch`). A task's
+    referee (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`) adds its matching and verdicts; the
+    task hands it its records, and it never answers a question the task could act on."""
+
+    def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:
+        self.world = world
+        self.settings = settings
+        self.watch = watch
+        self.truth = {o.id: o for o in world.objects()}
 
 
 # ---- simulator plumbing (never a task's decision) -----------------------------------------------
@@ -411,20 +263,3 @@ def oracle_ground_truth(world: World, detector: object) -> list[ObjectState] | N
     """ORACLE: the simulator's true objects for a detector that declares `needs_ground_truth` (the labelled
     `oracle` detector); None for every real detector."""
     return world.objects() if needs_ground_truth(detector) else None
-
-
-def perceive_robocup_scene(
-    world: World,
-    frame: RGBDFrame,
-    T_base_camera: np.ndarray,
-    settings: Settings,
-    detector: Detector,
-    *,
-    known_boxes: list[tuple[np.ndarray, np.ndarray]] | None = None,
-) -> RobocupResult:
-    """The RoboCup perception of one frame (`twin.tasks.robocup.perception.perceive_robocup`), with the ORACLE
-    hand-off: only a detector labelled as needing ground truth is given the simulator's objects."""
-    from twin.tasks.robocup.perception import perceive_robocup
-
-    fed = with_ground_truth(detector, oracle_ground_truth(world, detector))
-    return perceive_robocup(frame, T_base_camera, settings, fed, seed=world.seed, known_boxes=known_boxes)

@@ -31,15 +31,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.config import Settings
+from twin.kinematics import UR5e
 from twin.perception.aruco import MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture, wrist_camera_offset
 from twin.perception.mount import error_bound_m, level_on_table, table_disagreement, table_plane
+from twin.perception.pipeline import camera_extrinsics
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, marker_pose_in_base
-from twin.tasks.cell import OVER_MARGIN_M, Cell, StageFailed
+from twin.tasks.cell import Cell
+from twin.tasks.stage_failure import StageFailed
+from twin.tasks.ways import OVER_MARGIN_M
 from twin.types import CalibrationOutcome
 
 if TYPE_CHECKING:
-    from twin.kinematics import UR5e
     from twin.tasks.robocup.perception import ObjectEstimate
 
 __all__ = [
@@ -85,9 +88,6 @@ class HandEye:
 
     def camera_pose(self, settings: Settings, cap: Capture) -> np.ndarray:
         """(4, 4) T_base_camera perception uses for `cap`."""
-        from twin.kinematics import UR5e
-        from twin.perception.pipeline import camera_extrinsics
-
         if self.T_tool0_camera is not None:
             return UR5e.from_settings(settings).fk(cap.q, "flange") @ self.T_tool0_camera
         if cap.mount == "wrist":

@@ -44,10 +44,11 @@ from twin.config import RobocupPerceptionSettings, Settings
 from twin.perception.detection import Detection, Detector, SceneCloud, scene_cloud
 from twin.perception.geometry import NearestNeighbors, pca, rot_z, trimmed_icp
 from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
-from twin.perception.segmentation import footprint, open3d
+from twin.perception.segmentation import cluster_points, footprint, open3d
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.timing import stage
 from twin.transforms import rpy_to_matrix as rpy_matrix
+from twin.urdf_model import urdf_rgba
 
 __all__ = [
     "ObjectEstimate",
@@ -438,8 +439,6 @@ def unexplained_clusters(
     something on the table perception cannot name, which the planners must still go around."""
     from scipy.spatial import cKDTree
 
-    from twin.perception.segmentation import cluster_points
-
     is_above = cloud.height > cloud.table_threshold_m
     above = np.flatnonzero(is_above)
     if len(above) == 0:
@@ -484,8 +483,6 @@ def table_color(settings: Settings) -> np.ndarray | None:
 @lru_cache(maxsize=8)
 def _urdf_color(path: str) -> tuple[float, ...] | None:
     """A URDF's colour, read once per process (perception asks at every capture)."""
-    from twin.urdf_model import urdf_rgba
-
     rgba = urdf_rgba(path)
     return None if rgba is None else tuple(rgba)
 

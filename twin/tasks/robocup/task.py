@@ -7,13 +7,12 @@ object is retried from a fresh perception (`retries` times), then skipped with i
 
 The task decides with what a real cell senses: camera frames, joint encoders and the gripper's finger
 position (grasped, slipped, dropped: `Cell.close_gripper`, `Cell.check_holding`). Which true object an
-estimate was and whether it ended in its bin is for the judge (twin.tasks.judge) alone.
+estimate was and whether it ended in its bin is for the judge (twin.tasks.robocup.referee) alone.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import math
 from collections.abc import Iterator
@@ -23,19 +22,18 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from twin.config import Settings
-from twin.errors import ConfigError
 from twin.kinematics import wrap_to_pi
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture
 from twin.perception.pipeline import make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
+from twin.tasks.gripper import gripper_boxes
 from twin.tasks.jam import clear_after_release
-from twin.tasks.judge import RobocupReferee, perceive_robocup_scene
+from twin.tasks.robocup.bins import BinGeometry, bin_for, bin_geometries, read_bin_geometry
 from twin.tasks.robocup.calibration import calibrate_hand_eye, relook_target
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
-from twin.transforms import pose_from_xyz_rpy
+from twin.tasks.robocup.referee import RobocupReferee, perceive_robocup_scene
 from twin.types import ObjectOutcome
-from twin.urdf_model import RobotModel, primitive_half_extents, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
@@ -91,84 +89,6 @@ _SLOW_LIFT = 0.5
 _SAME_YAW_RAD = math.pi / 8
 
 
-@dataclass(frozen=True, eq=False)
-class BinGeometry:
-    """A bin as its URDF's collision boxes describe it, in its own frame, and where it stands.
-
-    `inner_lo`/`inner_hi` (3,): the open inner volume: x and y between the inner wall faces, z from the
-    floor's top to the rims' top. `outer_lo`/`outer_hi` (3,): the whole bin. `pose` (4, 4): the bin frame
-    in the base frame (the fixture's position and rpy).
-    """
-
-    name: str
-    pose: np.ndarray
-    inner_lo: np.ndarray
-    inner_hi: np.ndarray
-    outer_lo: np.ndarray
-    outer_hi: np.ndarray
-
-    def local(self, p: np.ndarray) -> np.ndarray:
-        """(3,) base-frame point in the bin frame."""
-        R, t = self.pose[:3, :3], self.pose[:3, 3]
-        return R.T @ (np.asarray(p, dtype=float)[:3] - t)
-
-    def world(self, p_local: np.ndarray) -> np.ndarray:
-        """(3,) bin-frame point in the base frame."""
-        return self.pose[:3, :3] @ np.asarray(p_local, dtype=float) + self.pose[:3, 3]
-
-    def over(self, p: np.ndarray) -> bool:
-        """True when base-frame point `p` is above or inside the bin's outer footprint."""
-        q = self.local(p)
-        return bool(np.all(q[:2] > self.outer_lo[:2]) and np.all(q[:2] < self.outer_hi[:2]))
-
-    @property
-    def yaw(self) -> float:
-        return math.atan2(self.pose[1, 0], self.pose[0, 0])
-
-
-def read_bin_geometry(name: str, urdf: str, pose: np.ndarray) -> BinGeometry:
-    """A bin's geometry from its URDF: the box with the largest footprint is the floor, the others are
-    walls, each on the side of the bin its thin direction points to. ConfigError if it is not such a bin."""
-    boxes = []
-    for s in read_fixture_shapes(urdf):
-        if s.kind != "box":
-            raise ConfigError(f"{urdf}: a bin is made of boxes, found a {s.kind}")
-        half = np.abs(s.pose[:3, :3]) @ (np.asarray(s.size, dtype=float) / 2.0)
-        boxes.append((s.pose[:3, 3], half))
-    if len(boxes) < 5:
-        raise ConfigError(f"{urdf}: a bin needs a floor and four walls, found {len(boxes)} boxes")
-    outer_lo = np.min([c - h for c, h in boxes], axis=0)
-    outer_hi = np.max([c + h for c, h in boxes], axis=0)
-    mid = (outer_lo + outer_hi) / 2.0
-    k_floor = max(range(len(boxes)), key=lambda k: (boxes[k][1][0] * boxes[k][1][1], -boxes[k][0][2]))
-    floor_c, floor_h = boxes[k_floor]
-    walls = [b for k, b in enumerate(boxes) if k != k_floor]
-    inner_lo, inner_hi = outer_lo.copy(), outer_hi.copy()
-    for axis in (0, 1):
-        other = 1 - axis
-        side = [(c, h) for c, h in walls if h[axis] < h[other]]  # thin along `axis`: a wall facing it
-        hi_faces = [c[axis] - h[axis] for c, h in side if c[axis] > mid[axis]]
-        lo_faces = [c[axis] + h[axis] for c, h in side if c[axis] < mid[axis]]
-        if not hi_faces or not lo_faces:
-            raise ConfigError(f"{urdf}: no wall on both sides of the bin along {'xy'[axis]}")
-        inner_lo[axis], inner_hi[axis] = max(lo_faces), min(hi_faces)
-    inner_lo[2] = floor_c[2] + floor_h[2]
-    inner_hi[2] = max(c[2] + h[2] for c, h in walls)
-    return BinGeometry(name, np.asarray(pose, dtype=float), inner_lo, inner_hi, outer_lo, outer_hi)
-
-
-def bin_geometries(settings: Settings) -> dict[str, BinGeometry]:
-    """The bins the class-to-bin map names, by fixture name (a bin named there but missing is a KeyError
-    later, reported per object)."""
-    task = settings.task.robocup
-    named = set(task.bins.values()) | {task.default_bin}
-    return {
-        f.name: read_bin_geometry(f.name, str(settings.resolve(f.urdf)), pose_from_xyz_rpy(f.position, f.rpy))
-        for f in settings.world.fixtures
-        if f.name in named
-    }
-
-
 @dataclass
 class _Target:
     """One object as the robot knows it: where it was seen and what happened when it tried."""
@@ -187,14 +107,6 @@ class _Target:
     first_estimate: np.ndarray | None = None
     slipped: list[tuple[GraspChoice, float]] = field(default_factory=list)  # grasps (and base yaws) that slipped
     true_ids: set[int] = field(default_factory=set)  # metrics only (the referee's), never decided on
-
-
-def bin_for(cls: str, color: str | None, settings: Settings) -> str:
-    """The fixture name of the bin for a class (a `cube_red`-style key wins over `cube`)."""
-    bins = settings.task.robocup.bins
-    if color and f"{cls}_{color}" in bins:
-        return bins[f"{cls}_{color}"]
-    return bins.get(cls, settings.task.robocup.default_bin)
 
 
 def _in_any_bin(p: np.ndarray, bins: dict[str, BinGeometry]) -> bool:
@@ -385,38 +297,6 @@ def _lift_speed(cell: Cell, share: float) -> Iterator[None]:
         yield
     finally:
         cell.limits = limits
-
-
-@functools.lru_cache(maxsize=4)
-def _robot_model(urdf: str) -> RobotModel:
-    return RobotModel.from_urdf(urdf)
-
-
-def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(lo (3,), hi (3,)) in the tcp frame of every collision shape of the gripper (the links below tool0)
-    at a finger opening, from the robot's URDF. The tcp's z axis points away from the flange, so when
-    grasping from above a larger z is lower in the world."""
-    model = _robot_model(str(settings.resolve(settings.robot.urdf)))
-    poses = model.link_poses(np.zeros((1, 6)), finger_opening=opening_m)
-    T_inv = np.linalg.inv(poses["tcp"][0])
-    out = []
-    for name in model.link_names:
-        up: str | None = name
-        while up is not None and up != "tool0":
-            up = model.parent_link(up)
-        if up is None:  # not on the gripper
-            continue
-        for shape in model.links[name].shapes:
-            try:
-                half = primitive_half_extents(shape.kind, shape.size)
-            except ValueError:
-                raise ConfigError(
-                    f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only"
-                ) from None
-            T = T_inv @ poses[name][0] @ shape.origin
-            h = np.abs(T[:3, :3]) @ half
-            out.append((T[:3, 3] - h, T[:3, 3] + h))
-    return out
 
 
 def _aligned(q: np.ndarray, x: float, y: float) -> np.ndarray:
