@@ -16,6 +16,7 @@ from twin.faults import fault_overrides
 from twin.kinematics import UR5e
 from twin.perception.aruco import transform_error
 from twin.perception.capture import Capture, capture_frame
+from twin.robot import Robot
 from twin.tasks import run_task
 from twin.tasks.cell import Cell
 from twin.tasks.robocup.calibration import HandEye, calibrate_hand_eye, error_bound_m, relook_target, view_candidates
@@ -62,7 +63,7 @@ def test_marker_out_of_frame_at_the_first_view_is_measured_from_another(looking_
         _reach_capture_pose(cell, np.array(s.camera.capture_pose))
         cap = capture_frame(world, s, move=False)
         T_true = true_camera_pose(s.camera, SEED, world.link_matrix("tool0"))
-        dt, dr = transform_error(hand_eye.camera_pose(s, cap), T_true)
+        dt, dr = transform_error(hand_eye.camera_pose(s, cap, cell.kin), T_true)
         dt0, dr0 = transform_error(cap.T_base_camera_nominal, T_true)
     assert dt0 > 0.009 and dr0 > 0.9  # the 1 cm / 1 deg error is there to be found
     assert dt < 0.005 and dr < 0.3, (dt, dr)
@@ -77,7 +78,7 @@ def test_no_view_sees_the_marker_falls_back_and_says_so() -> None:
     assert cal is not None and cal.status == "fallback"
     assert cal.views >= 1 and "not found" in cal.reason
     # 1 cm + 1 deg over the capture view's farthest level distance (~0.47 m): ~18 mm; unlevelled ~25 mm
-    assert cal.error_bound_m == pytest.approx(error_bound_m(s, levelled=True))
+    assert cal.error_bound_m == pytest.approx(error_bound_m(s, Robot.from_settings(s).arm, levelled=True))
     assert 0.012 < cal.error_bound_m < 0.025
     assert summary.to_json()["calibration"]["status"] == "fallback"
 
@@ -95,7 +96,8 @@ def test_fallback_levels_the_camera_on_the_table() -> None:
         _reach_capture_pose(cell, np.array(s.camera.capture_pose))
         cap = capture_frame(world, s, move=False)
         T_true = true_camera_pose(s.camera, SEED, world.link_matrix("tool0"))
-        T = hand_eye.camera_pose(s, cap)
+        T = hand_eye.camera_pose(s, cap, cell.kin)
+        bound = error_bound_m(s, cell.kin, levelled=True)
     tilt = math.degrees(math.acos(np.clip(T[:3, 2] @ T_true[:3, 2], -1.0, 1.0)))
     tilt0 = math.degrees(math.acos(np.clip(cap.T_base_camera_nominal[:3, 2] @ T_true[:3, 2], -1.0, 1.0)))
     assert abs(T[2, 3] - T_true[2, 3]) < 0.003
@@ -103,7 +105,7 @@ def test_fallback_levels_the_camera_on_the_table() -> None:
     # a table point under the camera is where the bound says
     foot = T[:3, 3] - T[:3, 2] * (T[2, 3] / T[2, 2])
     foot_true = T_true[:3, 3] - T_true[:3, 2] * (T_true[2, 3] / T_true[2, 2])
-    assert np.linalg.norm(foot - foot_true) < error_bound_m(s, levelled=True)
+    assert np.linalg.norm(foot - foot_true) < bound
 
 
 def test_summary_json_and_defaults() -> None:

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from twin.config import PROJECT_ROOT, PlannerBlock, load_config
+from twin.config import PROJECT_ROOT, PlannerBlock, load_config, with_planner
 from twin.errors import ConfigError, InvalidRequestError
 from twin.planning import goal_miss, make_context, make_planner
 from twin.types import JointGoal, Limits, MotionRequest, Pose, PoseGoal, Status
@@ -85,7 +85,7 @@ def test_in_a_task_cell_the_arm_never_reaches_the_colliding_configuration(acme_p
 
     settings = _without_objects(ROBOCUP)  # only what the planning scene knows: the check is what stops it
     with World(settings, seed=1, renderer="tiny") as world:
-        cell = Cell(settings, world, planner_override="acme.crash")
+        cell = Cell(with_planner(settings, "transfer", "acme.crash"), world)
         seen: list[np.ndarray] = []
         world.observe(lambda w: seen.append(w.joint_positions()), every_s=world.dt)
         start = world.joint_positions()

@@ -116,12 +116,16 @@ def test_plan_refuses_a_motion_through_the_wall_and_names_the_pair() -> None:
 def _transfer_params(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
     """A `twin run` that builds its stage planners (where parameters are checked) and stops; the transfer
     planner's validated params are appended to the returned list."""
+    from twin.config import with_planner
+    from twin.planning import make_context
     from twin.tasks.cell import stage_planners
 
     seen: list[Any] = []
 
     def fake_run_task(settings: Any, **kw: Any) -> RunSummary:
-        planners = stage_planners(settings, kw.get("planner"))
+        if kw.get("planner"):
+            settings = with_planner(settings, "transfer", kw["planner"])
+        planners = stage_planners(settings, make_context(settings))
         seen.append(planners["transfer"].inner.params)
         return _summary(settings.planners.transfer.name, placed=(True,))
 

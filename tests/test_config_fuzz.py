@@ -59,9 +59,8 @@ def run_config(path: Path, *, world: bool = True) -> Outcome:
     """Load `path`, then build the planning scene, every planner (config blocks and the default stage
     planners) and, with `world`, the PyBullet world; the first failure, else the first rejection."""
     from twin.collision import PlanningScene
-    from twin.config import load_config
+    from twin.config import STAGE_GROUPS, load_config
     from twin.planning import make_context, make_planner
-    from twin.tasks.cell import STAGE_GROUPS, stage_block
     from twin.world import World
 
     loaded, out = _stage("load", lambda: load_config(path))
@@ -72,7 +71,7 @@ def run_config(path: Path, *, world: bool = True) -> Outcome:
     context, out = _stage("context", lambda: make_context(s))
     outcomes.append(out)
     if context is not None:
-        blocks = {g: stage_block(s, g) for g in sorted(set(STAGE_GROUPS.values()))}
+        blocks = {g: s.planners.block(g) for g in sorted(set(STAGE_GROUPS.values()))}
         blocks.update(s.planners.given())
         for group, block in sorted(blocks.items()):
             outcomes.append(_stage(f"planner {group}", lambda b=block: make_planner(b, context))[1])

@@ -12,10 +12,10 @@ import pytest
 
 import twin.tasks.robocup.task as robocup
 from twin.config import load_config
+from twin.robot import Robot
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks import run_task
 from twin.tasks.cell import Cell, GraspCheck, GripStatus
-from twin.tasks.gripper import gripper_boxes
 from twin.tasks.robocup.perception import ObjectEstimate
 from twin.tasks.robocup.task import (
     STROKE_MARGIN_M,
@@ -112,19 +112,21 @@ def test_a_grasp_that_slipped_is_followed_by_a_different_one():
 
 def test_the_deepest_grasp_keeps_the_fingertips_off_the_table_and_the_palm_off_the_top():
     s = load_config("robocup")
+    robot = Robot.from_settings(s)
     for cls, orient in [("spam", "horizontal"), ("spam", "vertical"), ("cube", "vertical"), ("bottle", "vertical")]:
         est = _est(cls, orient)
         z = s.perception.robocup.grasp[f"{cls}_{orient}"].z_grasp_m  # the table at 0
-        low = robocup._lowest_tcp(s, est, z, STROKE_M)
+        low = robocup._lowest_tcp(s, robot, est, z, STROKE_M)
         assert low <= z + 1e-9
-        boxes = gripper_boxes(s, STROKE_M)
+        boxes = robot.gripper_boxes(STROKE_M)
         tip = max(hi[2] for _, hi in boxes)
         assert low - tip >= robocup._TIP_CLEARANCE_M - 1e-9  # fingertips above the table
         height = OBJECT_TEMPLATES[cls].height(orient == "horizontal")
         palm = max(hi[2] for lo, hi in boxes if lo[0] < 0.0 < hi[0])
         assert low - palm >= height + robocup._PALM_CLEARANCE_M - 1e-9  # the palm above its top
     spam = _est("spam", "horizontal")
-    assert robocup._lowest_tcp(s, spam, 0.035, STROKE_M) == pytest.approx(0.020)  # 15 mm deeper than the lookup
+    # 15 mm deeper than the lookup
+    assert robocup._lowest_tcp(s, robot, spam, 0.035, STROKE_M) == pytest.approx(0.020)
 
 
 def test_after_a_slip_on_the_ascent_the_robot_grips_the_spam_differently(monkeypatch):

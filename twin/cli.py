@@ -657,11 +657,9 @@ def _run_overrides(args: argparse.Namespace) -> list[str]:
 def _ran_title(args: argparse.Namespace, settings: Any, seed: int) -> str:
     """What a run ran, for its table's title: config, seed, each stage group's planner with the parameters the
     config gives it, and the command line's overrides."""
-    from twin.tasks.cell import stage_block
-
     groups = []
     for group in ("transfer", "movej", "movel"):
-        block = stage_block(settings, group)
+        block = settings.planners.block(group)
         given = [f"{k}={v}" for k, v in block.params.items()] + ([f"retimer {block.retimer}"] if block.retimer else [])
         groups.append(f"{group} {block.name}" + (f" ({', '.join(given)})" if given else ""))
     title = f"{args.config} seed {seed}; " + "; ".join(groups)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from twin.config import Settings
+from twin.kinematics import URArm
 from twin.perception.capture import Capture, wrist_camera_offset
 
 __all__ = ["error_bound_m", "level_on_table", "table_disagreement", "table_plane"]
@@ -73,7 +74,7 @@ def level_on_table(cap: Capture, settings: Settings) -> np.ndarray:
     return T
 
 
-def error_bound_m(settings: Settings, *, levelled: bool = False) -> float:
+def error_bound_m(settings: Settings, arm: URArm, *, levelled: bool = False) -> float:
     """How far (m) an object in the spawn region (`world.objects.region_x` x `region_y`, on the table), seen from
     the capture pose, may be misplaced by a camera pose off its mount by `camera.mount_tolerance` (t, r):
     t + d r, d the range to the region's farthest corner (small angles). Levelled on the table plane (tilt and
@@ -81,12 +82,11 @@ def error_bound_m(settings: Settings, *, levelled: bool = False) -> float:
     and a level shift are what is left). The region, not the image: a fixed camera's image reaches past the
     table, where no object is looked for."""
     from twin.camera import camera_pose
-    from twin.kinematics import UR5e
 
     cam = settings.camera
     t, r = cam.mount_tolerance.translation_m, math.radians(cam.mount_tolerance.rotation_deg)
     if cam.mount == "wrist":
-        T = UR5e.from_settings(settings).fk(np.asarray(cam.capture_pose, dtype=float), "flange")
+        T = arm.fk(np.asarray(cam.capture_pose, dtype=float), "flange")
         T = T @ wrist_camera_offset(settings)
     else:
         T = camera_pose(cam)

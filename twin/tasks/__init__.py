@@ -82,9 +82,13 @@ def run_task(
     address is logged; the viewer keeps serving after the run). `on_stage(text)` is told each stage as it starts,
     `on_objects(done, total)` how many of the objects the task knows of it is done with (`Cell.objects_done`).
     Bad config or planner names raise before anything is simulated."""
+    from twin.config import with_planner
+    from twin.planning import make_context
     from twin.recording import Recorder
     from twin.tasks.cell import Cell, stage_planners
 
+    if planner is not None:
+        settings = with_planner(settings, "transfer", planner)
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record, speed=record_speed) if record else None
     if rerun or rerun_serve:
@@ -94,19 +98,18 @@ def run_task(
     t0 = time.perf_counter()
     with collect_timings() as clock:
         with stage("setup"):  # planners built, task, the world and its bodies
-            planners = stage_planners(settings, planner)
-            task = make_task(settings)
+            context = make_context(settings)  # the run's robot: built once, handed to everything below
+            planners = stage_planners(settings, context)
+            task = make_task(settings, context)
             if recorder is not None:
                 recorder.landmarks = tuple(_landmarks_of(task))
             with stage("imports"):  # pybullet prints a banner on import: only once the input is known good
                 from twin.world import World
 
-            world = World(settings, seed=seed, gui=gui)
+            world = World(settings, seed=seed, gui=gui, robot=context.robot)
         with world:
             shown = on_stage if recorder is None else _to_both(recorder.stage, on_stage)
-            cell = Cell(
-                settings, world, planner_override=planner, on_stage=shown, planners=planners, on_objects=on_objects
-            )
+            cell = Cell(settings, world, context=context, on_stage=shown, planners=planners, on_objects=on_objects)
             if recorder is not None:
                 recorder.attach(world)
             recording = None
@@ -116,7 +119,7 @@ def run_task(
 
                 recording = RerunRecording(
                     rerun,
-                    scene=PlanningScene.from_settings(settings),  # every fixture, as the cell has them
+                    scene=PlanningScene.from_settings(settings, robot=context.robot),  # every fixture, as the cell has
                     kin=cell.kin,
                     recording_id=f"{config_name or settings.name}-seed{seed}",
                     serve=rerun_serve,

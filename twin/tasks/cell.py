@@ -20,7 +20,7 @@ import numpy as np
 
 from twin.camera import RGBDFrame
 from twin.collision import PlanningScene
-from twin.config import PlannerBlock, Settings
+from twin.config import DEFAULT_PLANNERS, STAGE_GROUPS, STAGES, PlannerBlock, Settings
 from twin.errors import ConfigError, PluginCrashed
 from twin.executor import MotionRecord, plan_and_execute
 from twin.failures import failure_of_plan
@@ -32,6 +32,7 @@ from twin.planning import (
     make_context,
     make_planner,
 )
+from twin.registry import PluginContext
 from twin.tasks import detours, jam
 from twin.tasks.gripper import (
     GRIPPER_POLL_S,
@@ -67,47 +68,23 @@ __all__ = [
     "clear_failure",
     "note_failure",
     "planner_metrics",
-    "stage_block",
     "stage_planners",
     "top_down",
 ]
 
 log = logging.getLogger("twin")
 
-# stage -> (planner group in `settings.planners`, the kind of goal it asks for). A transfer ends above
-# the place point and the place move finishes it, so it asks for a position within
-# `task.transfer_tolerance_m` with the orientation free; every other stage for an exact goal.
-STAGES: dict[str, tuple[str, str]] = {
-    "capture": ("movej", "joint"),
-    "align": ("movej", "joint"),
-    "hover": ("movej", "pose"),
-    "home": ("movej", "joint"),
-    "descent": ("movel", "pose"),
-    "ascent": ("movel", "pose"),
-    "place": ("movel", "pose"),
-    "transfer": ("transfer", "position"),
-}
-STAGE_GROUPS = {stage: group for stage, (group, _) in STAGES.items()}
-DEFAULT_PLANNERS = {"movej": "ruckig.movej", "movel": "toppra.movel", "transfer": "ruckig.movej"}
 # stages in which the fingers work at an object: a finger touching a loose object is not a fault there
 _GRASPING_STAGES = frozenset({"descent", "ascent", "place"})
 
 
-def stage_block(settings: Settings, group: str, planner_override: str | None = None) -> PlannerBlock:
-    """The planner block of a stage group: `--planner` for transfer, else the config, else the default."""
-    if group == "transfer" and planner_override:
-        return PlannerBlock(name=planner_override)
-    b = settings.planners.get(group)
-    return b if b is not None else PlannerBlock(name=DEFAULT_PLANNERS[group])
-
-
-def stage_planners(settings: Settings, planner_override: str | None = None) -> dict[str, CheckedPlanner]:
-    """Every stage planner, built up front: a bad name or parameter, or a planner that cannot reach the
-    kind of goal its stages ask for, fails (ConfigError, one line) before anything is simulated."""
-    context = make_context(settings)
+def stage_planners(settings: Settings, context: PluginContext) -> dict[str, CheckedPlanner]:
+    """Every stage planner (each group's block: `PlannerGroups.block`), built up front in the run's `context`:
+    a bad name or parameter, or a planner that cannot reach the kind of goal its stages ask for, fails
+    (ConfigError, one line) before anything is simulated."""
     out: dict[str, CheckedPlanner] = {}
     for group in sorted(set(STAGE_GROUPS.values())):
-        block = stage_block(settings, group, planner_override)
+        block = settings.planners.block(group)
         planner = make_planner(block, context)
         needed = {kind for g, kind in STAGES.values() if g == group}
         missing = {k for k in needed if not planner.serves(k)}
@@ -185,7 +162,8 @@ class Cell:
 
     settings: Settings
     world: Any  # twin.world.World
-    planner_override: str | None = None
+    # the run's plugin context (its robot is the world's); None: made here, around the world's robot
+    context: PluginContext | None = None
     on_stage: Callable[[str], None] | None = None
     records: list[MotionRecord] = field(default_factory=list)
     trace: RunTrace | None = None  # told every planned stage (a recording; None: none)
@@ -198,12 +176,14 @@ class Cell:
     calibration: CalibrationOutcome | None = None
 
     def __post_init__(self) -> None:
+        context = self.context if self.context is not None else make_context(self.settings, robot=self.world.robot)
+        self.context = self.run_context = context  # run_context: the same, typed as always there
         if not self.planners:
-            self.planners = stage_planners(self.settings, self.planner_override)
-        self.context = make_context(self.settings)
-        self.kin = self.context.kinematics
+            self.planners = stage_planners(self.settings, context)
+        self.robot = context.robot
+        self.kin = self.robot.arm
         # the cell knows its fixtures; obstacles marked `known: false` are what the task perceives and adds
-        self.scene = PlanningScene.from_settings(self.settings, unknown_fixtures="ignore")
+        self.scene = PlanningScene.from_settings(self.settings, robot=self.robot, unknown_fixtures="ignore")
         self.limits = limits_from_settings(self.settings)
         self.held_body: int | None = (
             None  # the simulated safety monitor's (judge.body_between_fingers); no task decides with it
@@ -222,7 +202,8 @@ class Cell:
 
     # ---- planners -------------------------------------------------------------------------------
     def block(self, group: str) -> PlannerBlock:
-        return stage_block(self.settings, group, self.planner_override)
+        """The planner block of `group` (the config's, else the group's default)."""
+        return self.settings.planners.block(group)
 
     def planner(self, group: str) -> CheckedPlanner:
         return self.planners[group]
@@ -277,7 +258,7 @@ class Cell:
                         self.planner(group),
                         request,
                         self.scene,
-                        self.context,
+                        self.run_context,
                         stage=stage,
                         planner_name=name,
                         ignore_bodies=ignore,

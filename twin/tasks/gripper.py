@@ -7,17 +7,14 @@ camera sees between the fingers), so it lives below all three.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
-from twin.config import GripperSettings, Settings
-from twin.errors import ConfigError
+from twin.config import GripperSettings
 from twin.types import Pose
-from twin.urdf_model import RobotModel, primitive_half_extents
 
 __all__ = [
     "GRIPPER_POLL_S",
@@ -25,7 +22,6 @@ __all__ = [
     "GripStatus",
     "GripperReading",
     "grasp_check",
-    "gripper_boxes",
     "holding_check",
     "top_down",
 ]
@@ -36,38 +32,6 @@ GRIPPER_POLL_S = 0.02  # the gripper's status is polled this long; free fingers 
 def top_down(xyz: np.ndarray | tuple[float, float, float], yaw: float) -> np.ndarray:
     """(4, 4) tcp pose at `xyz` pointing straight down, fingers closing along (cos yaw, sin yaw, 0)."""
     return Pose.from_xyz_rpy(tuple(float(v) for v in xyz), (math.pi, 0.0, float(yaw))).matrix()
-
-
-@functools.lru_cache(maxsize=4)
-def _robot_model(urdf: str) -> RobotModel:
-    return RobotModel.from_urdf(urdf)
-
-
-def gripper_boxes(settings: Settings, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(lo (3,), hi (3,)) in the tcp frame of every collision shape of the gripper (the links below tool0)
-    at a finger opening, from the robot's URDF. The tcp's z axis points away from the flange, so when
-    grasping from above a larger z is lower in the world."""
-    model = _robot_model(str(settings.resolve(settings.robot.urdf)))
-    poses = model.link_poses(np.zeros((1, 6)), finger_opening=opening_m)
-    T_inv = np.linalg.inv(poses["tcp"][0])
-    out = []
-    for name in model.link_names:
-        up: str | None = name
-        while up is not None and up != "tool0":
-            up = model.parent_link(up)
-        if up is None:  # not on the gripper
-            continue
-        for shape in model.links[name].shapes:
-            try:
-                half = primitive_half_extents(shape.kind, shape.size)
-            except ValueError:
-                raise ConfigError(
-                    f"{settings.robot.urdf}: gripper link {name!r} uses a {shape.kind}; primitives only"
-                ) from None
-            T = T_inv @ poses[name][0] @ shape.origin
-            h = np.abs(T[:3, :3]) @ half
-            out.append((T[:3, 3] - h, T[:3, 3] + h))
-    return out
 
 
 class GripStatus(Enum):

@@ -47,7 +47,7 @@ import numpy as np
 
 from twin.camera import Intrinsics, true_camera_pose
 from twin.perception.noise import apply_sensor_noise
-from twin.tasks.gripper import gripper_boxes, top_down
+from twin.tasks.gripper import top_down
 from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
 from twin.tasks.stage_failure import StageFailed
 from twin.timing import stage
@@ -296,7 +296,7 @@ def clear_after_release(
 # ---- freeing moves ---------------------------------------------------------------------------------
 def _tip_below_tcp(cell: Cell) -> float:
     """How far the fingertips reach past the tcp along the fingers (m), from the gripper's URDF boxes."""
-    boxes = gripper_boxes(cell.settings, cell.settings.gripper.max_opening_m)
+    boxes = cell.robot.gripper_boxes(cell.settings.gripper.max_opening_m)
     return max(0.0, *(float(hi[2]) for _, hi in boxes))
 
 
@@ -382,7 +382,7 @@ def _view_geometry(cell: Cell, opening_m: float) -> tuple[np.ndarray, np.ndarray
     )  # t along these = depth along the optical axis
     d = d_cam @ T_tcp_cam[:3, :3].T
     o = T_tcp_cam[:3, 3]
-    boxes = gripper_boxes(cell.settings, opening_m)
+    boxes = cell.robot.gripper_boxes(opening_m)
     body_bottom = max(float(hi[2]) for lo, hi in boxes if lo[0] < 0.0 < hi[0])  # the gripper body spans x = 0
     tips = max(float(hi[2]) for _, hi in boxes)
     half_x = max(0.0, opening_m / 2.0 - X_MARGIN_M)

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.config import Settings
-from twin.kinematics import UR5e
+from twin.kinematics import UR5e, URArm
 from twin.perception.aruco import MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture, wrist_camera_offset
 from twin.perception.mount import error_bound_m, level_on_table, table_disagreement, table_plane
@@ -86,10 +86,10 @@ class HandEye:
         """A calibration was asked for and not measured: poses are good to `outcome.error_bound_m` only."""
         return self.outcome.status == "fallback"
 
-    def camera_pose(self, settings: Settings, cap: Capture) -> np.ndarray:
-        """(4, 4) T_base_camera perception uses for `cap`."""
+    def camera_pose(self, settings: Settings, cap: Capture, arm: URArm) -> np.ndarray:
+        """(4, 4) T_base_camera perception uses for `cap`, taken by the wrist of `arm` (the run's)."""
         if self.T_tool0_camera is not None:
-            return UR5e.from_settings(settings).fk(cap.q, "flange") @ self.T_tool0_camera
+            return arm.fk(cap.q, "flange") @ self.T_tool0_camera
         if cap.mount == "wrist":
             if self.uncalibrated:
                 return level_on_table(cap, settings)
@@ -104,7 +104,7 @@ def calibrate_hand_eye(cell: Cell, reach: Callable[[Cell, np.ndarray], None]) ->
     cam = settings.camera
     if settings.perception.extrinsics != "aruco" or cam.mount != "wrist":
         reason = f"perception.extrinsics is {settings.perception.extrinsics} ({cam.mount} camera)"
-        return HandEye(CalibrationOutcome("configured", error_bound_m=error_bound_m(settings), reason=reason))
+        return HandEye(CalibrationOutcome("configured", error_bound_m=error_bound_m(settings, cell.kin), reason=reason))
     cell.current = "hand-eye"
     q_first = np.asarray(cam.calibration_pose if cam.calibration_pose is not None else cam.capture_pose, dtype=float)
     views: list[tuple[str, np.ndarray]] = [("the calibration pose", q_first)]
@@ -140,7 +140,7 @@ def calibrate_hand_eye(cell: Cell, reach: Callable[[Cell, np.ndarray], None]) ->
         if reasons:
             log.info("robocup: hand-eye measured in %d of %d views (%s)", len(good), taken, note)
         return HandEye(CalibrationOutcome("measured", views=taken, reprojection_px=rep, reason=note), T)
-    bound = error_bound_m(settings, levelled=levelled)
+    bound = error_bound_m(settings, cell.kin, levelled=levelled)
     reason = "; ".join(reasons) or "no view of the marker was reachable"
     log.warning(
         "robocup: no hand-eye calibration in %d views (%s); using the configured camera.wrist_offset_m%s, "
@@ -298,7 +298,7 @@ def relook(
         return None
     cap = capture_frame(cell.world, cell.settings, move=False)
     prefetch_next_capture(cell.world, cell.settings)
-    return cap, hand_eye.camera_pose(cell.settings, cap)
+    return cap, hand_eye.camera_pose(cell.settings, cap, cell.kin)
 
 
 def relook_target(

@@ -27,7 +27,6 @@ from twin.perception.capture import Capture, capture_frame, prefetch_next_captur
 from twin.perception.pipeline import make_detector
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
-from twin.tasks.gripper import gripper_boxes
 from twin.tasks.jam import clear_after_release
 from twin.tasks.robocup.bins import BinGeometry, bin_for, bin_geometries, read_bin_geometry
 from twin.tasks.robocup.calibration import calibrate_hand_eye, relook_target
@@ -37,6 +36,7 @@ from twin.types import ObjectOutcome
 
 if TYPE_CHECKING:
     from twin.registry import PluginContext
+    from twin.robot import Robot
 
 __all__ = [
     "STROKE_MARGIN_M",
@@ -266,16 +266,17 @@ def grip_width(est: ObjectEstimate, max_opening_m: float) -> float:
     return choose_grasp(est, max_opening_m).width_m
 
 
-def _lowest_tcp(settings: Settings, est: ObjectEstimate, z_grasp: float, opening_m: float) -> float:
+def _lowest_tcp(settings: Settings, robot: Robot, est: ObjectEstimate, z_grasp: float, opening_m: float) -> float:
     """The lowest tcp height (base z) for a top-down grasp of `est`: the fingertips `_TIP_CLEARANCE_M` above
     the table and the gripper's palm `_PALM_CLEARANCE_M` above the object's top, from the gripper's URDF
     shapes; the table's height is where the grasp lookup put `z_grasp` from."""
     entry = settings.perception.robocup.grasp.get(f"{est.cls}_{est.orientation}")
     table_z = z_grasp - (entry.z_grasp_m if entry is not None else est.top_m / 2.0)
     top = table_z + OBJECT_TEMPLATES[est.cls].height(est.orientation == "horizontal")
-    tip = max(hi[2] for lo, hi in gripper_boxes(settings, opening_m))  # tcp z points down: larger is lower
+    boxes = robot.gripper_boxes(opening_m)
+    tip = max(hi[2] for lo, hi in boxes)  # tcp z points down: larger is lower
     # the palm: the shapes across the axis between the fingers, where the object's top would meet the gripper
-    palm = max(hi[2] for lo, hi in gripper_boxes(settings, opening_m) if lo[0] < 0.0 < hi[0])
+    palm = max(hi[2] for lo, hi in boxes if lo[0] < 0.0 < hi[0])
     return max(table_z + _TIP_CLEARANCE_M + tip, top + _PALM_CLEARANCE_M + palm)
 
 
@@ -374,7 +375,7 @@ def _grasp_for(cell: Cell, est: ObjectEstimate, slipped: list[tuple[GraspChoice,
     if not slipped:
         return choose_grasp(est, max_opening)
     z_grasp, w_grip = float(est.grasp[2]), float(est.grasp[6])
-    lower = z_grasp - _lowest_tcp(settings, est, z_grasp, min(w_grip, max_opening))
+    lower = z_grasp - _lowest_tcp(settings, cell.robot, est, z_grasp, min(w_grip, max_opening))
     own = settings.task.robocup.grip_force_n.get(est.cls)  # a class's own force is its most
     return choose_grasp(
         est,
@@ -458,7 +459,7 @@ def _pick_and_place(
     tcp_z = floor_z + _RELEASE_GAP_M + z_grasp
     obj_half = np.array([short / 2.0, long_ / 2.0])
     reach_half = obj_half.copy()
-    for lo, hi in gripper_boxes(cell.settings, release_w):
+    for lo, hi in cell.robot.gripper_boxes(release_w):
         if tcp_z - hi[2] < rim_z + _WALL_MARGIN_M:
             reach_half = np.maximum(reach_half, np.maximum(np.abs(lo[:2]), np.abs(hi[:2])))
     yaw_grasp = yaw
@@ -543,7 +544,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
             break
         cap = capture_frame(world, settings, move=False)
         captures += 1
-        T_bc = hand_eye.camera_pose(settings, cap)
+        T_bc = hand_eye.camera_pose(settings, cap, cell.kin)
         # an oracle detector gets the truth; what stands on the table unexplained becomes an obstacle
         seen = perceive_robocup_scene(world, cap.frame, T_bc, settings, detector, known_boxes=fixture_boxes)
         unknown = [(f"unknown_{i}", lo, hi) for i, (lo, hi) in enumerate(seen.unknown)]

@@ -167,7 +167,7 @@ def _perceive(cell: Cell) -> WarehouseResult:
         # a fixed camera has no other view: the configured pose, levelled on the table plane it sees (its tilt and
         # height measured), trusted to `camera.mount_tolerance` for the rest, and the run says so
         T_base_camera = level_on_table(capture, settings)
-        bound = error_bound_m(settings, levelled=table_plane(capture) is not None)
+        bound = error_bound_m(settings, cell.kin, levelled=table_plane(capture) is not None)
         reason = f"the ArUco marker was not found ({e}); the configured camera pose, levelled on the table"
         if cell.calibration is None or cell.calibration.status != "fallback":
             log.warning("warehouse: %s: objects may be misplaced by up to %.0f mm", reason, 1e3 * bound)
