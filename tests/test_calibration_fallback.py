@@ -183,6 +183,6 @@ def test_warehouse_without_its_marker_goes_on_from_the_configured_pose_and_says_
     summary = run_task(s, seed=3)
     cal = summary.calibration
     assert cal is not None and cal.status == "fallback" and "not found" in cal.reason
-    assert cal.error_bound_m == pytest.approx(bound_of(s, levelled=True))
+    assert cal.error_bound_m == pytest.approx(bound_of(s, Robot.from_settings(s).arm, levelled=True))
     assert 0.015 < cal.error_bound_m < 0.03  # 1 cm + 1 deg over the 0.8 m to the region's far corner
     assert summary.success_rate == 1.0

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from twin.config import PROJECT_ROOT, PlannerBlock, load_config, with_planner
+from twin.config import PROJECT_ROOT, load_config, with_planner
 from twin.errors import ConfigError, InvalidRequestError
 from twin.planning import goal_miss, make_context, make_planner
 from twin.types import JointGoal, Limits, MotionRequest, Pose, PoseGoal, Status
@@ -184,7 +184,7 @@ def test_a_planner_that_cannot_reach_oriented_goals_is_refused_before_anything_r
     with pytest.raises(
         ConfigError, match=r"planners.movej: nmpc cannot reach joint goals, pose goals with an orientation"
     ):
-        run_task(ROBOCUP.model_copy(update={"planners": dict(ROBOCUP.planners, movej=PlannerBlock(name="nmpc"))}))
+        run_task(with_planner(ROBOCUP, "movej", "nmpc"))
     ctx = make_context(ROBOCUP)
     nmpc = make_planner("nmpc", ctx)
     res = nmpc.plan(
