@@ -196,7 +196,8 @@ def _draw_first_queries(spec: CompareSpec, source: str) -> None:
     """Draw the first random query of every query scenario (first seed), as the worker would."""
     import numpy as np
 
-    from twin.compare.worker import cell_for, sample_query
+    from twin.problems.cells import cell_for
+    from twin.problems.sampling import sample_query
 
     for i, sc in enumerate(spec.scenarios):
         if not isinstance(sc, QueryScenario) or sc.random is None or sc.scene is None:
