@@ -27,7 +27,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.config import PROJECT_ROOT, load_config
-from twin.perception.evaluate import run_perception
+from twin.perception.evaluate import Pipelines, run_perception
+from twin.tasks.robocup.perception import perceive_robocup
+from twin.tasks.warehouse.perception import perceive_warehouse
+
+PIPELINES = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
 
 STAGES = (
     "render",
@@ -82,11 +86,18 @@ def main() -> None:
         rows, cal, fps, boxes, walls = [], [], 0, [], []
         for seed in range(args.seeds):
             t0 = time.perf_counter()
-            rep = run_perception(settings, seed=seed, detector=args.detector, renderer=args.renderer)
+            rep = run_perception(
+                settings, pipelines=PIPELINES, seed=seed, detector=args.detector, renderer=args.renderer
+            )
             walls.append(time.perf_counter() - t0)
             # the same scene, measured on a frame the world's renderer has seen two before (a task's later frames)
             rep_later = run_perception(
-                settings, seed=seed, detector=args.detector, renderer=args.renderer, earlier_captures=2
+                settings,
+                pipelines=PIPELINES,
+                seed=seed,
+                detector=args.detector,
+                renderer=args.renderer,
+                earlier_captures=2,
             )
             later_rows += rep_later.objects
             for r, into in ((rep, times), (rep_later, later)):

@@ -63,7 +63,7 @@ def test_plan_compare_and_problem_sets_plan_in_one_scene(config: str, monkeypatc
     """The same objects and the same boxes in `twin plan`, `PlanningScene.from_settings`, `twin compare`'s
     cell, a `twin problems export` world and that world imported back; the obstacle marked `known: false` is
     in all of them as a box where it stands, and only a task's own cell leaves it to perception."""
-    from twin.compare.worker import cell_for
+    from twin.problems.cells import cell_for
     from twin.problems.export import export_problem_set
     from twin.problems.world import planning_scene, settings_for
 

@@ -459,8 +459,8 @@ def test_a_region_that_cannot_yield_blocked_queries_is_a_config_error_before_any
 def test_straight_option_draws_queries_of_the_asked_difficulty():
     import numpy as np
 
-    from twin.compare.spec import RandomQueries
-    from twin.compare.worker import cell_for, sample_query, straight_free
+    from twin.problems.cells import cell_for
+    from twin.problems.sampling import RandomQueries, sample_query, straight_free
 
     cell = cell_for(str(ROOT / "configs" / "warehouse.yaml"), (), "box")
     home = np.asarray(cell.settings.robot.home, dtype=float)

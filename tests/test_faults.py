@@ -11,14 +11,17 @@ from twin.camera import Intrinsics, RGBDFrame, camera_pose, mount_error, true_ca
 from twin.config import load_config
 from twin.errors import ConfigError
 from twin.perception.capture import capture_frame
-from twin.perception.evaluate import run_perception
+from twin.perception.evaluate import Pipelines, run_perception
 from twin.perception.noise import apply_sensor_noise, depth_noise_rms
+from twin.tasks.robocup.perception import perceive_robocup
 from twin.tasks.warehouse.perception import perceive_warehouse
 from twin.world import World
 
 pytest.importorskip("open3d")
 
 RENDERER = "tiny"
+# the pipelines scored (perception sits below the tasks that own them, so the caller hands them in)
+PIPELINES = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
 
 
 def _warehouse(**extrinsic_error: float):
@@ -132,7 +135,7 @@ def test_at_three_times_the_depth_noise_the_robust_preset_still_classifies_every
 
     def correct(preset: str) -> int:
         s = load_config("robocup", overrides=["camera.noise.scale=3", f"perception.preset={preset}"])
-        rep = run_perception(s, seed=11, renderer=RENDERER)
+        rep = run_perception(s, pipelines=PIPELINES, seed=11, renderer=RENDERER)
         assert rep.false_positives == 0
         return sum(o["class_est"] == o["class_true"] and o["color_est"] == o["color_true"] for o in rep.objects)
 
@@ -284,7 +287,7 @@ def test_under_a_warm_light_the_table_white_balance_keeps_the_colours_and_the_se
 
     def correct(preset: str) -> int:
         s = load_config("robocup", ["camera.noise.color_gain=[1.5,1.0,0.6]", f"perception.preset={preset}"])
-        rep = run_perception(s, seed=5, renderer=RENDERER)
+        rep = run_perception(s, pipelines=PIPELINES, seed=5, renderer=RENDERER)
         return sum(o["class_est"] == o["class_true"] and o["color_est"] == o["color_true"] for o in rep.objects)
 
     assert correct("robust") == 8

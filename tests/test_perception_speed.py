@@ -297,7 +297,11 @@ SEED_VOXEL = "perception.detector.params.voxel_m=0.004"  # the geometric detecto
 def robocup_runs():
     """Per seed: runs with the speed-ups on (twice), each off alone and both off (the old path)."""
     pytest.importorskip("open3d")
-    from twin.perception.evaluate import run_perception
+    from twin.perception.evaluate import Pipelines, run_perception
+    from twin.tasks.robocup.perception import perceive_robocup
+    from twin.tasks.warehouse.perception import perceive_warehouse
+
+    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
 
     fast = load_config("robocup")
     assert tuple(fast.perception.robocup.icp.tolerance) == (1e-4, 1e-3)  # the defaults since issue 15
@@ -307,9 +311,12 @@ def robocup_runs():
         "seed voxel": load_config("robocup", [SEED_VOXEL]),
         "old": load_config("robocup", [SEED_ICP, SEED_VOXEL]),
     }
-    runs = {seed: {k: run_perception(s, seed=seed, renderer="tiny") for k, s in configs.items()} for seed in (0, 1)}
+    runs = {
+        seed: {k: run_perception(s, pipelines=pipelines, seed=seed, renderer="tiny") for k, s in configs.items()}
+        for seed in (0, 1)
+    }
     for seed in runs:
-        runs[seed]["fast again"] = run_perception(fast, seed=seed, renderer="tiny")
+        runs[seed]["fast again"] = run_perception(fast, pipelines=pipelines, seed=seed, renderer="tiny")
     return runs
 
 
@@ -340,14 +347,18 @@ def test_warehouse_seeded_plane_is_repeatable_and_finds_the_cubes_open3d_found()
     """The seeded RANSAC table plane (and the 5 mm DBSCAN grid) gives the same result for the same seed every
     time, and the same cubes with the same colours, within 1 mm, as open3d's segment_plane did."""
     pytest.importorskip("open3d")
-    from twin.perception.evaluate import run_perception
+    from twin.perception.evaluate import Pipelines, run_perception
+    from twin.tasks.robocup.perception import perceive_robocup
+    from twin.tasks.warehouse.perception import perceive_warehouse
+
+    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
 
     fast, old = load_config("warehouse"), load_config("warehouse", OLD_WAREHOUSE)
     assert fast.perception.warehouse.plane_method == "ransac"
     for seed in (0, 3):
-        runs = [run_perception(fast, seed=seed, renderer="tiny") for _ in range(3)]
+        runs = [run_perception(fast, pipelines=pipelines, seed=seed, renderer="tiny") for _ in range(3)]
         assert runs[0].estimates == runs[1].estimates == runs[2].estimates, seed
-        before = run_perception(old, seed=seed, renderer="tiny")
+        before = run_perception(old, pipelines=pipelines, seed=seed, renderer="tiny")
         key = lambda e: (e["color"], round(e["position"][0], 2), round(e["position"][1], 2))  # noqa: E731
         new_cubes, old_cubes = sorted(runs[0].estimates, key=key), sorted(before.estimates, key=key)
         assert len(new_cubes) == len(old_cubes) == 4, seed

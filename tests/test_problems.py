@@ -49,8 +49,8 @@ def test_the_shipped_schema_is_the_models_and_validates_an_export(exported: dict
 
 
 def test_export_round_trips_and_its_world_is_the_planning_scene(exported: dict[str, Path]) -> None:
-    from twin.compare.worker import cell_for
     from twin.config import find_config, load_config
+    from twin.problems.cells import cell_for
 
     ps = load_problem_set(exported["warehouse"])
     assert ps == export_problem_set(

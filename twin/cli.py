@@ -834,10 +834,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_perceive(args: argparse.Namespace) -> int:
-    from twin.perception.evaluate import run_perception
+    from twin.perception.evaluate import Pipelines, run_perception
+    from twin.tasks.robocup.perception import perceive_robocup
+    from twin.tasks.warehouse.perception import perceive_warehouse
 
     settings = _settings(args)
-    rep = run_perception(settings, detector=args.detector)
+    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)  # the tasks' own pipelines
+    rep = run_perception(settings, pipelines=pipelines, detector=args.detector)
     fmt = "{:<24} {:<15} {:<15} {:<11} {:<11} {:<7} {:<7} {:>8} {:>8} {:>6}"
     print(fmt.format("object", "class", "estimate", "orient", "estimate", "color", "est", "dxy mm", "yaw deg", "S"))
     for o in rep.objects:

@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING, Any
 import pluggy
 from pydantic import BaseModel, ValidationError
 
-from twin.config import one_line, short_repr
 from twin.errors import ConfigError, DependencyMissing, DuplicateNameError, PluginError, TwinError, UnknownNameError
 from twin.hookspecs import TwinSpec
+from twin.messages import one_line, short_repr
 from twin.timing import stage
 
 if TYPE_CHECKING:

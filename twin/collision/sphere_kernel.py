@@ -69,85 +69,32 @@ def flag_configurations(
 ) -> None:
     """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring).
 
-    Frames: F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k] + v C[k]) for the joints in
-    chain order (chain[:, 0] = joint index), u = sin q, v = 1 - cos q (revolute) or u = q, v = 0.
     Objects (robot shapes, then a held box): frame, pose in that frame (4, 4; its origin is the centre
     of its bounding sphere), primitive kind and half dimensions (as `EnvPrimitives`), bounding radius,
     whether it is tested against the environment, and its spheres sph[sph_start[o]:sph_start[o + 1]]
     (x, y, z in the frame, r). Self pairs: objects pair_a[p] and pair_b[p]; a pair is clear when the
-    spheres of one miss the exact primitive of the other, tried both ways.
-
-    Conservative advancement: a cleared configuration also yields a lower bound on every robot-environment
-    distance (capped at `_MARGIN_CAP_M`) and one per self pair. No point of the robot moves farther than
-    sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any robot point can be from joint
-    k's axis), and the parts of a self pair move relative to each other only through the joints between
-    them (pair_moves[p, k] = 1), so the configurations after it that stay within all those bounds are clear
-    too, without being evaluated."""
+    spheres of one miss the exact primitive of the other, tried both ways."""
     n_obj = obj_frame.shape[0]
-    n_sph = sph.shape[0]
     n_env = env_kind.shape[0]
+    n_pairs = pair_a.shape[0]
     F = np.empty((7, 4, 4))
     L = np.empty((4, 4))
     oc = np.empty((n_obj, 3))
     inv = np.empty((n_obj, 3, 4))
-    sc = np.empty((n_sph, 3))
+    sc = np.empty((sph.shape[0], 3))
     placed = np.zeros(n_obj, dtype=np.bool_)
     posed = np.zeros(n_obj, dtype=np.bool_)
-    n_pairs = pair_a.shape[0]
-    anchor = -1  # the last configuration evaluated and cleared, and its clearance bounds
+    anchor = -1  # the last configuration cleared, and its clearance bounds (conservative advancement: `_near_anchor`)
     anchor_env = 0.0
     anchor_gap = np.zeros(n_pairs)
     gap_now = np.zeros(n_pairs)
     w = np.zeros(6)
     for i in range(qs.shape[0]):
-        if anchor >= 0:
-            moved = 0.0
-            for k in range(6):
-                w[k] = abs(qs[i, k] - qs[anchor, k]) * reach[k]
-                moved += w[k]
-            clear = moved < anchor_env - touch
-            p = 0
-            while clear and p < n_pairs:
-                rel = 0.0
-                for k in range(6):
-                    rel += pair_moves[p, k] * w[k]
-                clear = rel < anchor_gap[p] - touch
-                p += 1
-            if clear:
-                out[i] = False
-                continue
-        F[0] = 0.0
-        for k in range(4):
-            F[0, k, k] = 1.0
-        for c in range(chain.shape[0]):
-            j = chain[c, 0]
-            f = chain[c, 1]
-            q = qs[i, j]
-            if revolute[j]:
-                u = math.sin(q)
-                v = 1.0 - math.cos(q)
-            else:
-                u = q
-                v = 0.0
-            for r in range(4):
-                for s in range(4):
-                    L[r, s] = A[j, r, s] + u * B[j, r, s] + v * C[j, r, s]
-            for r in range(4):
-                for s in range(4):
-                    F[j + 1, r, s] = (
-                        F[f, r, 0] * L[0, s] + F[f, r, 1] * L[1, s] + F[f, r, 2] * L[2, s] + F[f, r, 3] * L[3, s]
-                    )
-        for o in range(n_obj):
-            fr = obj_frame[o]
-            for r in range(3):
-                oc[o, r] = (
-                    F[fr, r, 0] * obj_const[o, 0, 3]
-                    + F[fr, r, 1] * obj_const[o, 1, 3]
-                    + F[fr, r, 2] * obj_const[o, 2, 3]
-                    + F[fr, r, 3]
-                )
-            placed[o] = False
-            posed[o] = False
+        if anchor >= 0 and _near_anchor(qs, i, anchor, reach, pair_moves, anchor_env, anchor_gap, touch, w):
+            out[i] = False
+            continue
+        _link_frames(qs, i, revolute, A, B, C, chain, F, L)
+        _object_centres(F, obj_frame, obj_const, oc, placed, posed)
         flagged = False
         m = _MARGIN_CAP_M
         # robot (and held box) against the environment: bounding spheres first, then the object's spheres
@@ -155,9 +102,7 @@ def flag_configurations(
             if not obj_env[o]:
                 continue
             for e in range(n_env):
-                dx = oc[o, 0] - env_bound[e, 0]
-                dy = oc[o, 1] - env_bound[e, 1]
-                dz = oc[o, 2] - env_bound[e, 2]
+                dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
                 far = obj_radius[o] + env_bound[e, 3] + m
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 > far * far:
@@ -184,11 +129,8 @@ def flag_configurations(
         if not flagged:
             # self pairs, each with its own bound (the joints between its parts move them apart)
             for p in range(n_pairs):
-                a = pair_a[p]
-                b = pair_b[p]
-                dx = oc[a, 0] - oc[b, 0]
-                dy = oc[a, 1] - oc[b, 1]
-                dz = oc[a, 2] - oc[b, 2]
+                a, b = pair_a[p], pair_b[p]
+                dx, dy, dz = oc[a, 0] - oc[b, 0], oc[a, 1] - oc[b, 1], oc[a, 2] - oc[b, 2]
                 far = obj_radius[a] + obj_radius[b] + _MARGIN_CAP_M
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 > far * far:
@@ -214,10 +156,100 @@ def flag_configurations(
                 if flagged:
                     break
         if not flagged:
-            anchor = i
-            anchor_env = m
+            anchor, anchor_env = i, m
             anchor_gap[:] = gap_now
         out[i] = flagged
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _near_anchor(
+    qs: np.ndarray,
+    i: int,
+    anchor: int,
+    reach: np.ndarray,
+    pair_moves: np.ndarray,
+    anchor_env: float,
+    anchor_gap: np.ndarray,
+    touch: float,
+    w: np.ndarray,
+) -> bool:
+    """Conservative advancement: whether qs[i] is clear by the bounds of the cleared qs[anchor] alone.
+
+    A cleared configuration also yields a lower bound on every robot-environment distance (anchor_env,
+    capped at `_MARGIN_CAP_M`) and one per self pair (anchor_gap). No point of the robot moves farther
+    than sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any robot point can be from
+    joint k's axis), and the parts of a self pair move relative to each other only through the joints
+    between them (pair_moves[p, k] = 1), so the configurations after it that stay within all those bounds
+    are clear too, without being evaluated. `w` (6,): scratch, each joint's share of the motion."""
+    moved = 0.0
+    for k in range(6):
+        w[k] = abs(qs[i, k] - qs[anchor, k]) * reach[k]
+        moved += w[k]
+    clear = moved < anchor_env - touch
+    p = 0
+    while clear and p < anchor_gap.shape[0]:
+        rel = 0.0
+        for k in range(6):
+            rel += pair_moves[p, k] * w[k]
+        clear = rel < anchor_gap[p] - touch
+        p += 1
+    return clear
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _link_frames(
+    qs: np.ndarray,
+    i: int,
+    revolute: np.ndarray,
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    chain: np.ndarray,
+    F: np.ndarray,
+    L: np.ndarray,
+) -> None:
+    """The link frames at configuration qs[i]: F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k]
+    + v C[k]) for the joints in chain order (chain[:, 0] = joint index), u = sin q, v = 1 - cos q
+    (revolute) or u = q, v = 0. L (4, 4): scratch."""
+    F[0] = 0.0
+    for k in range(4):
+        F[0, k, k] = 1.0
+    for c in range(chain.shape[0]):
+        j = chain[c, 0]
+        f = chain[c, 1]
+        q = qs[i, j]
+        if revolute[j]:
+            u = math.sin(q)
+            v = 1.0 - math.cos(q)
+        else:
+            u = q
+            v = 0.0
+        for r in range(4):
+            for s in range(4):
+                L[r, s] = A[j, r, s] + u * B[j, r, s] + v * C[j, r, s]
+        for r in range(4):
+            for s in range(4):
+                F[j + 1, r, s] = (
+                    F[f, r, 0] * L[0, s] + F[f, r, 1] * L[1, s] + F[f, r, 2] * L[2, s] + F[f, r, 3] * L[3, s]
+                )
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _object_centres(
+    F: np.ndarray, obj_frame: np.ndarray, obj_const: np.ndarray, oc: np.ndarray, placed: np.ndarray, posed: np.ndarray
+) -> None:
+    """oc[o]: the world centre of object o's bounding sphere; no object's spheres placed or pose inverted yet."""
+    for o in range(obj_frame.shape[0]):
+        fr = obj_frame[o]
+        for r in range(3):
+            oc[o, r] = (
+                F[fr, r, 0] * obj_const[o, 0, 3]
+                + F[fr, r, 1] * obj_const[o, 1, 3]
+                + F[fr, r, 2] * obj_const[o, 2, 3]
+                + F[fr, r, 3]
+            )
+        placed[o] = False
+        posed[o] = False
 
 
 @njit(cache=True, nogil=True)

@@ -49,6 +49,7 @@ from twin.environment import environment
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
 
 if TYPE_CHECKING:
+    from twin.compare.summary import Summary
     from twin.config import Settings
 
 __all__ = [
@@ -196,7 +197,8 @@ def _draw_first_queries(spec: CompareSpec, source: str) -> None:
     """Draw the first random query of every query scenario (first seed), as the worker would."""
     import numpy as np
 
-    from twin.compare.worker import cell_for, sample_query
+    from twin.problems.cells import cell_for
+    from twin.problems.sampling import sample_query
 
     for i, sc in enumerate(spec.scenarios):
         if not isinstance(sc, QueryScenario) or sc.random is None or sc.scene is None:
@@ -642,6 +644,128 @@ def plan_comparison(spec: CompareSpec | str | Path, *, overrides: Iterable[str] 
     return DryRun(spec=spec, runs=runs, skipped=skipped)
 
 
+def _earlier_rows(
+    spec: CompareSpec, runs: Sequence[RunTask], defs: dict[str, Any], out: Path, *, resume: bool, force: bool
+) -> list[dict[str, Any]]:
+    """The latest rows of the sweep in `out` that a resume continues (none without `resume`). ConfigError
+    when results exist without `resume`, or when the config changed runs that have rows, unless `force`."""
+    results = out / RESULTS_FILE
+    if not resume:
+        if results.is_file() and results.stat().st_size > 0:
+            raise ConfigError(
+                f"{results} already holds results; pass --resume to continue that sweep, or choose another --out"
+            )
+        return []
+    wanted = {r.run_id for r in runs}
+    existing = latest_rows(read_results(results, repair=False))
+    have = {row["run_id"] for row in existing}
+    by_key = {r.key: r for r in runs if r.run_id not in have}
+    changed = [row for row in existing if row["run_id"] not in wanted and _row_key(row) in by_key]
+    if changed and not force:
+        previous = _previous_definitions(out / SPEC_FILE)
+        what = describe_changes(previous, defs) if previous is not None else []
+        if not what:
+            what = [f"{len(changed)} runs (e.g. {_row_key(changed[0])!r}) were made with a different definition"]
+        raise ConfigError(
+            f"{out}: the comparison config changed since this sweep started: {'; '.join(what)}. "
+            f"Pass --force to run the changed runs anew (their old rows stay in {RESULTS_FILE} and leave "
+            "the summary), or choose another --out"
+        )
+    return existing
+
+
+def _open_out_dir(out: Path, spec: CompareSpec, defs: dict[str, Any], *, resume: bool) -> dict[str, Any]:
+    """Create `out`, mend a results file a crash cut short (on resume), write the spec file with where
+    this sweep runs (twin, Python, backends, machine: the gate names what changed since its baseline);
+    returns that environment."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"cannot create the output folder {out}: {e.strerror}") from None
+    if resume:
+        read_results(out / RESULTS_FILE, repair=True)  # a line cut short by a crash goes before anything is appended
+    env = environment()
+    (out / SPEC_FILE).write_text(
+        json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs, "environment": env}, indent=1)
+    )
+    return env
+
+
+def _run_all(
+    todo: Sequence[RunTask],
+    results: Path,
+    *,
+    backend: Backend,
+    n_workers: int,
+    workers: int | None,
+    ray_address: str | None,
+    on_row: Callable[[dict[str, Any], int, int], None] | None,
+) -> list[dict[str, Any]]:
+    """Run `todo` on the backend, appending each row to `results` as it finishes; the new rows."""
+    new_rows: list[dict[str, Any]] = []
+    if not todo:
+        return new_rows
+    if backend == "ray":
+        stream = _run_ray(todo, max(1, n_workers), ray_address)
+    elif n_workers == 0 or workers == 0:
+        stream = _run_inline(todo)
+    else:
+        stream = _run_local(todo, n_workers)
+    writer = _Appender(results)
+    try:
+        for row in stream:
+            writer.write(row)
+            new_rows.append(row)
+            if on_row is not None:
+                on_row(row, len(new_rows), len(todo))
+    finally:
+        writer.close()
+        close = getattr(stream, "close", None)
+        if close is not None:
+            close()
+    return new_rows
+
+
+def _write_reports(
+    spec: CompareSpec,
+    rows: list[dict[str, Any]],
+    runs: Sequence[RunTask],
+    skipped: list[tuple[str, str]],
+    out: Path,
+    *,
+    started: datetime,
+    env: dict[str, Any],
+    plots: bool,
+) -> tuple[Summary, list[Path]]:
+    """Summarize the rows and write the summary files, the plots (when asked and plotting is installed)
+    and the HTML report; the summary and the files written after results.jsonl."""
+    from twin.compare.html_report import write_html
+    from twin.compare.report import summarize, write_summary
+    from twin.compare.summary import Provenance
+
+    skipped_ids = {rid for rid, _ in skipped}
+    skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
+    summary = summarize(
+        rows,
+        planners=[p.id for p in spec.planners],
+        skipped=skipped,
+        reference=spec.reference,
+        skipped_pairs=dict(skipped_pairs),
+        provenance=Provenance(spec.name, spec.source if spec.source != "<dict>" else None, started, env),
+    )
+    files = list(write_summary(summary, out))
+    pictures: list[Path] = []
+    if plots:
+        try:
+            from twin.compare.plots import write_plots
+
+            pictures = write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
+        except DependencyMissing as e:
+            log.warning("no plots: %s", e)
+    files += [write_html(summary, out, plots=pictures, title=spec.name or "planner comparison"), *pictures]
+    return summary, files
+
+
 def run_comparison(
     spec: CompareSpec | str | Path,
     *,
@@ -672,47 +796,15 @@ def run_comparison(
     check_spec(spec)
     out = Path(out_dir) if out_dir is not None else Path("out") / spec.name
     results = out / RESULTS_FILE
-    spec_path = out / SPEC_FILE
     defs = definitions(spec)
     runs = expand_runs(spec, defs)
     wanted = {r.run_id for r in runs}
-
-    existing: list[dict[str, Any]] = []
-    if resume:
-        existing = latest_rows(read_results(results, repair=False))
-        have = {row["run_id"] for row in existing}
-        by_key = {r.key: r for r in runs if r.run_id not in have}
-        changed = [row for row in existing if row["run_id"] not in wanted and _row_key(row) in by_key]
-        if changed and not force:
-            previous = _previous_definitions(spec_path)
-            what = describe_changes(previous, defs) if previous is not None else []
-            if not what:
-                what = [f"{len(changed)} runs (e.g. {_row_key(changed[0])!r}) were made with a different definition"]
-            raise ConfigError(
-                f"{out}: the comparison config changed since this sweep started: {'; '.join(what)}. "
-                f"Pass --force to run the changed runs anew (their old rows stay in {RESULTS_FILE} and leave "
-                "the summary), or choose another --out"
-            )
-    elif results.is_file() and results.stat().st_size > 0:
-        raise ConfigError(
-            f"{results} already holds results; pass --resume to continue that sweep, or choose another --out"
-        )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"cannot create the output folder {out}: {e.strerror}") from None
-    if resume:
-        read_results(results, repair=True)  # a line cut short by a crash goes before anything is appended
-    # where this sweep ran (twin, Python, backends, machine): the gate names what changed since its baseline
-    env = environment()
-    spec_path.write_text(
-        json.dumps({"spec": spec.model_dump(mode="json"), "definitions": defs, "environment": env}, indent=1)
-    )
+    existing = _earlier_rows(spec, runs, defs, out, resume=resume, force=force)
+    env = _open_out_dir(out, spec, defs, resume=resume)
 
     finished = {row["run_id"]: row for row in existing if row["run_id"] in wanted and row.get("status") != "error"}
     retried = sum(1 for row in existing if row["run_id"] in wanted and row.get("status") == "error")
-    runnable, skipped = _runnable([r for r in runs if r.run_id not in finished])
-    todo = runnable
+    todo, skipped = _runnable([r for r in runs if r.run_id not in finished])
     if skipped:
         log.info("%d runs skipped, e.g. %s", len(skipped), skipped[0][1])
     n_workers = _default_workers() if workers is None else workers
@@ -727,57 +819,15 @@ def run_comparison(
         backend,
         n_workers,
     )
-
-    new_rows: list[dict[str, Any]] = []
-    if todo:
-        if backend == "ray":
-            stream = _run_ray(todo, max(1, n_workers), ray_address)
-        elif n_workers == 0 or workers == 0:
-            stream = _run_inline(todo)
-        else:
-            stream = _run_local(todo, n_workers)
-        writer = _Appender(results)
-        try:
-            for row in stream:
-                writer.write(row)
-                new_rows.append(row)
-                if on_row is not None:
-                    on_row(row, len(new_rows), len(todo))
-        finally:
-            writer.close()
-            close = getattr(stream, "close", None)
-            if close is not None:
-                close()
+    new_rows = _run_all(
+        todo, results, backend=backend, n_workers=n_workers, workers=workers, ray_address=ray_address, on_row=on_row
+    )
 
     order = {r.run_id: i for i, r in enumerate(runs)}
     latest = dict(finished)
     latest.update({row["run_id"]: row for row in new_rows})  # a rerun replaces its 'error' row
     rows = sorted(latest.values(), key=lambda r: order[r["run_id"]])
-    from twin.compare.report import summarize, write_summary
-    from twin.compare.summary import Provenance
-
-    skipped_ids = {rid for rid, _ in skipped}
-    skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
-    summary = summarize(
-        rows,
-        planners=[p.id for p in spec.planners],
-        skipped=skipped,
-        reference=spec.reference,
-        skipped_pairs=dict(skipped_pairs),
-        provenance=Provenance(spec.name, spec.source if spec.source != "<dict>" else None, started, env),
-    )
-    files = [results, *write_summary(summary, out)]
-    pictures: list[Path] = []
-    if plots:
-        try:
-            from twin.compare.plots import write_plots
-
-            pictures = write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
-        except DependencyMissing as e:
-            log.warning("no plots: %s", e)
-    from twin.compare.html_report import write_html
-
-    files += [write_html(summary, out, plots=pictures, title=spec.name or "planner comparison"), *pictures]
+    summary, files = _write_reports(spec, rows, runs, skipped, out, started=started, env=env, plots=plots)
     return CompareResult(
         out_dir=out,
         rows=rows,
@@ -785,7 +835,7 @@ def run_comparison(
         resumed=len(finished),
         skipped=skipped,
         summary=summary,
-        files=files,
+        files=[results, *files],
         wall_time_s=time.perf_counter() - t_start,
         retried=retried,
         spec_name=spec.name,

@@ -85,6 +85,7 @@ from twin.config.loader import unknown_key_hint
 from twin.errors import ConfigError
 from twin.problems.model import ProblemSet, load_problem_set
 from twin.problems.queries import query_of_problem
+from twin.problems.sampling import RandomQueries
 
 __all__ = [
     "NOMINAL",
@@ -168,46 +169,6 @@ class QuerySpec(_Model):
         if not all(math.isfinite(v) for v in vals):
             raise ValueError("start and goal must be finite numbers")
         return self
-
-
-class RandomQueries(_Model):
-    """Seeded random queries: `count` per seed, start and goal with the TCP pointing down at a random
-    yaw (+-90 deg) inside a box (base frame, m), at least `min_clearance_m` from the environment and
-    `min_travel_m` apart. The start takes the IK branch nearest the home posture, the goal the IK
-    solution nearest the start.
-
-    `goal`: the goal configuration (`joint`), the TCP pose reached exactly (`pose`), or the TCP position
-    within `position_tolerance_m` with the orientation free (`position`: what receding-horizon planners
-    such as `nmpc`, which track a position, can be compared on).
-
-    `straight` says how hard a query is: `blocked` keeps only queries whose straight joint motion from
-    the start to the goal configuration collides (so a planner has to search), `free` only those where
-    it does not, `any` takes what comes. The goal is drawn in `goal_region_*` when given (else in the
-    same box as the start): narrow passages, such as into a bin from beside another one.
-
-    The default box is the work area in front of the arm, over the table; in the warehouse scene it
-    straddles the obstacle wall, so straight-line planners meet it.
-    """
-
-    count: int = Field(ge=1, le=10_000)
-    goal: Literal["joint", "pose", "position"] = "joint"
-    position_tolerance_m: float = Field(0.03, gt=0, le=0.1)  # `goal: position` only: the TCP within this
-    straight: Literal["free", "blocked", "any"] = "any"
-    region_x: tuple[float, float] = (-0.65, -0.25)
-    region_y: tuple[float, float] = (-0.35, 0.35)
-    region_z: tuple[float, float] = (0.05, 0.40)
-    goal_region_x: tuple[float, float] | None = None
-    goal_region_y: tuple[float, float] | None = None
-    goal_region_z: tuple[float, float] | None = None
-    min_clearance_m: float = Field(0.02, ge=0)
-    min_travel_m: float = Field(0.10, ge=0)
-
-    @field_validator("region_x", "region_y", "region_z", "goal_region_x", "goal_region_y", "goal_region_z")
-    @classmethod
-    def _ordered(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
-        if v is not None and not v[0] <= v[1]:
-            raise ValueError(f"range must be [min, max] with min <= max, got {list(v)}")
-        return v
 
 
 def _yaml_text(v: Any) -> str:

@@ -1,10 +1,10 @@
 """One run, start to finish, inside a worker: the function both backends (process pool, Ray) execute.
 
 Why a per-process cache: building the FCL scene and the PyBullet world costs more than a typical plan,
-so each worker process builds them once per scene config and reuses them. Nothing a run leaves behind
-changes the next run: the world is reset (rebuilt) before every execution, planners are instantiated
-per run, and random queries are drawn from a generator seeded by (seed, scenario, index) alone. So a
-row depends only on its RunTask, whichever worker, backend or order ran it.
+so each worker process builds them once per scene config and reuses them (`twin.problems.cells`).
+Nothing a run leaves behind changes the next run: the world is reset (rebuilt) before every execution,
+planners are instantiated per run, and random queries are drawn from a generator seeded by (seed,
+scenario, index) alone. So a row depends only on its RunTask, whichever worker, backend or order ran it.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ import os
 import sys
 import time
 import traceback
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,50 +33,25 @@ from twin.compare.metrics import (
     trajectory_metrics,
 )
 from twin.compare.spec import RunTask
-from twin.errors import ConfigError, TwinError
+from twin.errors import TwinError
+from twin.problems.cells import QueryCell, cell_for
+from twin.problems.sampling import sample_query, straight_free
 
 if TYPE_CHECKING:
-    from twin.collision import PlanningScene
-    from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
-    from twin.kinematics import UR5e
-    from twin.problems import ProblemSet
     from twin.types import MotionRequest
     from twin.world import World
 
 __all__ = [
     "TASKS_UNAVAILABLE",
-    "cell_for",
     "error_row",
     "execute_run",
-    "sample_query",
-    "straight_free",
     "worker_init",
 ]
 
 log = logging.getLogger("twin")
 
 TASKS_UNAVAILABLE = "skipped: twin.tasks not available"
-_SAMPLE_TRIES = 2000  # draws for one valid configuration
-_PAIR_TRIES = 300  # valid (start, goal) pairs tried for a `straight: blocked|free` condition
-
-
-@dataclass
-class _Cell:
-    """A scene config's static cell, built once per worker: settings without loose objects, the FCL
-    scene, kinematics, and (on first execution) the PyBullet world."""
-
-    settings: Settings
-    scene: PlanningScene
-    kin: UR5e
-    world: World | None = None
-    key: tuple[Any, ...] = ()  # its key in _CELLS
-
-
-_CellKey = tuple[str, tuple[str, ...], str, str | None, int | None]
-_CELLS: dict[_CellKey, _Cell] = {}
-_OWN_WORLD_CELLS = 2  # cells of problems with their own world kept at once (each may hold a PyBullet world)
-_SETS: dict[str, ProblemSet] = {}  # problem sets read in this process, by path
 _QUERIES: dict[tuple[Any, ...], dict[str, Any]] = {}  # random queries drawn in this process (`_drawn_query`)
 _STRAIGHT_FREE: dict[tuple[Any, str], bool | None] = {}  # (cell key, query) -> its straight motion is free
 
@@ -109,73 +83,7 @@ def worker_init(threads: int | None = None) -> None:
         pass
 
 
-def _problem_set(path: str) -> ProblemSet:
-    ps = _SETS.get(path)
-    if ps is None:
-        from twin.problems import load_problem_set
-
-        ps = _SETS[path] = load_problem_set(path)
-    return ps
-
-
-def _keep(key: _CellKey, cell: _Cell) -> _Cell:
-    """Remember a cell; of the cells of problems with their own world only the latest few stay (a set
-    of 700 worlds would otherwise hold 700 scenes and PyBullet worlds)."""
-    cell.key = key
-    if key[4] is not None:
-        own = [k for k in _CELLS if k[4] is not None]
-        for old in own[: max(0, len(own) - _OWN_WORLD_CELLS + 1)]:
-            gone = _CELLS.pop(old)
-            if gone.world is not None:
-                gone.world.close()
-    _CELLS[key] = cell
-    return cell
-
-
-def cell_for(
-    config: str,
-    overrides: tuple[str, ...],
-    unknown_fixtures: UnknownFixtures,
-    problems: str | None = None,
-    problem_index: int | None = None,
-) -> _Cell:
-    """The static cell of a scene config (built on first use in this process, then reused); with
-    `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`): the
-    world of problem `problem_index` when it has its own (format version 2), else the set's."""
-    own = None
-    if problems is not None and problem_index is not None and _problem_set(problems).problems[problem_index].world:
-        own = problem_index
-    key: _CellKey = (config, overrides, unknown_fixtures, problems, own)
-    cell = _CELLS.get(key)
-    if cell is None and problems is not None:
-        from twin.config import load_config
-        from twin.kinematics import UR5e
-        from twin.problems.world import check_robot, planning_scene, settings_for
-
-        ps = _problem_set(problems)
-        s = load_config(config, overrides)
-        check_robot(ps, s, source=problems)
-        world = ps.world_of(own) if own is not None else None
-        s = settings_for(ps, s, world=world)
-        cell = _keep(key, _Cell(settings=s, scene=planning_scene(ps, s, world=world), kin=UR5e.from_settings(s)))
-    if cell is None:
-        from twin.collision import PlanningScene
-        from twin.config import load_config
-        from twin.kinematics import UR5e
-
-        s = load_config(config, overrides)
-        # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps
-        # "contacts seen in physics" a measure of the trajectory, not of objects the planner never saw
-        no_objects = s.world.objects.model_copy(update={"items": []})
-        s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
-        # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
-        # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
-        scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
-        cell = _keep(key, _Cell(settings=s, scene=scene, kin=UR5e.from_settings(s)))
-    return cell
-
-
-def _world(cell: _Cell) -> World:
+def _world(cell: QueryCell) -> World:
     if cell.world is None:
         from twin.world import World
 
@@ -183,123 +91,7 @@ def _world(cell: _Cell) -> World:
     return cell.world
 
 
-def _box(random: dict[str, Any], prefix: str) -> tuple[np.ndarray, np.ndarray]:
-    rx, ry, rz = (random.get(f"{prefix}region_{a}") or random[f"region_{a}"] for a in "xyz")
-    return np.array([rx[0], ry[0], rz[0]]), np.array([rx[1], ry[1], rz[1]])
-
-
-def _region_text(random: dict[str, Any], prefix: str = "") -> str:
-    lo, hi = _box(random, prefix)
-    return " ".join(f"{a}=[{lo[i]:g}, {hi[i]:g}]" for i, a in enumerate("xyz"))
-
-
-def sample_query(
-    random: dict[str, Any],
-    rng: np.random.Generator,
-    *,
-    scene: PlanningScene,
-    kin: UR5e,
-    home: np.ndarray,
-    resolution_rad: float = 0.01,
-) -> dict[str, Any]:
-    """A random query (as a QuerySpec dict): start and goal with the TCP pointing down at a random yaw
-    (+-90 deg), the start in `region_*` on the IK branch nearest `home`, the goal in `goal_region_*`
-    (default: the same box) on the IK solution nearest the start, both clear of the environment and of
-    the arm itself; with `straight: blocked|free`, pairs are drawn until the straight joint motion between
-    them collides (or does not), checked every `resolution_rad`.
-
-    Raises ConfigError when the region yields no valid configuration in a few thousand draws, or no pair
-    with the asked straight motion in a few hundred valid pairs.
-    """
-    from twin.types import Pose
-
-    start_box, goal_box = _box(random, ""), _box(random, "goal_")
-    want = random.get("straight", "any")
-
-    def one(box: tuple[np.ndarray, np.ndarray], near: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        p = rng.uniform(box[0], box[1])
-        yaw = float(rng.uniform(-0.5 * math.pi, 0.5 * math.pi))  # a parallel gripper is symmetric under pi
-        T = Pose.from_xyz_rpy(p, (math.pi, 0.0, yaw)).matrix()
-        sols = kin.ik(T)
-        if sols.shape[0] == 0:
-            return None
-        q = sols[int(np.argmin(np.linalg.norm(sols - near, axis=1)))]
-        if scene.in_collision(q) or scene.min_distance(q, include_self=False).distance < random["min_clearance_m"]:
-            return None
-        return q, np.array([*p, math.pi, 0.0, yaw])
-
-    def no_query(what: str) -> ConfigError:
-        return ConfigError(
-            f"no collision-free random {what} in region {_region_text(random, 'goal_' if what == 'goal' else '')} "
-            f"after {_SAMPLE_TRIES} draws; widen it or lower min_clearance_m (now {random['min_clearance_m']:g})"
-        )
-
-    for _ in range(_PAIR_TRIES):
-        start = None
-        for _ in range(_SAMPLE_TRIES):
-            start = one(start_box, home)
-            if start is not None:
-                break
-        if start is None:
-            raise no_query("start")
-        goal = None
-        for _ in range(_SAMPLE_TRIES):
-            goal = one(goal_box, start[0])
-            if goal is not None and np.linalg.norm(goal[1][:3] - start[1][:3]) >= random["min_travel_m"]:
-                break
-            goal = None
-        if goal is None:
-            raise no_query("goal")
-        if want == "any":
-            break
-        free = scene.check_path(np.stack([start[0], goal[0]]), resolution_rad=resolution_rad).free
-        if free == (want == "free"):
-            break
-    else:
-        where = _region_text(random)
-        if any(random.get(f"goal_region_{a}") for a in "xyz"):
-            where += f" to goal region {_region_text(random, 'goal_')}"
-        raise ConfigError(
-            f"random queries in {where}: none of {_PAIR_TRIES} collision-free pairs has a {want} straight joint "
-            f"motion; move the regions (blocked: start and goal on either side of an obstacle) or use straight: any"
-        )
-    out: dict[str, Any] = {
-        "start": start[0].tolist(),
-        "goal": None,
-        "goal_pose": None,
-        "frame": "tcp",
-        "orientation_free": False,
-        "position_tolerance_m": None,
-    }
-    if random["goal"] == "joint":
-        out["goal"] = goal[0].tolist()
-    elif random["goal"] == "position":
-        out["goal_pose"] = goal[1].tolist()
-        out["orientation_free"], out["position_tolerance_m"] = True, random["position_tolerance_m"]
-    else:
-        out["goal_pose"] = goal[1].tolist()
-    return out
-
-
-def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: UR5e, resolution_rad: float) -> bool | None:
-    """Whether the straight joint motion from the query's start to its goal is collision-free (checked
-    every `resolution_rad`); for a pose goal, to the IK solution nearest the start. None when a pose goal
-    has no IK solution."""
-    from twin.types import Pose
-
-    start = np.asarray(query["start"], dtype=float)
-    if query.get("goal") is not None:
-        goal = np.asarray(query["goal"], dtype=float)
-    else:
-        x, y, z, r, p, yw = query["goal_pose"]
-        sols = kin.ik(Pose.from_xyz_rpy((x, y, z), (r, p, yw)).matrix(), query.get("frame", "tcp"))
-        if sols.shape[0] == 0:
-            return None
-        goal = sols[int(np.argmin(np.linalg.norm(sols - start, axis=1)))]
-    return bool(scene.check_path(np.stack([start, goal]), resolution_rad=resolution_rad).free)
-
-
-def _drawn_query(task: RunTask, cell: _Cell) -> dict[str, Any]:
+def _drawn_query(task: RunTask, cell: QueryCell) -> dict[str, Any]:
     """The random query of `task`, drawn once per process: every planner of a sweep plans the same query
     (its generator is seeded by scenario, seed and index alone), so the second planner's draw, often
     hundreds of IK solutions and collision checks for a `straight: blocked` pair, would repeat the first's."""

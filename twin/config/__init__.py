@@ -2,8 +2,8 @@
 
 `twin.config.schema` holds the models of the cell and `Settings` (the two reference tasks' own models
 live with their tasks, `twin.tasks.<name>.settings`), `twin.config.loader` reads files (`extends`, `--set`
-overrides, config names, one-line errors). Import from here: every name below stays importable from
-`twin.config` whichever module defines it.
+overrides, config names, one-line errors worded by `twin.messages`). Import from here: every name below
+stays importable from `twin.config` whichever module defines it.
 """
 
 from __future__ import annotations
@@ -15,10 +15,8 @@ from twin.config.loader import (
     apply_override,
     find_config,
     load_config,
-    one_line,
     read_yaml,
     settings_from_dict,
-    short_repr,
     swap_planner,
     with_planner,
 )
@@ -47,6 +45,7 @@ from twin.config.schema import (
     UnmodelledObstacleSettings,
     WorldSettings,
 )
+from twin.messages import one_line, short_repr
 from twin.tasks.robocup.settings import GraspEntry, IcpSettings, RobocupPerceptionSettings, RobocupTaskSettings
 from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 

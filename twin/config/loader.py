@@ -25,7 +25,9 @@ import yaml
 from pydantic import BaseModel, Tag, ValidationError
 
 from twin.config.schema import PlannerBlock, PlannerGroups, Settings
-from twin.errors import ConfigError
+from twin.errors import ConfigError, UnknownNameError
+from twin.messages import one_line, short_repr
+from twin.registry import Kind, default_registry
 from twin.resources import CONFIG_SUFFIXES, config_names, packaged_config
 
 __all__ = [
@@ -34,10 +36,8 @@ __all__ = [
     "find_config",
     "format_validation",
     "load_config",
-    "one_line",
     "read_yaml",
     "settings_from_dict",
-    "short_repr",
     "swap_planner",
     "unknown_key_hint",
     "with_planner",
@@ -60,22 +60,6 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 _MAX_DEPTH = 32
 _MAX_NODES = 100_000
 _MAX_INT = 2**63 - 1  # beyond int64 a seed or an id breaks numpy, PyBullet or OpenCV instead of failing here
-
-
-def one_line(text: object, limit: int = 300) -> str:
-    """`text` on one line (every line break and run of white space becomes one space), cut to `limit`
-    characters: error messages quote user input, and a user mistake must print as ONE line."""
-    out = " ".join(str(text).split())
-    return out if len(out) <= limit else out[: limit - 3] + "..."
-
-
-def short_repr(value: object, limit: int = 60) -> str:
-    """repr of a user's value for an error message: one line, at most `limit` characters."""
-    try:
-        r = repr(value)
-    except Exception:  # noqa: BLE001 - a message must never fail
-        r = f"<{type(value).__name__}>"
-    return one_line(r, limit)
 
 
 def _dotted(loc: Iterable[object]) -> str:
@@ -511,9 +495,6 @@ def load_config(
 
 def _check_task(settings: Settings, source: str) -> None:
     """`task.kind` must name a registered task plugin (`twin planners` lists them): one line if not."""
-    from twin.errors import UnknownNameError
-    from twin.registry import Kind, default_registry
-
     try:
         default_registry().entry(settings.task.kind, (Kind.TASK,))
     except UnknownNameError as e:

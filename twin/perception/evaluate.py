@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -31,17 +31,21 @@ from twin.perception.aruco import Calibration, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, prefetch_next_capture
 from twin.perception.detection import detection_label, with_ground_truth
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
-from twin.tasks.robocup.perception import CYLINDERS
 from twin.transforms import rpy_to_matrix as rpy_matrix
 from twin.types import BoxBounds, quat_to_matrix
 
 if TYPE_CHECKING:
+    from twin.camera import RGBDFrame
+    from twin.perception.detection import Detector
     from twin.world import ObjectState, World
 
 __all__ = [
     "MATCH_GATE_M",
     "CalibrationReport",
     "PerceptionReport",
+    "Pipelines",
+    "RobocupPipeline",
+    "WarehousePipeline",
     "ideal_grasp_yaw",
     "match",
     "orientation_truth",
@@ -71,10 +75,16 @@ def orientation_truth(obj: ObjectState) -> str:
     return "horizontal" if obj.lying else "vertical"
 
 
+def _is_cylinder(cls: str) -> bool:
+    """Whether an object class is a cylinder (bottle, can, marker), as its template says."""
+    template = OBJECT_TEMPLATES.get(cls)
+    return template is not None and template.shape == "cylinder"
+
+
 def ideal_grasp_yaw(obj: ObjectState) -> tuple[float, float] | None:
     """(yaw, symmetry period) of the best top-down grasp for the true pose; None when any yaw will do."""
     R = quat_to_matrix(obj.orientation_xyzw)
-    if obj.cls in CYLINDERS:
+    if _is_cylinder(obj.cls):
         if not obj.lying:
             return None
         return math.atan2(R[1, 2], R[0, 2]) + math.pi / 2, math.pi
@@ -245,15 +255,117 @@ def _object_row(obj: ObjectState, label_true: str, est: dict[str, Any] | None) -
     return row
 
 
+class WarehousePipeline(Protocol):
+    """The warehouse pipeline (`twin.tasks.warehouse.perception.perceive_warehouse`): cubes and the
+    obstacle's box in one frame; its result has `cubes`, `obstacle`, `obstacle_extended`,
+    `obstacle_points` and `timings_s`."""
+
+    def __call__(self, frame: RGBDFrame, T_base_camera: np.ndarray, params: Any, *, seed: int = ...) -> Any: ...
+
+
+class RobocupPipeline(Protocol):
+    """The RoboCup pipeline (`twin.tasks.robocup.perception.perceive_robocup`): an estimate per detection;
+    its result has `objects` (ObjectEstimate-like) and `timings_s`."""
+
+    def __call__(
+        self, frame: RGBDFrame, T_base_camera: np.ndarray, settings: Settings, detector: Detector, *, seed: int = ...
+    ) -> Any: ...
+
+
+@dataclass(frozen=True)
+class Pipelines:
+    """The pipelines `run_perception` scores, chosen by `perception.pipeline`. They belong to the tasks
+    (`twin.tasks.<name>.perception`), which sit above perception, so the caller hands them in:
+    `Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)`."""
+
+    warehouse: WarehousePipeline
+    robocup: RobocupPipeline
+
+
+def _warehouse_estimates(res: Any, settings: Settings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The warehouse result as estimates (one per cube) and the obstacle's box against the truth."""
+    estimates = [
+        {
+            "class": "warehouse_cube",
+            "color": c.color_label,
+            "orientation": "vertical",
+            "position": c.centroid.tolist(),
+            "yaw": None,
+            "points": c.n_points,
+        }
+        for c in res.cubes
+    ]
+    box_true = true_obstacle_box(settings)
+    face_err = None
+    if res.obstacle is not None and box_true is not None:
+        face_err = float(np.max(np.abs(np.r_[res.obstacle.lo - box_true.lo, res.obstacle.hi - box_true.hi])))
+    obstacle = {
+        "box_est": _box_dict(res.obstacle),
+        "box_extended": _box_dict(res.obstacle_extended),
+        "box_true": _box_dict(box_true),
+        "max_face_error_m": face_err,
+        "points": res.obstacle_points,
+    }
+    return estimates, obstacle
+
+
+def _robocup_estimates(res: Any) -> list[dict[str, Any]]:
+    """The RoboCup result as estimates, one per object estimated."""
+    return [
+        {
+            "class": e.label,
+            "color": e.color,
+            "orientation": e.orientation,
+            "orientation_pca": e.orientation_pca,
+            "position": e.position.tolist(),
+            "yaw": e.yaw,
+            "grasp": e.grasp.tolist(),
+            "source": e.source,
+            "icp_rmse": e.icp_rmse,
+            "points": e.n_points,
+            "confidence": e.confidence,
+        }
+        for e in res.objects
+    ]
+
+
+def _scored_rows(objs: list[ObjectState], estimates: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], int]:
+    """Every true object's row (its matched estimate, if any, scored) and the count of false positives."""
+    m = match(
+        np.array([e["position"] for e in estimates]).reshape(-1, 3),
+        np.array([o.position for o in objs]).reshape(-1, 3),
+    )
+    rows: list[dict[str, Any]] = []
+    for i, o in enumerate(objs):
+        label = "warehouse_cube" if o.cls == "warehouse_cube" else detection_label(o.cls, o.color)
+        rows.append(_object_row(o, label, estimates[m[i]] if i in m else None))
+    return rows, len(estimates) - len(m)
+
+
+def _perceive_earlier(
+    world: World, settings: Settings, pipelines: Pipelines, det: Detector | None, *, seed: int, count: int
+) -> None:
+    """`count` scene captures, each perceived (results dropped) before the next, as a task's earlier ones."""
+    for _ in range(count):
+        earlier = capture_frame(world, settings, pose="capture")
+        if settings.perception.pipeline == "warehouse":
+            pipelines.warehouse(earlier.frame, earlier.T_base_camera_nominal, settings.perception.warehouse)
+        else:
+            assert det is not None
+            pipelines.robocup(earlier.frame, earlier.T_base_camera_nominal, settings, det, seed=seed)
+        prefetch_next_capture(world, settings)
+
+
 def run_perception(
     settings: Settings,
     *,
+    pipelines: Pipelines,
     seed: int | None = None,
     renderer: str = "auto",
     detector: str | None = None,
     earlier_captures: int = 0,
 ) -> PerceptionReport:
-    """Build the scene of `seed`, run the configured pipeline on captured frames, score it.
+    """Build the scene of `seed`, run the configured pipeline (of `pipelines`) on captured frames, score it.
 
     Warehouse: one frame from the fixed camera serves calibration and perception. RoboCup: the wrist
     camera first views the marker from `camera.calibration_pose` (for the calibration report, and for
@@ -265,8 +377,6 @@ def run_perception(
     """
     from twin.perception.aruco import MarkerNotFound
     from twin.perception.pipeline import camera_extrinsics, make_detector
-    from twin.tasks.robocup.perception import perceive_robocup
-    from twin.tasks.warehouse.perception import perceive_warehouse
     from twin.world import World
 
     seed = settings.seed if seed is None else int(seed)
@@ -282,14 +392,7 @@ def run_perception(
                 cal_report = _calibrate_in(world, settings, cap_cal)
             except MarkerNotFound as e:
                 log.warning("calibration view: %s", e)
-        for _ in range(earlier_captures):  # as a task's: each perceived (results dropped) before the next
-            earlier = capture_frame(world, settings, pose="capture")
-            if pipeline == "warehouse":
-                perceive_warehouse(earlier.frame, earlier.T_base_camera_nominal, settings.perception.warehouse)
-            else:
-                assert det is not None
-                perceive_robocup(earlier.frame, earlier.T_base_camera_nominal, settings, det, seed=seed)
-            prefetch_next_capture(world, settings)
+        _perceive_earlier(world, settings, pipelines, det, seed=seed, count=earlier_captures)
         cap = capture_frame(world, settings, pose="capture", rng=None if earlier_captures else noise_rng(seed, 0))
         timings.update(cap.timings_s)
         if settings.camera.mount == "fixed" and has_marker:
@@ -305,64 +408,19 @@ def run_perception(
             settings, cap, cal_report.T_base_camera if cal_report else None, cal_report.q if cal_report else None
         )
         truth = world.objects()
-        rows: list[dict[str, Any]] = []
-        estimates: list[dict[str, Any]] = []
         obstacle = None
         if pipeline == "warehouse":
-            res = perceive_warehouse(cap.frame, T_base_camera, settings.perception.warehouse, seed=seed)
+            res = pipelines.warehouse(cap.frame, T_base_camera, settings.perception.warehouse, seed=seed)
             timings.update(res.timings_s)
-            estimates = [
-                {
-                    "class": "warehouse_cube",
-                    "color": c.color_label,
-                    "orientation": "vertical",
-                    "position": c.centroid.tolist(),
-                    "yaw": None,
-                    "points": c.n_points,
-                }
-                for c in res.cubes
-            ]
-            box_true = true_obstacle_box(settings)
-            face_err = None
-            if res.obstacle is not None and box_true is not None:
-                face_err = float(np.max(np.abs(np.r_[res.obstacle.lo - box_true.lo, res.obstacle.hi - box_true.hi])))
-            obstacle = {
-                "box_est": _box_dict(res.obstacle),
-                "box_extended": _box_dict(res.obstacle_extended),
-                "box_true": _box_dict(box_true),
-                "max_face_error_m": face_err,
-                "points": res.obstacle_points,
-            }
+            estimates, obstacle = _warehouse_estimates(res, settings)
             objs = [o for o in truth if o.cls == "warehouse_cube"]
         else:
             assert det is not None
-            res_r = perceive_robocup(cap.frame, T_base_camera, settings, with_ground_truth(det, truth), seed=seed)
-            timings.update(res_r.timings_s)
-            estimates = [
-                {
-                    "class": e.label,
-                    "color": e.color,
-                    "orientation": e.orientation,
-                    "orientation_pca": e.orientation_pca,
-                    "position": e.position.tolist(),
-                    "yaw": e.yaw,
-                    "grasp": e.grasp.tolist(),
-                    "source": e.source,
-                    "icp_rmse": e.icp_rmse,
-                    "points": e.n_points,
-                    "confidence": e.confidence,
-                }
-                for e in res_r.objects
-            ]
+            res = pipelines.robocup(cap.frame, T_base_camera, settings, with_ground_truth(det, truth), seed=seed)
+            timings.update(res.timings_s)
+            estimates = _robocup_estimates(res)
             objs = list(truth)
-        m = match(
-            np.array([e["position"] for e in estimates]).reshape(-1, 3),
-            np.array([o.position for o in objs]).reshape(-1, 3),
-        )
-        for i, o in enumerate(objs):
-            label = "warehouse_cube" if o.cls == "warehouse_cube" else detection_label(o.cls, o.color)
-            rows.append(_object_row(o, label, estimates[m[i]] if i in m else None))
-        fp = len(estimates) - len(m)
+        rows, fp = _scored_rows(objs, estimates)
     return PerceptionReport(
         settings.name,
         seed,

@@ -5,8 +5,10 @@
     save_problem_set(ps, "robocup-blocked.json")
 
 Modules: `model` (the file format, validated; its JSON Schema), `queries` (problems <-> compare queries),
-`world` (a problem set's world as twin's fixtures and planning scene), `export` (from a scene config),
-`moveit` (from MoveIt PlanningScene / MotionPlanRequest YAML: `problem_set_from_moveit`).
+`world` (a problem set's world as twin's fixtures and planning scene), `cells` (a scene config's cell
+for motion queries, built once per process), `sampling` (seeded random queries in a cell), `export`
+(from a scene config), `moveit` (from MoveIt PlanningScene / MotionPlanRequest YAML:
+`problem_set_from_moveit`).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ __all__ = [
 
 
 def __getattr__(name: str) -> Any:
-    # these load the compare worker or the robot model (FCL, kinematics) only when asked for
+    # these load the planning scene and the robot model (FCL, kinematics) only when asked for
     if name == "export_problem_set":
         from twin.problems.export import export_problem_set
 

@@ -1,6 +1,6 @@
 """`twin problems export`: a scene config's seeded random motion queries as a problem set.
 
-The queries are drawn exactly as a `twin compare` scenario draws them (`twin.compare.worker.sample_query`
+The queries are drawn exactly as a `twin compare` scenario draws them (`twin.problems.sampling.sample_query`
 with the generator seeded by (seed, scenario name, index)), so exporting with a compare scenario's name,
 `random:` settings and seed gives that scenario's problems; the world is the planning scene those
 queries are planned in (fixtures, and the obstacles a task perceives, as `unknown_fixtures: box` gives
@@ -18,8 +18,10 @@ import numpy as np
 from pydantic import ValidationError
 
 from twin.errors import ConfigError
+from twin.problems.cells import cell_for
 from twin.problems.model import ProblemSet
 from twin.problems.queries import problem_of_query
+from twin.problems.sampling import RandomQueries, sample_query
 from twin.problems.world import robot_spec, world_of_scene
 
 if TYPE_CHECKING:
@@ -44,8 +46,6 @@ def export_problem_set(
     (RandomQueries fields: goal, straight, regions, clearances; `count` is the argument).
 
     Raises ConfigError for a bad config, bad `random` fields or a region that yields no query."""
-    from twin.compare.spec import RandomQueries
-    from twin.compare.worker import cell_for, sample_query
     from twin.config import find_config
 
     path = str(find_config(config).resolve())

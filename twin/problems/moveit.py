@@ -67,8 +67,9 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from twin.config.loader import one_line, read_yaml, short_repr
+from twin.config.loader import read_yaml
 from twin.errors import ConfigError
+from twin.messages import one_line, short_repr
 from twin.problems.model import (
     BoxShape,
     CollisionObject,

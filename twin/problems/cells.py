@@ -1,0 +1,109 @@
+"""The cell a motion query is planned in, built once per process: `QueryCell`, `cell_for`.
+
+Motion queries (a `twin compare` run, a problem set's export) need a scene config's static cell: its
+settings without loose objects, the FCL planning scene, the kinematics and, once a run executes, a
+PyBullet world. Building the scene and the world costs more than a typical plan, so a process builds
+each cell on first use and reuses it. Below `twin.compare` (its worker takes cells from here), so that
+exporting problems never reaches up into the comparison machinery.
+
+Not the tasks' `Cell` (`twin.tasks.cell`), which runs a whole sorting task with perception and grasping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from twin.collision import PlanningScene
+    from twin.collision.scene import UnknownFixtures
+    from twin.config import Settings
+    from twin.kinematics import UR5e
+    from twin.problems.model import ProblemSet
+    from twin.world import World
+
+__all__ = ["QueryCell", "cell_for"]
+
+
+@dataclass
+class QueryCell:
+    """A scene config's static cell for motion queries, built once per process: settings without loose
+    objects, the FCL scene, kinematics, and (once a query is executed in physics) the PyBullet world."""
+
+    settings: Settings
+    scene: PlanningScene
+    kin: UR5e
+    world: World | None = None
+    key: tuple[Any, ...] = ()  # its key in _CELLS
+
+
+_CellKey = tuple[str, tuple[str, ...], str, str | None, int | None]
+_CELLS: dict[_CellKey, QueryCell] = {}
+_OWN_WORLD_CELLS = 2  # cells of problems with their own world kept at once (each may hold a PyBullet world)
+_SETS: dict[str, ProblemSet] = {}  # problem sets read in this process, by path
+
+
+def _problem_set(path: str) -> ProblemSet:
+    ps = _SETS.get(path)
+    if ps is None:
+        from twin.problems.model import load_problem_set
+
+        ps = _SETS[path] = load_problem_set(path)
+    return ps
+
+
+def _keep(key: _CellKey, cell: QueryCell) -> QueryCell:
+    """Remember a cell; of the cells of problems with their own world only the latest few stay (a set
+    of 700 worlds would otherwise hold 700 scenes and PyBullet worlds)."""
+    cell.key = key
+    if key[4] is not None:
+        own = [k for k in _CELLS if k[4] is not None]
+        for old in own[: max(0, len(own) - _OWN_WORLD_CELLS + 1)]:
+            gone = _CELLS.pop(old)
+            if gone.world is not None:
+                gone.world.close()
+    _CELLS[key] = cell
+    return cell
+
+
+def cell_for(
+    config: str,
+    overrides: tuple[str, ...],
+    unknown_fixtures: UnknownFixtures,
+    problems: str | None = None,
+    problem_index: int | None = None,
+) -> QueryCell:
+    """The static cell of a scene config (built on first use in this process, then reused); with
+    `problems`, the world of that problem set in the config's robot cell (`twin.problems.world`): the
+    world of problem `problem_index` when it has its own (format version 2), else the set's."""
+    own = None
+    if problems is not None and problem_index is not None and _problem_set(problems).problems[problem_index].world:
+        own = problem_index
+    key: _CellKey = (config, overrides, unknown_fixtures, problems, own)
+    cell = _CELLS.get(key)
+    if cell is None and problems is not None:
+        from twin.config import load_config
+        from twin.kinematics import UR5e
+        from twin.problems.world import check_robot, planning_scene, settings_for
+
+        ps = _problem_set(problems)
+        s = load_config(config, overrides)
+        check_robot(ps, s, source=problems)
+        world = ps.world_of(own) if own is not None else None
+        s = settings_for(ps, s, world=world)
+        cell = _keep(key, QueryCell(settings=s, scene=planning_scene(ps, s, world=world), kin=UR5e.from_settings(s)))
+    if cell is None:
+        from twin.collision import PlanningScene
+        from twin.config import load_config
+        from twin.kinematics import UR5e
+
+        s = load_config(config, overrides)
+        # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps
+        # "contacts seen in physics" a measure of the trajectory, not of objects the planner never saw
+        no_objects = s.world.objects.model_copy(update={"items": []})
+        s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
+        # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
+        # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
+        scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
+        cell = _keep(key, QueryCell(settings=s, scene=scene, kin=UR5e.from_settings(s)))
+    return cell
