@@ -87,7 +87,7 @@ def _world(cell: QueryCell) -> World:
     if cell.world is None:
         from twin.world import World
 
-        cell.world = World(cell.settings, cell.settings.seed, renderer="tiny")
+        cell.world = World(cell.settings, cell.settings.seed, renderer="tiny", robot=cell.robot)
     return cell.world
 
 
@@ -158,7 +158,7 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
         )
     row["straight_free"] = _STRAIGHT_FREE[key]
     request = _request(task, query, settings)
-    context = make_context(settings)  # FIXME(issue 40): the cell's robot
+    context = make_context(settings, robot=cell.robot)
     planner = make_planner(PlannerBlock(**task.planner), context)
     result = plan_with(planner, request, cell.scene, context)
     timing, solves = timing_metrics(result)

@@ -14,11 +14,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from twin.robot import Robot
+
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
-    from twin.kinematics import UR5e
+    from twin.kinematics import URArm
     from twin.problems.model import ProblemSet
     from twin.world import World
 
@@ -28,13 +30,19 @@ __all__ = ["QueryCell", "cell_for"]
 @dataclass
 class QueryCell:
     """A scene config's static cell for motion queries, built once per process: settings without loose
-    objects, the FCL scene, kinematics, and (once a query is executed in physics) the PyBullet world."""
+    objects, the robot (built once for the cell), its FCL scene, and (once a query is executed in physics) the
+    PyBullet world."""
 
     settings: Settings
+    robot: Robot
     scene: PlanningScene
-    kin: UR5e
     world: World | None = None
     key: tuple[Any, ...] = ()  # its key in _CELLS
+
+    @property
+    def kin(self) -> URArm:
+        """The robot's arm."""
+        return self.robot.arm
 
 
 _CellKey = tuple[str, tuple[str, ...], str, str | None, int | None]
@@ -83,7 +91,6 @@ def cell_for(
     cell = _CELLS.get(key)
     if cell is None and problems is not None:
         from twin.config import load_config
-        from twin.kinematics import UR5e
         from twin.problems.world import check_robot, planning_scene, settings_for
 
         ps = _problem_set(problems)
@@ -91,11 +98,11 @@ def cell_for(
         check_robot(ps, s, source=problems)
         world = ps.world_of(own) if own is not None else None
         s = settings_for(ps, s, world=world)
-        cell = _keep(key, QueryCell(settings=s, scene=planning_scene(ps, s, world=world), kin=UR5e.from_settings(s)))
+        robot = Robot.from_settings(s)
+        cell = _keep(key, QueryCell(s, robot, planning_scene(ps, s, world=world, robot=robot)))
     if cell is None:
         from twin.collision import PlanningScene
         from twin.config import load_config
-        from twin.kinematics import UR5e
 
         s = load_config(config, overrides)
         # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps
@@ -104,6 +111,7 @@ def cell_for(
         s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
         # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
         # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
-        scene = PlanningScene.from_settings(s, unknown_fixtures=unknown_fixtures)
-        cell = _keep(key, QueryCell(settings=s, scene=scene, kin=UR5e.from_settings(s)))
+        robot = Robot.from_settings(s)
+        scene = PlanningScene.from_settings(s, robot=robot, unknown_fixtures=unknown_fixtures)
+        cell = _keep(key, QueryCell(s, robot, scene))
     return cell

@@ -33,6 +33,7 @@ from twin.transforms import matrix_to_rpy
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import Settings
+    from twin.robot import Robot
 
 __all__ = ["check_robot", "object_urdf", "planning_scene", "robot_spec", "settings_for", "world_of_scene"]
 
@@ -179,12 +180,15 @@ def settings_for(ps: ProblemSet, base: Settings, *, world: WorldSpec | None = No
     return base.model_copy(update={"world": cell})
 
 
-def planning_scene(ps: ProblemSet, settings: Settings, *, world: WorldSpec | None = None) -> PlanningScene:
+def planning_scene(
+    ps: ProblemSet, settings: Settings, *, world: WorldSpec | None = None, robot: Robot | None = None
+) -> PlanningScene:
     """The planning scene of a problem set in the cell `settings_for` made: its fixtures, the held box of
-    `world` (default the set's; attached to the TCP) and the gripper opening the set states."""
+    `world` (default the set's; attached to the TCP) and the gripper opening the set states; for `robot`
+    (default: built from `settings.robot`)."""
     from twin.collision import PlanningScene
 
-    scene = PlanningScene.from_settings(settings)  # the known fixtures, the perceived ones as boxes
+    scene = PlanningScene.from_settings(settings, robot=robot)  # the known fixtures, the perceived ones as boxes
     # a collision model without finger joints (a spheres-only arm and gripper) has no opening to set
     if (
         ps.robot.gripper_opening_m is not None
