@@ -6,7 +6,14 @@ Static (an AST walk of `twin/` and `plugins/`, nothing imported):
   imports under `if TYPE_CHECKING:` do not count (they never run). An edge `a -> b` is an import in `a` of
   module `b` (a `from b import name` whose name is a module is an edge to that module). Cycles are the
   strongly connected components of that graph with more than one module;
-- import statements of twin's own modules inside functions (how many, in how many modules);
+- import statements of twin's own modules inside functions (how many, in how many modules), and those of them
+  without a reason: a function-local import of a twin module is kept only where a top-level one would load a
+  heavy library, slow the CLI's start-up or close an import cycle, and says which on its own line(s) as
+  `# lazy: REASON`, one of
+      # lazy: pybullet                  (or fcl, cv2, scipy, open3d, matplotlib, ...: the heavy library it loads)
+      # lazy: cli start-up              (`twin --help` and a usage error stay fast)
+      # lazy: breaks the cycle a <-> b  (a top-level import would close the cycle)
+  The modules that still have local imports without one are listed;
 - import statements of `twin_nmpc` in `twin_croc`;
 - the largest classes and functions (lines, decorators included), with the limits 400 and 120;
 - module basenames used in more than one place for different modules (`__init__.py` aside);
@@ -26,6 +33,7 @@ from __future__ import annotations
 import argparse
 import ast
 import json
+import re
 import sys
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -33,6 +41,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 CLASS_LIMIT, FUNCTION_LIMIT = 400, 120
+LAZY_REASON = re.compile(r"#\s*lazy:\s*\S")  # the reason a function-local import gives for staying local
 
 
 def _modules() -> dict[str, Path]:
@@ -58,11 +67,17 @@ def _is_type_checking(node: ast.If) -> bool:
     )
 
 
-def _imports(module: str, path: Path, known: set[str]) -> list[tuple[str, bool, int]]:
-    """(imported internal module, inside a function, line) for every import that runs."""
-    tree = ast.parse(path.read_text(), str(path))
+def _imports(module: str, path: Path, known: set[str]) -> list[tuple[str, bool, int, bool]]:
+    """(imported internal module, inside a function, line, gives a `# lazy:` reason) for every import that runs."""
+    text = path.read_text()
+    lines = text.splitlines()
+    tree = ast.parse(text, str(path))
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    found: list[tuple[str, bool, int]] = []
+    found: list[tuple[str, bool, int, bool]] = []
+
+    def reasoned(node: ast.stmt) -> bool:
+        span = lines[node.lineno - 1 : node.end_lineno or node.lineno]
+        return any(LAZY_REASON.search(line) for line in span)
 
     def resolve(name: str) -> str | None:
         while name and name not in known:
@@ -80,7 +95,7 @@ def _imports(module: str, path: Path, known: set[str]) -> list[tuple[str, bool, 
                 for alias in child.names:
                     target = resolve(alias.name)
                     if target is not None:
-                        found.append((target, in_function, child.lineno))
+                        found.append((target, in_function, child.lineno, reasoned(child)))
             elif isinstance(child, ast.ImportFrom):
                 if child.level:
                     base = package.split(".")
@@ -92,11 +107,11 @@ def _imports(module: str, path: Path, known: set[str]) -> list[tuple[str, bool, 
                     target = resolve(f"{source}.{alias.name}") if f"{source}.{alias.name}" in known else None
                     target = target or resolve(source)
                     if target is not None:
-                        found.append((target, in_function, child.lineno))
+                        found.append((target, in_function, child.lineno, reasoned(child)))
             visit(child, inner)
 
     visit(tree, False)
-    return [(t, f, n) for t, f, n in found if t != module]
+    return [(t, f, n, r) for t, f, n, r in found if t != module]
 
 
 def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
@@ -162,13 +177,16 @@ def static_report() -> dict[str, Any]:
     known = set(modules)
     edges: dict[str, set[str]] = defaultdict(set)
     local: dict[str, set[int]] = defaultdict(set)  # module: lines of import statements inside functions
+    unreasoned: dict[str, set[int]] = defaultdict(set)  # of them, those without a `# lazy:` reason
     croc_from_nmpc: set[tuple[str, int]] = set()
     for module, path in modules.items():
         edges.setdefault(module, set())
-        for target, in_function, line in _imports(module, path, known):
+        for target, in_function, line, reason in _imports(module, path, known):
             edges[module].add(target)
             if in_function:
                 local[module].add(line)
+                if not reason:
+                    unreasoned[module].add(line)
             if module.startswith("twin_croc") and target.startswith("twin_nmpc"):
                 croc_from_nmpc.add((module, line))
     cycles = _cycles(edges)
@@ -186,6 +204,10 @@ def static_report() -> dict[str, Any]:
         "function_local_import_statements": sum(len(v) for v in local.values()),
         "  of_them_in_twin": sum(len(v) for m, v in local.items() if m.split(".")[0] == "twin"),
         "modules_with_function_local_imports": len(local),
+        "function_local_imports_without_reason": sum(len(v) for v in unreasoned.values()),
+        "modules_with_local_imports_without_reason": [
+            f"{m}: {len(v)}" for m, v in sorted(unreasoned.items(), key=lambda kv: (-len(kv[1]), kv[0]))
+        ],
         "twin_croc_import_statements_of_twin_nmpc": len(croc_from_nmpc),
         "classes_over_limit": [f"{n} lines {name}" for n, name in classes if n > CLASS_LIMIT],
         "functions_over_limit": [f"{n} lines {name}" for n, name in functions if n > FUNCTION_LIMIT],
@@ -253,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"    {k}: {', '.join(v) if isinstance(v, list) else v}")
             elif isinstance(value, list):
                 print(f"  {key}: {len(value)}")
-                for v in value[:12]:
+                for v in value if key == "modules_with_local_imports_without_reason" else value[:12]:
                     print(f"    {v}")
             else:
                 print(f"  {key}: {value}")

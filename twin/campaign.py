@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from twin.compare.spec import ComparePlanner, CompareSpec, TaskScenario
+from twin.config import load_config
 from twin.failures import FAILURES, failure_of_task
 from twin.faults import fault_overrides
 
@@ -62,8 +63,6 @@ def campaign_spec(
     fault set; the spec's own validation for bad planner blocks."""
     overrides = list(fault_overrides(faults))
     if planners is None:
-        from twin.config import load_config
-
         block = load_config(config).planners.get("transfer")
         planners = [{"name": block.name, "params": block.params} if block else {"name": "ruckig.movej"}]
     stem = config.rsplit("/", 1)[-1].removesuffix(".yaml")

@@ -20,13 +20,23 @@ import re
 import sys
 import textwrap
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
+# light (most are loaded by `import twin` already); what one command needs loads in it, so `--help` stays fast
+from twin import tasks  # `tasks.run_task`, looked up when a run starts (tests put a stand-in there)
 from twin.cli_exchange import COMMANDS as EXCHANGE_COMMANDS
 from twin.cli_exchange import add_parsers as add_exchange_parsers
-from twin.errors import PlanningError, TwinError
+from twin.config import load_config
+from twin.config.loader import apply_override
+from twin.errors import ConfigError, InvalidRequestError, PlanningError, TwinError
+from twin.faults import fault_overrides
+from twin.registry import default_registry
+from twin.timing import format_breakdown, process_age_s
+from twin.transforms import matrix_to_rpy
+from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
 
 if TYPE_CHECKING:
     from twin.compare import DryRun
@@ -429,9 +439,6 @@ def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) 
     """The config with `--set` overrides; `transfer_planner` (`--planner`) swaps the whole `planners.transfer`
     block before them, so `--set planners.transfer.params.K=V` reaches it and is validated by its own model
     (twin.config.swap_planner)."""
-    from twin.config import load_config
-    from twin.faults import fault_overrides
-
     overrides = [*(fault_overrides(args.faults) if args.faults else ()), *args.overrides]
     planners = {"transfer": transfer_planner} if transfer_planner is not None else None
     settings = load_config(args.config, overrides, planners=planners)
@@ -441,8 +448,6 @@ def _settings(args: argparse.Namespace, *, transfer_planner: str | None = None) 
 
 
 def _write_json(path: str, data: Any) -> None:
-    from twin.errors import ConfigError
-
     try:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(data, indent=1))
@@ -453,8 +458,6 @@ def _write_json(path: str, data: Any) -> None:
 def _cmd_planners(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
-
-    from twin.registry import default_registry
 
     entries = default_registry().entries()
     # asking each entry imports its backend (never builds a planner): a name whose backend is missing
@@ -486,7 +489,7 @@ def _cmd_planners(args: argparse.Namespace) -> int:
 
 
 def _cmd_scene(args: argparse.Namespace) -> int:
-    from twin.snapshot import save_snapshot
+    from twin.snapshot import save_snapshot  # lazy: cli start-up
 
     settings = _settings(args)
     out = save_snapshot(settings, args.snapshot)
@@ -496,9 +499,6 @@ def _cmd_scene(args: argparse.Namespace) -> int:
 
 def _plan_goal(args: argparse.Namespace, settings: Any) -> Any:
     """The goal of `twin plan`: joints, a tcp pose, or a tcp position within a tolerance (orientation free)."""
-    from twin.errors import InvalidRequestError
-    from twin.types import JointGoal, Pose, PoseGoal
-
     if args.position_tolerance is not None and args.goal_position is None:
         raise InvalidRequestError("--position-tolerance goes with --goal-position (a joint or pose goal is exact)")
     if args.goal is not None:
@@ -526,15 +526,12 @@ def _scene_line(scene: Any) -> str:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    from twin.collision import PlanningScene
-    from twin.planning import limits_from_settings, plan
-    from twin.types import MotionRequest
+    from twin.collision import PlanningScene  # lazy: fcl
+    from twin.planning import limits_from_settings, plan  # lazy: cli start-up
 
     settings = _settings(args, transfer_planner=args.planner)
     goal = _plan_goal(args, settings)
     if not args.time_limit > 0:
-        from twin.errors import InvalidRequestError
-
         raise InvalidRequestError(f"--time-limit must be positive, got {args.time_limit}")
     request = MotionRequest(
         start=args.start,
@@ -574,22 +571,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from twin.environment import environment
-    from twin.progress import RunDisplay
-    from twin.tasks import run_task
-    from twin.timing import format_breakdown, process_age_s
+    from twin.environment import environment  # lazy: cli start-up
+    from twin.progress import RunDisplay  # lazy: cli start-up
 
     startup = process_age_s()  # interpreter start, imports and argument parsing, before the run's own clock
     if args.speed is not None and args.record is None:
-        from twin.errors import ConfigError
-
         raise ConfigError(
             f"--speed {args.speed:g} goes with --record PATH (the video it speeds up); give both or neither"
         )
     settings = _settings(args, transfer_planner=args.planner)
     # stage, objects done, elapsed and time left on stderr where it is a terminal; gone when the run ends
     with RunDisplay(f"{settings.name} seed {settings.seed}", enabled=not args.quiet) as shown:
-        summary = run_task(  # `--planner` is in `settings.planners.transfer` already
+        summary = tasks.run_task(  # `--planner` is in `settings.planners.transfer` already
             settings,
             gui=args.gui,
             record=args.record,
@@ -669,16 +662,14 @@ def _ran_title(args: argparse.Namespace, settings: Any, seed: int) -> str:
 
 def _print_skipped(skipped: list[tuple[str, str]], verb: str) -> None:
     """One line per distinct reason with its count (e.g. every nmpc run on joint-goal queries)."""
-    from collections import Counter
-
     for reason, n in Counter(r for _, r in skipped).items():
         print(f"{verb} {n} runs: {reason}")
 
 
 def _dry_run_estimate(dry: DryRun, args: argparse.Namespace) -> str:
     """How long the sweep would take: from the rows of a sweep recorded in its output folder, else rough."""
-    from twin.compare import read_results
-    from twin.compare.estimate import estimate_sweep
+    from twin.compare import read_results  # lazy: cli start-up
+    from twin.compare.estimate import estimate_sweep  # lazy: cli start-up
 
     results = (Path(args.out) if args.out is not None else Path("out") / dry.spec.name) / "results.jsonl"
     try:
@@ -706,7 +697,7 @@ def compare_progress(
 ) -> Callable[[dict[str, Any], int, int], None]:
     """`run_comparison`'s `on_row`: a `progress_line` with elapsed time and estimate per finished run, timed by
     `clock` from now, printed (flushed) or given to `write`."""
-    from twin.progress import ProgressClock
+    from twin.progress import ProgressClock  # lazy: cli start-up
 
     watch = ProgressClock(clock=clock)
 
@@ -723,11 +714,16 @@ def compare_progress(
 def _cmd_compare(args: argparse.Namespace) -> int:
     from rich.console import Console
 
-    from twin.compare import plan_comparison, run_comparison
-    from twin.compare.gate import Tolerance, check_shares_runs, gate, load_baseline, load_baseline_environment
-    from twin.compare.report import summary_table, sweep_tables
-    from twin.compare.runner import check_run_options, recorded_environment
-    from twin.errors import ConfigError
+    from twin.compare import plan_comparison, run_comparison  # lazy: cli start-up
+    from twin.compare.gate import (  # lazy: cli start-up
+        Tolerance,
+        check_shares_runs,
+        gate,
+        load_baseline,
+        load_baseline_environment,
+    )
+    from twin.compare.report import summary_table, sweep_tables  # lazy: cli start-up
+    from twin.compare.runner import check_run_options, recorded_environment  # lazy: cli start-up
 
     if args.tolerance is not None and args.baseline is None:
         raise ConfigError("--tolerance goes with --baseline (the results the sweep is gated against)")
@@ -779,7 +775,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         + ", ".join(str(f) for f in result.files)
     )
     if args.export_ompl is not None:
-        from twin.compare.ompl_export import export_planner_arena
+        from twin.compare.ompl_export import export_planner_arena  # lazy: cli start-up
 
         files = export_planner_arena(
             result.rows,
@@ -789,7 +785,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         )
         print("Planner Arena export: " + ", ".join(str(f) for f in files))
     if args.latex is not None:
-        from twin.compare.latex import write_latex
+        from twin.compare.latex import write_latex  # lazy: cli start-up
 
         print(f"LaTeX table: {write_latex(result.summary, args.latex)}")
     if baseline is not None:
@@ -812,15 +808,13 @@ _COMMANDS["compare"] = _cmd_compare
 def _pose_line(T: Any) -> str:
     import numpy as np
 
-    from twin.transforms import matrix_to_rpy
-
     rpy = np.degrees(matrix_to_rpy(np.asarray(T)[:3, :3]))
     xyz = np.asarray(T)[:3, 3]
     return f"xyz [{xyz[0]:+.4f}, {xyz[1]:+.4f}, {xyz[2]:+.4f}] m, rpy [{rpy[0]:+.2f}, {rpy[1]:+.2f}, {rpy[2]:+.2f}] deg"
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from twin.perception.evaluate import run_calibration
+    from twin.perception.evaluate import run_calibration  # lazy: cv2
 
     settings = _settings(args)
     rep = run_calibration(settings)
@@ -834,9 +828,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_perceive(args: argparse.Namespace) -> int:
-    from twin.perception.evaluate import Pipelines, run_perception
-    from twin.tasks.robocup.perception import perceive_robocup
-    from twin.tasks.warehouse.perception import perceive_warehouse
+    from twin.perception.evaluate import Pipelines, run_perception  # lazy: cv2
+    from twin.tasks.robocup.perception import perceive_robocup  # lazy: cv2
+    from twin.tasks.warehouse.perception import perceive_warehouse  # lazy: cv2
 
     settings = _settings(args)
     pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)  # the tasks' own pipelines
@@ -884,21 +878,15 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from twin.testing import check_planner, time_slack_s
+    from twin.testing import check_planner, time_slack_s  # lazy: cli start-up
 
     if not (math.isfinite(args.time_limit) and args.time_limit > 0):
-        from twin.errors import InvalidRequestError
-
         raise InvalidRequestError(f"--time-limit must be positive, got {args.time_limit}")
     settings = None
     if args.config is not None:
-        from twin.config import load_config
-
         settings = load_config(args.config)
     planner: str | dict[str, Any] = args.name
     if args.params:
-        from twin.config.loader import apply_override
-
         params: dict[str, Any] = {}
         for item in args.params:
             apply_override(params, item)
@@ -937,9 +925,8 @@ _COMMANDS["check-planner"] = _cmd_check_planner
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from twin.compare.replay import replay_row
-    from twin.errors import ConfigError
-    from twin.rerun_log import rerun_module
+    from twin.compare.replay import replay_row  # lazy: cli start-up
+    from twin.rerun_log import rerun_module  # lazy: cli start-up
 
     if not str(args.rerun).lower().endswith(".rrd"):
         raise ConfigError(f"--rerun must name an .rrd file, got {args.rerun!r}")

@@ -9,7 +9,12 @@ module: `twin.problems`, `twin.compare.ompl_export` and `twin.compare.latex`.
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 from typing import Any
+
+from twin.config import apply_override
+from twin.errors import ConfigError
 
 __all__ = ["COMMANDS", "add_parsers"]
 
@@ -111,11 +116,7 @@ def add_parsers(sub: Any) -> None:
 
 
 def _cmd_problems(args: argparse.Namespace) -> int:
-    import json
-    from pathlib import Path
-
-    from twin.config import apply_override
-    from twin.problems import json_schema, save_problem_set
+    from twin.problems import json_schema, save_problem_set  # lazy: cli start-up
 
     if args.problems_command == "schema":
         text = json.dumps(json_schema(), indent=1) + "\n"
@@ -125,7 +126,7 @@ def _cmd_problems(args: argparse.Namespace) -> int:
             print(text, end="")
         return EXIT_OK
     if args.problems_command == "export":
-        from twin.problems import export_problem_set
+        from twin.problems import export_problem_set  # lazy: cli start-up
 
         random: dict[str, Any] = {"goal": args.goal, "straight": args.straight}
         for o in args.random_overrides:
@@ -139,8 +140,7 @@ def _cmd_problems(args: argparse.Namespace) -> int:
             time_limit_s=args.time_limit,
         )
     else:
-        from twin.errors import ConfigError
-        from twin.problems import problem_set_from_moveit, problem_set_from_moveit_dir
+        from twin.problems import problem_set_from_moveit, problem_set_from_moveit_dir  # lazy: cli start-up
 
         options: dict[str, Any] = {
             "config": args.config,
@@ -173,11 +173,13 @@ def _cmd_problems(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from twin.compare.ompl_export import export_planner_arena
-    from twin.compare.runner import RESULTS_FILE, latest_rows, read_results, recorded_environment
-    from twin.errors import ConfigError
+    from twin.compare.ompl_export import export_planner_arena  # lazy: cli start-up
+    from twin.compare.runner import (  # lazy: cli start-up
+        RESULTS_FILE,
+        latest_rows,
+        read_results,
+        recorded_environment,
+    )
 
     src = Path(args.results)
     path = src / RESULTS_FILE if src.is_dir() else src
@@ -192,7 +194,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from twin.compare.latex import DEFAULT_LABEL, latex_report
+    from twin.compare.latex import DEFAULT_LABEL, latex_report  # lazy: cli start-up
 
     path, summary = latex_report(args.results, args.latex, caption=args.caption, label=args.label or DEFAULT_LABEL)
     scenarios = len(dict.fromkeys(r.scenario for r in summary.by_scenario))

@@ -37,13 +37,14 @@ from urllib.parse import quote
 import numpy as np
 
 from twin.errors import ConfigError, DependencyMissing
+from twin.planning import densify_path
 from twin.transforms import matrix_to_quat
+from twin.types import JointGoal, MotionRequest, MotionResult, ObjectOutcome
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.kinematics import UR5e
     from twin.tasks.cell import Sighting
-    from twin.types import MotionRequest, MotionResult, ObjectOutcome
     from twin.world import World, WorldView
 
 __all__ = ["POSE_RATE_HZ", "LiveView", "RerunRecording", "rerun_module"]
@@ -146,7 +147,7 @@ class RerunRecording:
             sinks.append(rr.GrpcSink(self.live.grpc_url))
         self.rec.set_sinks(*sinks)
         self.rec.send_blueprint(self._layout())
-        from twin.collision.geometry import primitive_shapes
+        from twin.collision.geometry import primitive_shapes  # lazy: fcl
 
         self._scene, self._kin = scene, kin
         self._names = list(kin.joint_names)
@@ -349,8 +350,6 @@ class RerunRecording:
         start = np.asarray(request.start, dtype=float)
         self.configuration(0.0, start)
         rec.set_time("sim", duration=0.0)
-        from twin.types import JointGoal
-
         goal = request.goal
         goal_q: np.ndarray | None = None
         if isinstance(goal, JointGoal):
@@ -386,8 +385,6 @@ class RerunRecording:
         """A refused motion (`MotionResult.path`): its TCP path in red, the robot moving along it (one second per
         radian of the largest joint change, densified at 0.01 rad) up to the first configuration in collision in
         the planning scene, which is marked; the robot stays there."""
-        from twin.planning import densify_path
-
         rr, rec = self._rr, self.rec
         qs = densify_path(path, 0.01)
         hit = self._scene.first_collision(qs)

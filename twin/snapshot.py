@@ -14,6 +14,7 @@ from twin.annotate import Label, banner, cell_points, draw_circle_on_table, draw
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import Settings
 from twin.errors import ConfigError
+from twin.tasks import task_landmarks
 
 __all__ = ["SceneViews", "render_views", "save_snapshot"]
 
@@ -48,8 +49,7 @@ def render_views(settings: Settings, *, settle_s: float = 0.5) -> SceneViews:
     """Render the scene of `settings` (its seed): the camera from the pose perception uses it at (a wrist
     camera with the arm at `camera.capture_pose`, as the task's capture stage puts it; the mount error
     of the seed included) and the labelled overview."""
-    from twin.tasks import task_landmarks
-    from twin.world import World
+    from twin.world import World  # lazy: pybullet
 
     cam = settings.camera
     intr = Intrinsics.from_settings(cam)

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.compare.report import _fmt, summarize
+from twin.compare.runner import RESULTS_FILE, SPEC_FILE, latest_rows, read_results
 from twin.compare.stats import BOOTSTRAP_RESAMPLES, CONFIDENCE
 from twin.compare.summary import Stat, Summary, SummaryRow
 from twin.errors import ConfigError
@@ -133,8 +134,6 @@ def read_result_rows(results: str | Path) -> tuple[list[dict[str, Any]], list[st
     """The latest row of each run of a sweep (`results`: its results.jsonl or the folder holding it) and the
     planners in the order its config lists them (from the compare.json beside it; else as the rows first
     show them). ConfigError, one line, for a missing file, a file that is not a results file, no rows."""
-    from twin.compare.runner import RESULTS_FILE, SPEC_FILE, latest_rows, read_results
-
     src = Path(results)
     path = src / RESULTS_FILE if src.is_dir() else src
     if not path.is_file():

@@ -19,9 +19,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from twin.errors import DependencyMissing, PluginCrashed
 from twin.executor import execute
 from twin.failures import FAILURES, failure_of_plan, failure_of_task
 from twin.limit_check import RATIO_METRICS
+from twin.planning import densify
 from twin.types import JointGoal, MotionRequest, MotionResult, RunSummary, Trajectory
 
 if TYPE_CHECKING:
@@ -143,8 +145,6 @@ def failure_of_row(row: dict[str, Any]) -> str | None:
 def failure_of_exception(e: BaseException) -> str:
     """dependency_missing for a planner whose backend is not installed, plugin_error for a plugin that raised
     an exception of its own, else error."""
-    from twin.errors import DependencyMissing, PluginCrashed
-
     if isinstance(e, PluginCrashed):
         return "plugin_error"
     return "dependency_missing" if isinstance(e, DependencyMissing) else "error"
@@ -213,8 +213,6 @@ def trajectory_metrics(
     where the query's start or goal is the closest point (a grasp just above the table), every path to it
     has the same clearance, and so do planners that return the same path (the straight joint motion).
     """
-    from twin.planning import densify
-
     fine = _fine(traj, jerk_dt_s)
     dq = np.diff(fine.q, axis=0)
     joint_len = float(np.linalg.norm(dq, axis=1).sum()) if dq.size else 0.0

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from twin.compare.report import summarize
 from twin.compare.summary import ALL
 from twin.errors import ConfigError, DependencyMissing
 
@@ -508,8 +509,6 @@ def comparison_figures(
     'tradeoff' (success against planning time) and BOX_PLOTS' stems, each only where it has values; the
     caller closes them. `summary` (of the same rows) gives the intervals and the skipped pairs; without it
     they are summarised here (and nothing is known to be skipped)."""
-    from twin.compare.report import summarize
-
     plt = _pyplot()
     rows = [r for r in rows if r.get("status") != "skipped"]
     order = list(planners or [])
@@ -611,8 +610,6 @@ def write_plots(
     interval and n; a planner with no value is shown empty), DIR/success.png (bars with the success rate's
     95 % Wilson interval) and, for a sweep, DIR/sweep_<key>.png per swept key (`sweep_figures`); returns the
     paths written. Pass the `summary` of the same rows to reuse its intervals."""
-    from twin.compare.report import summarize
-
     plt = _pyplot()
     out = Path(out_dir)
     rows = [r for r in rows if r.get("status") != "skipped"]

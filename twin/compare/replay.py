@@ -13,6 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from twin.compare.runner import SPEC_FILE, latest_rows, read_results
+from twin.compare.spec import CompareSpec, expand_runs
+from twin.compare.worker import execute_run
 from twin.errors import ConfigError
 
 __all__ = ["Replay", "differences", "replay_row"]
@@ -49,10 +52,6 @@ def differences(a: Any, b: Any, where: str = "") -> list[str]:
 
 def replay_row(results: str | Path, run_id: str, rerun: str | Path) -> Replay:
     """Run the row `run_id` of the results file `results` again, with a recording written to `rerun`."""
-    from twin.compare.runner import SPEC_FILE, latest_rows, read_results
-    from twin.compare.spec import CompareSpec, expand_runs
-    from twin.compare.worker import execute_run
-
     path = Path(results)
     if path.is_dir():
         path = path / "results.jsonl"

@@ -27,9 +27,10 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from twin.camera import Intrinsics, RGBDFrame
+from twin.camera import Intrinsics, RGBDFrame, point_cloud
 from twin.config import ArucoSettings, Settings
 from twin.errors import TwinError
+from twin.scene_layout import marker_pose_in_base
 from twin.timing import stage
 
 __all__ = ["Calibration", "MarkerNotFound", "MarkerPose", "calibrate", "detect_marker", "transform_error"]
@@ -160,8 +161,7 @@ def _plane_constrained_pose(
     nominal corners onto those points gives the in-plane position and the rotation about the normal.
     Returns None when the dominant plane does not hold the marker (then PnP alone is used).
     """
-    from twin.camera import point_cloud
-    from twin.perception.geometry import fit_plane_ransac
+    from twin.perception.geometry import fit_plane_ransac  # lazy: scipy
 
     pts, _ = point_cloud(frame, stride=2)
     if len(pts) < 500:
@@ -216,8 +216,6 @@ def calibrate(
 
 
 def _calibrate(frame: RGBDFrame, settings: Settings, *, method: str | None, refine: bool | None) -> Calibration:
-    from twin.scene_layout import marker_pose_in_base
-
     method = settings.aruco.method if method is None else method
     refine = settings.aruco.refine_grid if refine is None else refine
     marker, obj_pts, img_pts = _detect(frame.rgb, frame.intrinsics, settings.aruco, refine=refine)

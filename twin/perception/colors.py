@@ -11,6 +11,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from twin.scene_layout import color_rgba
+
 __all__ = ["classify_color", "color_distance", "palette"]
 
 _BRIGHTNESS_WEIGHT = 0.5
@@ -19,8 +21,6 @@ _FLOOR = 0.02  # keeps the log ratio finite for black
 
 def palette(names: Sequence[str]) -> dict[str, np.ndarray]:
     """RGB (3,) in [0, 1] of colour names from `twin.scene_layout.COLORS` (ConfigError when unknown)."""
-    from twin.scene_layout import color_rgba
-
     return {n: np.array(color_rgba(n)[:3], dtype=float) for n in names}
 
 

@@ -8,12 +8,15 @@ import time
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
+from twin.config import PlannerBlock, load_config
+from twin.errors import InvalidRequestError
+from twin.planning import make_context, make_planner
+from twin.registry import Registry, plugin_manager
 from twin.testing.checker import _Checker
 from twin.testing.rules import RULES, ConformanceReport
 
 if TYPE_CHECKING:
-    from twin.config import PlannerBlock, Settings
-    from twin.registry import Registry
+    from twin.config import Settings
 
 __all__ = ["DEFAULT_CONFIG", "assert_conformant", "check_planner"]
 
@@ -21,8 +24,6 @@ DEFAULT_CONFIG = "robocup"  # the shipped reference config whose scene and limit
 
 
 def _default_settings() -> Settings:
-    from twin.config import load_config
-
     return load_config(DEFAULT_CONFIG)
 
 
@@ -31,8 +32,6 @@ def _block(
 ) -> tuple[PlannerBlock, Registry | None]:
     """A config block for `planner` (a name, a block or its dict, or a planner class, registered here
     under 'check.<class name>' in a registry of every installed plugin plus this class)."""
-    from twin.config import PlannerBlock
-
     if isinstance(planner, PlannerBlock):
         return planner, registry
     if isinstance(planner, str):
@@ -40,8 +39,6 @@ def _block(
     if isinstance(planner, dict):
         return PlannerBlock(**planner), registry
     if isinstance(planner, type):
-        from twin.registry import Registry, plugin_manager
-
         reg = registry or Registry.from_plugin_manager(plugin_manager())
         name = f"check.{planner.__name__.lower()}"
         rh = callable(getattr(planner, "reset", None)) and callable(getattr(planner, "step", None))
@@ -72,12 +69,9 @@ def check_planner(
 
     Bad input (an unknown name, bad params, a missing backend) raises a TwinError, as `make_planner` does;
     every breach of the contract is a failed `CheckResult` in the report, never an exception."""
-    from twin.collision import PlanningScene
-    from twin.planning import make_context, make_planner
+    from twin.collision import PlanningScene  # lazy: fcl
 
     if not (math.isfinite(time_limit_s) and time_limit_s > 0):
-        from twin.errors import InvalidRequestError
-
         raise InvalidRequestError(f"time_limit_s must be positive, got {time_limit_s}")
     t0 = time.perf_counter()
     block, registry = _block(planner, registry)
@@ -89,8 +83,6 @@ def check_planner(
     rh = checked.receding_horizon
     n = queries if queries is not None else (2 if rh else 3)
     if n < 1:
-        from twin.errors import InvalidRequestError
-
         raise InvalidRequestError(f"queries must be at least 1, got {n}")
     scene = PlanningScene.from_settings(settings)  # with the obstacles perception would report, as boxes
     checker = _Checker(

@@ -11,6 +11,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.errors import PlanningError
+from twin.planning import (
+    CheckedPlanner,
+    Segment,
+    colliding_pair,
+    densify,
+    first_collision,
+    goal_miss,
+    jerk_limited,
+    limits_from_settings,
+)
 from twin.testing.judge import (
     LIMIT_TOLERANCE,
     START_TOLERANCE_RAD,
@@ -27,7 +37,6 @@ from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal,
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import Settings
-    from twin.planning import CheckedPlanner
     from twin.registry import PluginContext
 
 __all__: list[str] = []
@@ -156,8 +165,6 @@ class _Checker:
 
     # ---- rules -------------------------------------------------------------------------------------
     def rule_statuses(self, outcomes: list[_Outcome]) -> CheckResult:
-        from twin.planning import Segment
-
         v = _Verdict()
         for o in outcomes:
             if o.raw_error is not None:
@@ -279,8 +286,6 @@ class _Checker:
     def _jerk_result(self, verdict: _Verdict, judged_text: str, tol: str) -> CheckResult:
         """Jerk is judged for a planner that keeps it (`jerk_limited`, the default); one that declares
         `jerk_limited = False` (TOPP-RA timing bounds velocity and acceleration only) is reported, not failed."""
-        from twin.planning import jerk_limited
-
         if jerk_limited(self.recorder._inner):
             return verdict.result("jerk", f"{judged_text}: within max_joint_jerk (+{tol}), differences of qdd and of q")
         seen = (verdict.raw or verdict.checked or ["within max_joint_jerk"])[0]
@@ -356,13 +361,9 @@ class _Checker:
 
     # ---- helpers -----------------------------------------------------------------------------------
     def _goal_miss(self, request: MotionRequest, q_end: np.ndarray) -> str | None:
-        from twin.planning import goal_miss
-
         return goal_miss(request.goal, q_end, self.kin)
 
     def _collision(self, traj: Trajectory) -> str | None:
-        from twin.planning import colliding_pair, densify, first_collision
-
         hit = first_collision(traj, self.scene, self.kin, max_step_rad=self.res_rad, max_step_m=self.res_m)
         if hit is None:
             return None
@@ -389,6 +390,4 @@ def _clock_note(*outcomes: _Outcome) -> str:
 
 
 def _limits(settings: Settings) -> Limits:
-    from twin.planning import limits_from_settings
-
     return limits_from_settings(settings)
