@@ -20,7 +20,7 @@ Static (an AST walk of `twin/` and `plugins/`, nothing imported):
 - `.from_settings(` calls and `UR5e(`/`URArm(` constructions in the source.
 
 Dynamic (one `twin run CONFIG --seed N` in this process, with counters wrapped around the functions):
-URDF files parsed for a robot model (`twin.urdf_model._parse`), arms built (`URArm.__init__`), plugin contexts
+URDF files parsed for a robot model (`twin.robot.urdf_model._parse`), arms built (`URArm.__init__`), plugin contexts
 made (`twin.planning.make_context`).
 
     .venv/bin/python bench/bench_house.py                     # static and one robocup run
@@ -220,15 +220,18 @@ def static_report() -> dict[str, Any]:
 
 
 def run_report(config: str, seed: int) -> dict[str, Any]:
-    """Counters around one `twin run` in this process."""
-    import twin.kinematics as kinematics
-    import twin.planning as planning
-    import twin.urdf_model as urdf_model
+    """Counters around one `twin run` in this process: URDF files parsed (by file), arms built (`URArm`),
+    robots built (`Robot.from_settings`) and plugin contexts made (`PluginContext`, however it is made)."""
+    import twin.registry as registry
+    import twin.robot.kinematics as kinematics
+    import twin.robot.urdf_model as urdf_model
     from twin.config import load_config
+    from twin.robot import Robot
     from twin.tasks import run_task
 
     counts: Counter[str] = Counter()
-    parse, arm_init, make_context = urdf_model._parse, kinematics.URArm.__init__, planning.make_context
+    parse, arm_init, context_init = urdf_model._parse, kinematics.URArm.__init__, registry.PluginContext.__init__
+    robot_from = Robot.__dict__["from_settings"]
 
     def counted_parse(source: Any, text: Any = None) -> Any:
         counts["urdf_parses"] += 1
@@ -239,17 +242,24 @@ def run_report(config: str, seed: int) -> dict[str, Any]:
         counts["arms_built"] += 1
         arm_init(self, *args, **kwargs)
 
-    def counted_context(*args: Any, **kwargs: Any) -> Any:
+    def counted_context(self: Any, *args: Any, **kwargs: Any) -> None:
         counts["plugin_contexts"] += 1
-        return make_context(*args, **kwargs)
+        context_init(self, *args, **kwargs)
+
+    def counted_robot(cls: Any, settings: Any) -> Any:
+        counts["robots_built"] += 1
+        return robot_from.__func__(cls, settings)
 
     urdf_model._parse = counted_parse  # type: ignore[assignment]
     kinematics.URArm.__init__ = counted_arm  # type: ignore[method-assign]
-    planning.make_context = counted_context  # type: ignore[assignment]
+    registry.PluginContext.__init__ = counted_context  # type: ignore[method-assign]
+    Robot.from_settings = classmethod(counted_robot)  # type: ignore[assignment,method-assign]
     try:
         summary = run_task(load_config(config), seed=seed)
     finally:
-        urdf_model._parse, kinematics.URArm.__init__, planning.make_context = parse, arm_init, make_context
+        urdf_model._parse, kinematics.URArm.__init__ = parse, arm_init  # type: ignore[method-assign]
+        registry.PluginContext.__init__ = context_init  # type: ignore[method-assign]
+        Robot.from_settings = robot_from  # type: ignore[method-assign]
     placed = sum(o.placed for o in summary.objects)
     done = f"{placed}/{len(summary.objects)}"
     return {"config": config, "seed": seed, "placed": done, **dict(sorted(counts.items()))}

@@ -53,8 +53,8 @@ from twin.config import PlannerBlock
 from twin.errors import DependencyMissing
 from twin.planning import first_collision, make_planner, plan_with
 from twin.registry import Kind
+from twin.robot.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
 from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
-from twin.urdf_model import pose_from_xyz_rpy, read_fixture_shapes
 from twin_ompl.scenarios import QueryCell as Cell
 from twin_ompl.scenarios import top_down
 

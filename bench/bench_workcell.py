@@ -22,8 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.collision import PlanningScene
 from twin.config import PROJECT_ROOT, Settings, load_config
-from twin.kinematics import UR5e
-from twin.urdf_model import RobotModel
+from twin.robot.kinematics import URArm
+from twin.robot.urdf_model import RobotModel
 
 
 def best_us(fn: Callable[[], object], count: int, repeat: int = 5) -> float:
@@ -47,7 +47,7 @@ def main() -> None:
     n = ap.parse_args().n
     rng = np.random.default_rng(0)
     s = settings()
-    kin = UR5e()
+    kin = URArm()
     model = RobotModel.from_urdf(s.resolve(s.robot.urdf))
     t0 = time.perf_counter()
     scene = PlanningScene.from_settings(s)

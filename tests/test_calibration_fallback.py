@@ -13,10 +13,10 @@ import pytest
 from twin.camera import true_camera_pose
 from twin.config import Settings, load_config
 from twin.faults import fault_overrides
-from twin.kinematics import UR5e
 from twin.perception.aruco import transform_error
 from twin.perception.capture import Capture, capture_frame
 from twin.robot import Robot
+from twin.robot.kinematics import URArm
 from twin.tasks import run_task
 from twin.tasks.cell import Cell
 from twin.tasks.robocup.calibration import HandEye, calibrate_hand_eye, error_bound_m, relook_target, view_candidates
@@ -52,7 +52,7 @@ def test_marker_out_of_frame_at_the_first_view_is_measured_from_another(looking_
     from twin.world import World
 
     s = looking_away
-    assert len(view_candidates(s, UR5e.from_settings(s), np.array(s.camera.capture_pose))) >= 2
+    assert len(view_candidates(s, URArm(model=s.robot.model), np.array(s.camera.capture_pose))) >= 2
     with World(s, SEED) as world:
         cell = Cell(s, world)
         hand_eye = calibrate_hand_eye(cell, _reach_capture_pose)

@@ -274,9 +274,9 @@ def test_assert_conformant_lists_the_failures(robocup):
 
 def test_the_queries_are_seeded_free_and_include_one_that_must_search(robocup):
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
 
-    scene, kin = PlanningScene.from_settings(robocup), UR5e()
+    scene, kin = PlanningScene.from_settings(robocup), URArm()
     a = contract_queries(robocup, scene, kin, 4, seed=3)
     b = contract_queries(robocup, scene, kin, 4, seed=3)
     assert all(np.array_equal(x.start, y.start) and np.array_equal(x.goal, y.goal) for x, y in zip(a, b, strict=True))

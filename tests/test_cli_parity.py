@@ -174,9 +174,9 @@ def test_plan_reaches_a_position_goal_with_nmpc(tmp_path: Path) -> None:
     )  # fmt: skip
     assert r.returncode == 0, (r.stdout, r.stderr)
     data = json.loads(out.read_text())
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
 
-    tcp = UR5e().fk(np.array(data["q"][-1]))[:3, 3]
+    tcp = URArm().fk(np.array(data["q"][-1]))[:3, 3]
     assert data["status"] == "success" and np.linalg.norm(tcp - target) <= 0.03  # the task's transfer tolerance
 
 

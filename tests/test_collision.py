@@ -16,7 +16,7 @@ import pytest
 from twin.collision import DistanceResult, PathCheck, PlanningScene
 from twin.config import PROJECT_ROOT, Settings, load_config, settings_from_dict
 from twin.errors import InvalidRequestError
-from twin.kinematics import JOINT_NAMES, UR5e
+from twin.robot.kinematics import JOINT_NAMES, URArm
 
 N_REFERENCE = 2000
 
@@ -137,7 +137,7 @@ DOWN = np.diag([1.0, -1.0, -1.0])  # tcp z pointing at the table
 
 def _q_for_tcp(xyz, R=DOWN) -> np.ndarray:
     """An elbow-up IK solution for a tcp pose (the test scenes are all reachable)."""
-    sols = UR5e().ik(_pose(xyz, R))
+    sols = URArm().ik(_pose(xyz, R))
     assert len(sols), f"no IK for {xyz}"
     # prefer solutions near the home posture (elbow up, wrist down)
     home = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])

@@ -329,11 +329,11 @@ def test_clearance_is_the_minimum_along_the_path_not_at_its_start_or_goal() -> N
     from twin.collision import PlanningScene
     from twin.compare.metrics import trajectory_metrics
     from twin.config import load_config
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
     from twin.types import Trajectory
 
     settings = load_config(Path(__file__).resolve().parent.parent / "configs/robocup.yaml")
-    scene, kin = PlanningScene.from_settings(settings), UR5e()
+    scene, kin = PlanningScene.from_settings(settings), URArm()
     start = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
     goal = start + [0.8, 0.0, 0.0, 0.0, 0.0, 0.0]
     dip = start + [0.4, 0.35, 0.3, 0.0, 0.0, 0.0]

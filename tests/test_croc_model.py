@@ -1,5 +1,5 @@
 """twin_croc's pinocchio model is twin's arm: its tcp, DH frames and sphere-proxy centres equal
-`twin.kinematics` (and the nmpc sphere model it shares) to round-off on random configurations."""
+`twin.robot.kinematics` (and the nmpc sphere model it shares) to round-off on random configurations."""
 
 from __future__ import annotations
 
@@ -10,19 +10,19 @@ pin = pytest.importorskip("pinocchio")
 pytest.importorskip("crocoddyl")
 
 from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres, sphere_centres  # noqa: E402
-from twin.plugin import UR5e  # noqa: E402
+from twin.plugin import URArm  # noqa: E402
 from twin_croc.model import TCP_FRAME_NAME, arm_model, dh_frame_name, sphere_frames  # noqa: E402
 from twin_nmpc.params import NMPCParams  # noqa: E402
 
 
 def _configurations(n: int) -> np.ndarray:
-    kin = UR5e()
+    kin = URArm()
     rng = np.random.default_rng(28)
     return rng.uniform(kin.joint_limits[:, 0], kin.joint_limits[:, 1], size=(n, 6))
 
 
 def test_the_tcp_and_every_dh_frame_equal_twins_kinematics():
-    kin = UR5e()
+    kin = URArm()
     model = arm_model(kin)
     data = model.createData()
     assert model.nq == 6 and list(model.names)[1:] == list(kin.joint_names)
@@ -40,7 +40,7 @@ def test_the_tcp_and_every_dh_frame_equal_twins_kinematics():
 
 
 def test_sphere_frames_sit_where_the_nmpc_sphere_model_puts_the_spheres():
-    kin = UR5e()
+    kin = URArm()
     p = NMPCParams()
     spheres = robot_spheres(p.tool_spheres, p.wrist_spheres)
     spheres = np.vstack([spheres, [[3, 0.01, -0.02, 0.03, 0.05]]])  # a sphere on a DH frame below the wrist too

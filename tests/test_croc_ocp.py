@@ -13,7 +13,7 @@ pytest.importorskip("crocoddyl")
 pytest.importorskip("mim_solvers")
 
 from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres
-from twin.plugin import UR5e
+from twin.plugin import URArm
 from twin_croc.ocp import HorizonProblem
 from twin_croc.rows import close_pairs, sphere_bounds
 from twin_nmpc.params import NMPCParams
@@ -27,7 +27,7 @@ def _down(p: np.ndarray) -> np.ndarray:
     return T
 
 
-def _over_the_box(kin: UR5e, q0: np.ndarray, goal: np.ndarray, height: float, n: int) -> np.ndarray:
+def _over_the_box(kin: URArm, q0: np.ndarray, goal: np.ndarray, height: float, n: int) -> np.ndarray:
     """The joints (n, 6) of a lift, a move across at `height` and a descent, through IK waypoints."""
     qs = [q0]
     p0 = kin.fk(q0)[:3, 3]
@@ -53,7 +53,7 @@ def _rows(prob: HorizonProblem, qs: np.ndarray, margin: float = 0.01) -> np.ndar
 
 
 def test_a_solve_over_the_wall_keeps_every_sphere_out_and_reaches_the_goal():
-    kin = UR5e()
+    kin = URArm()
     p = NMPCParams()
     sph = robot_spheres(p.tool_spheres, p.wrist_spheres)
     prob = HorizonProblem(kin, sph, tcp_index=TCP_FRAME)
@@ -152,14 +152,14 @@ def test_a_sphere_starting_within_a_margin_may_stay_as_deep_but_not_go_deeper():
     """A held can lifted 8 mm into the margin of the bottle beside it: its bounds give way by exactly what the
     start lacks, and the loop's check (`path_gaps`) lets a path stay that deep but not go deeper."""
     from twin.planning.proxy_spheres import path_gaps
-    from twin.plugin import UR5e
+    from twin.plugin import URArm
 
     box = [("bottle", np.array([0.0, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))]
     r, margin = 0.05, 0.01
     c = np.array([[-0.052, 0.0, 0.1], [-0.06, 0.0, 0.1], [-0.2, 0.0, 0.1]])[:, None, :]  # 8 mm short, then away
     b = sphere_bounds(c, np.array([r]), box, {(0, 0)}, margin=margin, tighten=0.0)
     assert b[1, 0, 1, 0] == pytest.approx(-0.052)  # x <= where it starts, not -0.06
-    kin = UR5e()
+    kin = URArm()
     q0 = np.array([0.0, -1.2, 1.4, -1.77, -1.57, 0.0])
     sph = np.array([[7.0, 0.0, 0.0, 0.0, r]])
     tcp = kin.fk(q0)[:3, 3]

@@ -20,7 +20,7 @@ from twin.planning import densify, make_context, make_planner, plan_with
 from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres, sphere_positions
 from twin.planning.receding_params import DEFAULT_ARM_SPHERES, DEFAULT_WHOLE_ARM_TOOL_SPHERES
 from twin.planning.selfrows import SelfRows, link_groups, self_pairs, self_rows, self_violation
-from twin.plugin import UR5e
+from twin.plugin import URArm
 from twin.types import MotionResult
 from twin_croc.ocp import HorizonProblem
 from twin_nmpc.params import NMPCParams
@@ -34,7 +34,7 @@ OPEN = FOLDED - np.array([0.0, 0.0, 0.65, 0.0, 0.0, 0.0])
 
 def _gaps(qs: np.ndarray) -> np.ndarray:
     """(m, P) how far apart each non-neighbour pair of the self set is along the joints qs (m, 6)."""
-    c = sphere_positions(UR5e(), qs, SELF_SPH)
+    c = sphere_positions(URArm(), qs, SELF_SPH)
     p = self_pairs(SELF_SPH)
     r = SELF_SPH[:, 4]
     return np.linalg.norm(c[:, p[:, 0]] - c[:, p[:, 1]], axis=-1) - r[p[:, 0]] - r[p[:, 1]]
@@ -51,7 +51,7 @@ def test_self_pairs_are_the_spheres_of_links_that_are_not_neighbours():
 
 
 def test_self_rows_take_each_knots_nearest_pairs_and_none_when_nothing_is_near():
-    kin = UR5e()
+    kin = URArm()
     pairs = self_pairs(SELF_SPH)
     radii = SELF_SPH[:, 4]
     path = np.linspace(OPEN, FOLDED, 8)
@@ -75,7 +75,7 @@ def test_self_rows_take_each_knots_nearest_pairs_and_none_when_nothing_is_near()
 
 
 def test_a_start_closer_than_the_bound_may_stay_as_close_but_not_come_closer():
-    kin = UR5e()
+    kin = URArm()
     pairs = self_pairs(SELF_SPH)
     radii = SELF_SPH[:, 4]
     path = np.repeat(FOLDED[None], 3, axis=0)  # starting folded: every knot as deep as the start
@@ -89,7 +89,7 @@ def test_a_start_closer_than_the_bound_may_stay_as_close_but_not_come_closer():
 
 
 def test_the_distance_rows_derivative_is_the_distances():
-    kin = UR5e()
+    kin = URArm()
     p = NMPCParams()
     prob = HorizonProblem(
         kin, robot_spheres(p.tool_spheres, p.wrist_spheres), tcp_index=TCP_FRAME, self_spheres=SELF_SPH, self_slots=1
@@ -122,7 +122,7 @@ def test_the_distance_rows_derivative_is_the_distances():
 def _pull_towards_the_fold(slots: int) -> np.ndarray:
     """A horizon from the open arm towards the folded arm's tcp, solved in rounds as the planner does (the self
     rows chosen again on each iterate); returns its joints."""
-    kin = UR5e()
+    kin = URArm()
     p = NMPCParams()
     prob = HorizonProblem(
         kin,
@@ -245,7 +245,7 @@ def test_croc_whole_arm_places_warehouse_seed_105_without_folding_the_gripper_in
     from twin.tasks import run_task
     from twin_croc.planner import CrocPlanner
 
-    kin = UR5e()
+    kin = URArm()
     segments, touching = [0], []
     reset, step = CrocPlanner.reset, CrocPlanner.step
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from twin.kinematics import DH_D, UR5e
+from twin.robot.kinematics import DH_D, URArm
 from twin.types import Pose
 from twin_motion.ik import DefensiveIK, DefensiveIKParams, condition_numbers
 
@@ -20,12 +20,12 @@ TOP_DOWN = np.diag([1.0, -1.0, -1.0])  # tcp z axis pointing down
 
 
 @pytest.fixture(scope="module")
-def kin() -> UR5e:
-    return UR5e()
+def kin() -> URArm:
+    return URArm()
 
 
 @pytest.fixture(scope="module")
-def ik(kin: UR5e) -> DefensiveIK:
+def ik(kin: URArm) -> DefensiveIK:
     return DefensiveIK(kin)
 
 
@@ -40,12 +40,12 @@ def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     return Pose(np.zeros(3), q / np.linalg.norm(q)).matrix()[:3, :3]
 
 
-def _pose_error(kin: UR5e, q: np.ndarray, T: np.ndarray, frame: str = "tcp") -> tuple[float, float]:
+def _pose_error(kin: URArm, q: np.ndarray, T: np.ndarray, frame: str = "tcp") -> tuple[float, float]:
     F = kin.fk(q, frame)
     return float(np.linalg.norm(F[:3, 3] - T[:3, 3])), float(np.linalg.norm(F[:3, :3] - T[:3, :3]))
 
 
-def _stress_targets(kin: UR5e, rng: np.random.Generator) -> list[tuple[str, np.ndarray, np.ndarray]]:
+def _stress_targets(kin: URArm, rng: np.random.Generator) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(kind, target pose, continuity seed) x 1000, spread over and around the workspace."""
     out: list[tuple[str, np.ndarray, np.ndarray]] = []
     for _ in range(450):  # reachable by construction, arbitrary orientation
@@ -70,7 +70,7 @@ def _stress_targets(kin: UR5e, rng: np.random.Generator) -> list[tuple[str, np.n
     return out
 
 
-def test_ik_stress_1000_targets(kin: UR5e, ik: DefensiveIK) -> None:
+def test_ik_stress_1000_targets(kin: URArm, ik: DefensiveIK) -> None:
     rng = np.random.default_rng(2002)
     p = ik.params
     accepted: dict[str, int] = {}
@@ -103,7 +103,7 @@ def test_ik_stress_1000_targets(kin: UR5e, ik: DefensiveIK) -> None:
     assert 0 < accepted.get("box", 0) < 200
 
 
-def test_cost_is_the_seed_formula(kin: UR5e, ik: DefensiveIK) -> None:
+def test_cost_is_the_seed_formula(kin: URArm, ik: DefensiveIK) -> None:
     q = np.array([0.3, -1.2, 1.4, -1.8, -1.5, 0.4])
     seed = q + 0.05
     res = ik.solve(kin.fk(q), seed, HOME)
@@ -115,7 +115,7 @@ def test_cost_is_the_seed_formula(kin: UR5e, ik: DefensiveIK) -> None:
     assert res.condition == pytest.approx(kin.condition_number(q), rel=1e-9)
 
 
-def test_every_analytic_branch_is_a_candidate(kin: UR5e, ik: DefensiveIK) -> None:
+def test_every_analytic_branch_is_a_candidate(kin: URArm, ik: DefensiveIK) -> None:
     """The candidates are the 8 analytic branches (a superset of the seed's 4 seeds), each a solution of
     UR5e.ik up to 2*pi wraps, wrapped to the value nearest the seed inside the limits."""
     rng = np.random.default_rng(3)
@@ -144,7 +144,7 @@ def test_every_analytic_branch_is_a_candidate(kin: UR5e, ik: DefensiveIK) -> Non
         assert np.all((W >= lo - 1e-12) & (W <= hi + 1e-12))
 
 
-def test_flip_penalty_keeps_the_base_frontal(kin: UR5e, ik: DefensiveIK) -> None:
+def test_flip_penalty_keeps_the_base_frontal(kin: URArm, ik: DefensiveIK) -> None:
     """Whenever some acceptable branch has |base| <= 1.57 rad, the chosen one has too."""
     rng = np.random.default_rng(5)
     checked = 0
@@ -161,7 +161,7 @@ def test_flip_penalty_keeps_the_base_frontal(kin: UR5e, ik: DefensiveIK) -> None
     assert checked > 50
 
 
-def test_jump_protection_rejects_with_reason(kin: UR5e) -> None:
+def test_jump_protection_rejects_with_reason(kin: URArm) -> None:
     strict = DefensiveIK(kin, DefensiveIKParams(max_base_jump_rad=0.1))
     q = np.array([0.3, -1.2, 1.4, -1.8, -1.5, 0.4])
     res = strict.solve(kin.fk(q), q + np.array([1.5, 0, 0, 0, 0, 0]), HOME)
@@ -171,7 +171,7 @@ def test_jump_protection_rejects_with_reason(kin: UR5e) -> None:
     assert DefensiveIK(kin).solve(kin.fk(q), q + np.array([1.5, 0, 0, 0, 0, 0]), HOME).ok
 
 
-def test_singular_branches_are_penalised_or_rejected(kin: UR5e) -> None:
+def test_singular_branches_are_penalised_or_rejected(kin: URArm) -> None:
     q = np.array([0.3, -1.2, 1.4, -1.8, 0.0, 0.4])  # wrist singular (q5 = 0)
     T = kin.fk(q)
     # every non-singular branch here has the base behind (+100 flip): the seed's cost keeps the singular
@@ -188,7 +188,7 @@ def test_singular_branches_are_penalised_or_rejected(kin: UR5e) -> None:
     assert not res.ok and "singular" in res.reason and "jump protection" in res.reason
 
 
-def test_bad_and_unreachable_targets_never_raise(kin: UR5e, ik: DefensiveIK) -> None:
+def test_bad_and_unreachable_targets_never_raise(kin: URArm, ik: DefensiveIK) -> None:
     T = np.full((4, 4), np.nan)
     assert not ik.solve(T, HOME).ok
     far = _pose(TOP_DOWN, np.array([1.5, 0.0, 0.3]))
@@ -198,7 +198,7 @@ def test_bad_and_unreachable_targets_never_raise(kin: UR5e, ik: DefensiveIK) -> 
     assert res.ok and res.q is not None and np.abs(res.q - HOME).max() < 1e-6
 
 
-def test_flange_frame_and_validity_filter(kin: UR5e, ik: DefensiveIK) -> None:
+def test_flange_frame_and_validity_filter(kin: URArm, ik: DefensiveIK) -> None:
     q = np.array([0.3, -1.2, 1.4, -1.8, -1.5, 0.4])
     res = ik.solve(kin.fk(q, "flange"), q, frame="flange")
     assert res.ok and res.q is not None
@@ -211,7 +211,7 @@ def test_flange_frame_and_validity_filter(kin: UR5e, ik: DefensiveIK) -> None:
     assert not res3.ok and "invalid" in res3.reason
 
 
-def test_fast_jacobians_match_core(kin: UR5e, ik: DefensiveIK) -> None:
+def test_fast_jacobians_match_core(kin: URArm, ik: DefensiveIK) -> None:
     rng = np.random.default_rng(9)
     qs = rng.uniform(-math.pi, math.pi, (10, 6))
     conds = condition_numbers(kin, qs, "tcp")

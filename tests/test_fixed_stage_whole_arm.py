@@ -136,10 +136,10 @@ def test_the_ik_configurations_split_by_shoulder_and_elbow():
     elbow either way), each with the wrist flipped: `choose_way_down` tries the arm's own configuration first,
     however much more room another has (a campaign's marker hover took the thrown-over shoulder for its
     centimetre of room, and the transfers after it folded the gripper into the forearm)."""
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
     from twin.tasks.ways import arm_configuration
 
-    kin = UR5e()
+    kin = URArm()
     sols = kin.ik(top_down((-0.45, 0.1, 0.35), 0.3), all_wraps=False)
     configs = [arm_configuration(kin, q) for q in sols]
     assert sorted(set(configs)) == [(False, False), (False, True), (True, False), (True, True)]

@@ -1,4 +1,4 @@
-"""Kinematics: analytic FK/IK (twin.kinematics) and the URDF chain (twin.urdf_model) against PyBullet.
+"""Kinematics: analytic FK/IK (twin.robot.kinematics) and the URDF chain (twin.robot.urdf_model) against PyBullet.
 
 PyBullet is only the reference here (tests may import it; library code other than twin.world may not).
 """
@@ -13,8 +13,8 @@ import pytest
 
 from twin.config import PROJECT_ROOT
 from twin.errors import ConfigError, InvalidRequestError
-from twin.kinematics import JOINT_LIMITS, JOINT_NAMES, UR5e, wrap_to_pi
-from twin.urdf_model import RobotModel, read_fixture_shapes, rpy_to_matrix
+from twin.robot.kinematics import JOINT_LIMITS, JOINT_NAMES, URArm, wrap_to_pi
+from twin.robot.urdf_model import RobotModel, read_fixture_shapes, rpy_to_matrix
 
 URDF = PROJECT_ROOT / "urdf" / "ur5e.urdf"
 N_RANDOM = 1000
@@ -65,7 +65,7 @@ def _bullet_pose(bullet, q: np.ndarray, link: str, fingers: float = 0.0) -> np.n
 # ---- forward kinematics ---------------------------------------------------------------------------
 def test_fk_flange_and_tcp_match_pybullet_on_1000_random_configurations(bullet):
     rng = np.random.default_rng(1)
-    kin = UR5e()
+    kin = URArm()
     worst_pos, worst_rot = 0.0, 0.0
     for q in _random_q(rng, N_RANDOM):
         for frame, link in (("flange", "tool0"), ("tcp", "tcp")):
@@ -79,7 +79,7 @@ def test_fk_flange_and_tcp_match_pybullet_on_1000_random_configurations(bullet):
 
 def test_fk_batch_equals_single_fk():
     rng = np.random.default_rng(2)
-    kin = UR5e()
+    kin = URArm()
     qs = _random_q(rng, 200)
     for frame in ("tcp", "flange"):
         batch = kin.fk_batch(qs, frame)
@@ -89,7 +89,7 @@ def test_fk_batch_equals_single_fk():
 
 
 def test_tcp_is_135mm_along_flange_z():
-    kin = UR5e()
+    kin = URArm()
     q = np.array([0.4, -1.2, 1.0, -0.3, 0.8, -2.0])
     F, T = kin.fk(q, "flange"), kin.fk(q, "tcp")
     assert np.allclose(T[:3, 3], F[:3, 3] + 0.135 * F[:3, 2], atol=1e-12)
@@ -99,7 +99,7 @@ def test_tcp_is_135mm_along_flange_z():
 # ---- inverse kinematics ---------------------------------------------------------------------------
 def test_ik_on_1000_random_configurations_reproduces_pose_contains_q_and_respects_limits():
     rng = np.random.default_rng(3)
-    kin = UR5e()
+    kin = URArm()
     lo, hi = JOINT_LIMITS[:, 0] - 1e-9, JOINT_LIMITS[:, 1] + 1e-9
     missing, worst, counts = 0, 0.0, []
     for q in _random_q(rng, N_RANDOM):
@@ -120,14 +120,14 @@ def test_ik_on_1000_random_configurations_reproduces_pose_contains_q_and_respect
 
 
 def test_ik_flange_frame_round_trip():
-    kin = UR5e()
+    kin = URArm()
     q = np.array([1.0, -1.3, 1.9, -2.1, -1.4, 0.5])
     sols = kin.ik(kin.fk(q, "flange"), "flange")
     assert np.abs(wrap_to_pi(sols - q)).max(axis=1).min() < 1e-9
 
 
 def test_ik_out_of_reach_pose_returns_empty_0x6_array():
-    kin = UR5e()
+    kin = URArm()
     T = np.eye(4)
     T[:3, 3] = [2.0, 0.0, 0.3]
     sols = kin.ik(T)
@@ -147,13 +147,13 @@ def test_ik_out_of_reach_pose_returns_empty_0x6_array():
 )
 def test_bad_shapes_and_frames_raise_invalid_request(call):
     with pytest.raises(InvalidRequestError):
-        call(UR5e())
+        call(URArm())
 
 
 # ---- differential kinematics ----------------------------------------------------------------------
 def test_jacobian_matches_finite_differences():
     rng = np.random.default_rng(4)
-    kin = UR5e()
+    kin = URArm()
     h = 1e-6
     worst = 0.0
     for q in _random_q(rng, 50):
@@ -171,7 +171,7 @@ def test_jacobian_matches_finite_differences():
 
 
 def test_manipulability_vanishes_at_wrist_singularity_and_not_elsewhere():
-    kin = UR5e()
+    kin = URArm()
     singular = np.array([0.3, -1.2, 1.4, -1.0, 0.0, 0.7])  # wrist_2 = 0: wrist_1 and wrist_3 axes align
     regular = np.array([0.3, -1.2, 1.4, -1.0, -1.2, 0.7])
     assert kin.manipulability(singular) < 1e-9
@@ -193,7 +193,7 @@ def test_urdf_model_reads_the_ur5e_tree():
 
 def test_urdf_link_poses_match_analytic_fk_on_1000_random_configurations():
     rng = np.random.default_rng(5)
-    kin, m = UR5e(), RobotModel.from_urdf(URDF)
+    kin, m = URArm(), RobotModel.from_urdf(URDF)
     qs = _random_q(rng, N_RANDOM)
     P = m.link_poses(qs)
     assert P["tcp"].shape == (N_RANDOM, 4, 4)

@@ -196,7 +196,7 @@ def ur5_settings(urdf: Path) -> Settings:
 
 def test_a_spheres_only_model_rooted_in_the_world_is_placed_on_the_arm(tmp_path: Path) -> None:
     from twin.collision import PlanningScene
-    from twin.kinematics import URArm
+    from twin.robot.kinematics import URArm
 
     scene = PlanningScene.from_settings(ur5_settings(spherized_urdf(tmp_path / "ur5_spheres.urdf")))
     assert scene.model.root == "offset_link" and scene.max_opening_m == 0.0

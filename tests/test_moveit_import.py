@@ -238,7 +238,7 @@ UR_DESCRIPTION = [
 def test_ur_descriptions_base_link_is_twins_base_frame_turned_half_a_turn() -> None:
     """Why `frames="ur_description"` turns base_link: the same joint angles put ur_description's tool0 at
     twin's tool0 pose in its frame `base`, and turned 180 deg about z in its base_link."""
-    from twin.urdf_model import RobotModel
+    from twin.robot.urdf_model import RobotModel
 
     def joint(name: str, parent: str, child: str, xyz: tuple[float, ...], rpy: tuple[float, ...]) -> str:
         kind = "fixed" if "-" in name else "revolute"

@@ -8,11 +8,11 @@ import pytest
 from twin.collision import PlanningScene
 from twin.config import settings_from_dict
 from twin.errors import InvalidRequestError
-from twin.kinematics import UR5e
 from twin.planning import densify, first_collision
+from twin.robot.kinematics import URArm
 from twin.types import Limits, MotionRequest, MotionResult, Status, Trajectory
 
-KIN = UR5e()
+KIN = URArm()
 
 
 def quintic(a: np.ndarray, b: np.ndarray, T: float, n: int) -> Trajectory:

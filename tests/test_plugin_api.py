@@ -54,7 +54,8 @@ def test_plugins_import_twin_only_through_twin_plugin(path: Path) -> None:
 def test_the_scan_catches_core_imports(tmp_path: Path) -> None:
     f = tmp_path / "p.py"
     f.write_text(
-        "from twin import hookimpl\nimport twin.kinematics\nfrom twin.plugin import UR5e\nimport twin_ompl.params\n"
+        "from twin import hookimpl\nimport twin.robot.kinematics\nfrom twin.plugin import URArm\n"
+        "import twin_ompl.params\n"
         "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from twin.collision import PlanningScene\n"
         "def f():\n    from twin.types import Pose\n"
     )

@@ -100,12 +100,12 @@ def test_a_recording_path_that_is_not_rrd_is_a_one_line_error(tmp_path):
 
 def test_the_recorder_refuses_a_bad_path_before_anything_runs(tmp_path):
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
     from twin.rerun_log import RerunRecording
+    from twin.robot.kinematics import URArm
 
     scene = PlanningScene.from_settings(load_config("warehouse"))
     with pytest.raises(ConfigError, match=r"\.rrd"):
-        RerunRecording(tmp_path / "run.txt", scene=scene, kin=UR5e(), recording_id="x")
+        RerunRecording(tmp_path / "run.txt", scene=scene, kin=URArm(), recording_id="x")
 
 
 def test_a_recorded_run_is_the_plain_run(recorded):

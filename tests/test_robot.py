@@ -47,3 +47,13 @@ def test_a_planner_plans_the_context_s_arm_and_has_no_default_one(name: str) -> 
     assert param.default is inspect.Parameter.empty
     with pytest.raises(TypeError):
         type(planner)(None)  # type: ignore[call-arg]
+
+
+def test_ur5e_is_a_deprecated_alias_of_the_arm() -> None:
+    import twin
+    import twin.plugin
+    from twin.robot import URArm
+
+    for module in (twin, twin.plugin):
+        with pytest.warns(DeprecationWarning, match="use .*URArm"):
+            assert module.UR5e is URArm

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from twin.collision import FixtureSpec, PlanningScene
 from twin.collision.spheres import cover
 from twin.config import load_config
-from twin.urdf_model import pose_from_xyz_rpy
+from twin.robot.urdf_model import pose_from_xyz_rpy
 
 CUBE_M = 0.05
 
@@ -233,8 +233,8 @@ def test_the_kernels_compile_once_whatever_arrays_they_are_handed(cells: dict[st
     compiling takes seconds: inside a planner's time limit that is a timeout. The scene and the kinematics
     hand the kernels one layout only, whatever the caller passes."""
     from twin.collision.sphere_kernel import flag_configurations
-    from twin.kinematics import dh_frames
-    from twin.kinematics_kernel import dh_frames_into
+    from twin.robot.kinematics import dh_frames
+    from twin.robot.kinematics_kernel import dh_frames_into
 
     scene = cells["robocup"]
     qs = random_configs(scene, 12, seed=1)

@@ -1,4 +1,4 @@
-"""The arm is a config choice within the Universal Robots family: one DH table (`twin.ur_models`) that agrees
+"""The arm is a config choice within the Universal Robots family: one DH table (`twin.robot.ur_models`) that agrees
 with the closed-form IK twin uses for each arm, kinematics for any of them, and the UR5e unchanged."""
 
 from __future__ import annotations
@@ -12,9 +12,10 @@ import ur_analytic_ik
 from twin.config import load_config
 from twin.config.schema import RobotSettings
 from twin.errors import ConfigError
-from twin.kinematics import DH_A, DH_D, UR5e, URArm, wrap_to_pi
 from twin.planning import limits_from_settings
-from twin.ur_models import UR_MODELS, ur_model
+from twin.robot import Robot
+from twin.robot.kinematics import DH_A, DH_D, URArm, wrap_to_pi
+from twin.robot.ur_models import UR_MODELS, ur_model
 
 
 @pytest.mark.parametrize("name", list(UR_MODELS))
@@ -50,18 +51,18 @@ def test_the_arms_differ_where_their_datasheets_do() -> None:
 
 
 def test_the_ur5e_is_the_default_and_unchanged() -> None:
-    assert UR5e is URArm and URArm().model == "ur5e"
+    assert URArm is URArm and URArm().model == "ur5e"
     assert list(DH_D) == [0.1625, 0, 0, 0.1333, 0.0997, 0.0996] and list(DH_A) == [0, -0.425, -0.3922, 0, 0, 0]
     q = np.array([0.3, -1.2, 1.1, -1.4, -1.6, 0.2])
     assert np.array_equal(URArm().fk(q), ur_analytic_ik.ur5e.forward_kinematics(*q) @ URArm().tool_transform())
-    assert URArm.from_settings(load_config("robocup")).model == "ur5e"
+    assert Robot.from_settings(load_config("robocup")).arm.model == "ur5e"
 
 
 def test_robot_model_is_checked_on_load() -> None:
     allowed = typing.get_args(RobotSettings.model_fields["model"].annotation)
     assert set(allowed) == set(UR_MODELS)  # the schema offers exactly the arms the table has
     ur10e = load_config("robocup", ["robot.model=ur10e"])
-    assert URArm.from_settings(ur10e).model == "ur10e"
+    assert Robot.from_settings(ur10e).arm.model == "ur10e"
     # planning limits: the config's, no faster than the datasheet (UR5e: pi everywhere, unchanged)
     assert np.array_equal(limits_from_settings(load_config("robocup")).max_joint_vel, np.full(6, np.pi))
     assert limits_from_settings(ur10e).max_joint_vel == pytest.approx([np.radians(120)] * 2 + [np.pi] * 4)
@@ -95,13 +96,14 @@ def test_twin_ships_a_urdf_per_arm_that_matches_its_dh() -> None:
     from pathlib import Path
 
     from twin.collision import PlanningScene
-    from twin.ur_urdf import arm_urdf
-    from twin.urdf_model import RobotModel
+    from twin.robot.ur_urdf import arm_urdf
+    from twin.robot.urdf_model import RobotModel
 
     root = Path(__file__).resolve().parent.parent / "urdf"
     for name in UR_MODELS:
         text = (root / f"{name}.urdf").read_text()
-        assert text == arm_urdf(name), f"urdf/{name}.urdf is stale: python -m twin.ur_urdf"  # ur5e: the hand-written
+        stale = f"urdf/{name}.urdf is stale: python -m twin.robot.ur_urdf"
+        assert text == arm_urdf(name), stale  # ur5e: the hand-written
         model = RobotModel.from_string(text)
         assert np.array_equal(URArm(model=name).urdf_base(model), np.eye(4))  # rooted at the arm's base
         assert URArm(model=name).urdf_mismatch(model) is None

@@ -1,4 +1,4 @@
-"""URDF visual colours (twin.urdf_model.urdf_rgba / urdf_link_rgba): the shipped models against PyBullet,
+"""URDF visual colours (twin.robot.urdf_model.urdf_rgba / urdf_link_rgba): the shipped models against PyBullet,
 which renders them, and the material rules (robot-level named materials, inline colours) on small files."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pybullet as pb
 import pytest
 
 from twin.errors import ConfigError
-from twin.urdf_model import urdf_link_rgba, urdf_rgba
+from twin.robot.urdf_model import urdf_link_rgba, urdf_rgba
 
 ROOT = Path(__file__).resolve().parent.parent  # the checkout: urdf/ holds the shipped models
 SHIPPED = sorted((ROOT / "urdf").glob("*.urdf")) + sorted((ROOT / "urdf" / "objects").glob("*.urdf"))
@@ -112,7 +112,7 @@ def test_no_colour_and_bad_input(tmp_path):
 
 
 def test_primitive_half_extents_are_those_of_each_kind_and_a_mesh_has_none():
-    from twin.urdf_model import primitive_half_extents
+    from twin.robot.urdf_model import primitive_half_extents
 
     assert primitive_half_extents("box", (0.2, 0.4, 0.6)).tolist() == [0.1, 0.2, 0.3]
     assert primitive_half_extents("cylinder", (0.05, 0.3)).tolist() == [0.05, 0.05, 0.15]

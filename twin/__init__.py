@@ -30,9 +30,10 @@ __all__ = [
     "InvalidRequestError",
     "PlanningError",
     "PlanningScene",
+    "Robot",
     "Settings",
     "TwinError",
-    "UR5e",
+    "URArm",
     "UnknownNameError",
     "World",
     "WorldError",
@@ -44,18 +45,27 @@ __all__ = [
 _LAZY = {
     "World": "twin.world",
     "PlanningScene": "twin.collision",
-    "UR5e": "twin.kinematics",
+    "URArm": "twin.robot.kinematics",
+    "Robot": "twin.robot",
     "plan": "twin.planning",
 }
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
     from twin.planning import plan
+    from twin.robot import Robot
+    from twin.robot.kinematics import URArm
     from twin.world import World
 
 
 def __getattr__(name: str) -> Any:
+    if name == "UR5e":  # deprecated: it was any arm of robot.model, not only a UR5e
+        import warnings
+
+        warnings.warn(
+            "twin.UR5e is deprecated: it was any arm of robot.model; use twin.URArm", DeprecationWarning, stacklevel=2
+        )
+        name = "URArm"
     mod = _LAZY.get(name)
     if mod is None:
         raise AttributeError(f"module 'twin' has no attribute {name!r}")

@@ -21,6 +21,7 @@ Contracts are declared, not probed:
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import TYPE_CHECKING, Any
 
 from twin.errors import (
@@ -66,7 +67,7 @@ _LAZY: dict[str, str] = {
     "quats_to_matrices": "twin.transforms",
     "matrix_to_quat": "twin.transforms",
     "pose_from_xyz_rpy": "twin.transforms",
-    "urdf_rgba": "twin.urdf_model",
+    "urdf_rgba": "twin.robot.urdf_model",
     # planner contracts and the checks every planner's output gets
     "Segment": "twin.planning",
     "PathPlanner": "twin.planning",
@@ -110,9 +111,10 @@ _LAZY: dict[str, str] = {
     "self_violation": "twin.planning.selfrows",
     "guess_slack": "twin.planning.guess",
     # kinematics
-    "UR5e": "twin.kinematics",
-    "DHParameters": "twin.kinematics",
-    "wrap_to_pi": "twin.kinematics",
+    "URArm": "twin.robot.kinematics",
+    "Robot": "twin.robot",
+    "DHParameters": "twin.robot.kinematics",
+    "wrap_to_pi": "twin.robot.kinematics",
     # the collision world
     "PlanningScene": "twin.collision",
     "FixtureSpec": "twin.collision",
@@ -197,6 +199,7 @@ __all__ = [
     "RecedingParams",
     "Registry",
     "Retimer",
+    "Robot",
     "SceneCloud",
     "SceneView",
     "Segment",
@@ -207,7 +210,7 @@ __all__ = [
     "Status",
     "Trajectory",
     "TwinError",
-    "UR5e",
+    "URArm",
     "UnknownNameError",
     "Verdict",
     "Weights",
@@ -259,7 +262,6 @@ if TYPE_CHECKING:
     from twin.camera import RGBDFrame
     from twin.collision import FixtureSpec, PlanningScene
     from twin.config import Settings, load_config
-    from twin.kinematics import DHParameters, UR5e, wrap_to_pi
     from twin.perception.colors import color_distance, palette
     from twin.perception.detection import CLASSES, Detection, Detector, SceneCloud, scene_cloud
     from twin.perception.segmentation import Cluster, cluster_points, footprint
@@ -303,6 +305,9 @@ if TYPE_CHECKING:
     )
     from twin.planning.selfrows import SelfRows, link_groups, pair_gaps, self_pairs, self_rows, self_violation
     from twin.registry import Kind, PluginContext, Registry
+    from twin.robot import Robot
+    from twin.robot.kinematics import DHParameters, URArm, wrap_to_pi
+    from twin.robot.urdf_model import urdf_rgba
     from twin.scene_layout import OBJECT_TEMPLATES
     from twin.tasks.cell import Cell
     from twin.tasks.gripper import GraspCheck, GripStatus, top_down
@@ -336,10 +341,19 @@ if TYPE_CHECKING:
         as_q,
         rpy_matrix,
     )
-    from twin.urdf_model import urdf_rgba
+
+
+# Deprecated names, still resolved for third-party plugins: name -> (the name now, why)
+_DEPRECATED = {
+    "UR5e": ("URArm", "twin.plugin.UR5e is deprecated: it was any arm of robot.model, not only a UR5e; use URArm"),
+}
 
 
 def __getattr__(name: str) -> Any:
+    if name in _DEPRECATED:
+        new, why = _DEPRECATED[name]
+        warnings.warn(why, DeprecationWarning, stacklevel=2)
+        return __getattr__(new)
     mod = _LAZY.get(name)
     if mod is None:
         raise AttributeError(f"module 'twin.plugin' has no attribute {name!r}")

@@ -29,8 +29,8 @@ from twin.timing import stage
 
 if TYPE_CHECKING:
     from twin.config import Settings
-    from twin.kinematics import URArm
     from twin.robot import Robot
+    from twin.robot.kinematics import URArm
 
 __all__ = ["HOOKS", "Availability", "Entry", "Kind", "PluginContext", "Registry", "default_registry", "plugin_manager"]
 

@@ -43,7 +43,7 @@ from twin.types import JointGoal, MotionRequest, MotionResult, ObjectOutcome
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
     from twin.tasks.cell import Sighting
     from twin.world import World, WorldView
 
@@ -125,7 +125,7 @@ class RerunRecording:
     cell's trace), `.verdicts(outcomes)` and `.close()` after it."""
 
     def __init__(
-        self, path: str | Path | None, *, scene: PlanningScene, kin: UR5e, recording_id: str, serve: bool = False
+        self, path: str | Path | None, *, scene: PlanningScene, kin: URArm, recording_id: str, serve: bool = False
     ):
         if path is None and not serve:
             raise ConfigError("a recording needs a file (--rerun OUT.rrd) or a live view (--rerun-serve)")
@@ -184,7 +184,7 @@ class RerunRecording:
 
     # ---- static: the cell ------------------------------------------------------------------------
     def _shape(self, kind: str, size: tuple[float, ...], T: np.ndarray | None = None) -> Any:
-        """A primitive (twin.urdf_model.Shape kinds) as a rerun archetype at pose T (None: the identity)."""
+        """A primitive (twin.robot.urdf_model.Shape kinds) as a rerun archetype at pose T (None: the identity)."""
         rr = self._rr
         centre = [0.0, 0.0, 0.0] if T is None else T[:3, 3].tolist()
         quat = None if T is None else rr.Quaternion(xyzw=matrix_to_quat(T[:3, :3]))

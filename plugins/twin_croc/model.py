@@ -1,5 +1,5 @@
 """The arm as a pinocchio model, built from twin's own kinematics so that Crocoddyl optimises the arm twin
-judges: the joints, DH frames and tcp of `twin.plugin.UR5e`, equal to its forward kinematics to round-off
+judges: the joints, DH frames and tcp of `twin.plugin.URArm`, equal to its forward kinematics to round-off
 (`tests/test_croc_model.py`), not a second description of the robot read from another file.
 
 A DH link is `Rz(theta) Tz(d) Tx(a) Rx(alpha)`: joint i turns about the z axis of DH frame i-1, and the
@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 if TYPE_CHECKING:
-    from twin.plugin import UR5e
+    from twin.plugin import URArm
 
 __all__ = ["TCP_FRAME_NAME", "arm_model", "dh_frame_name", "sphere_frames"]
 
@@ -45,7 +45,7 @@ def _dh_fixed(d: float, a: float, alpha: float) -> pin.SE3:
     return pin.SE3(R, np.array([a, 0.0, d]))
 
 
-def arm_model(kin: UR5e) -> pin.Model:
+def arm_model(kin: URArm) -> pin.Model:
     """A pinocchio model of `kin`'s arm: six revolute joints named as twin names them, with twin's joint
     limits and the velocity limit left to the planner's request; frames `dh1` .. `dh6` and `tcp`."""
     dh = kin.dh

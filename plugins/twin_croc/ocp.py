@@ -33,7 +33,7 @@ from twin.plugin import SelfRows, Weights  # the seed's cost weights, nmpc's too
 from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
 
 if TYPE_CHECKING:
-    from twin.plugin import UR5e
+    from twin.plugin import URArm
 
 __all__ = ["HorizonProblem", "PairDistances", "Solve"]
 
@@ -144,7 +144,7 @@ class HorizonProblem:
 
     def __init__(
         self,
-        kin: UR5e,
+        kin: URArm,
         spheres: np.ndarray,
         *,
         tcp_index: int,

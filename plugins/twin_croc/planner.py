@@ -82,7 +82,7 @@ _TABLE_TOP_TOL_M = 1e-3  # a primitive whose top is this close to the table top 
 
 
 def _aabb(kind: str, size: tuple[float, ...], T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned bounds of a primitive (kinds and sizes as twin.urdf_model.Shape) at pose T."""
+    """Axis-aligned bounds of a primitive (kinds and sizes as twin.robot.urdf_model.Shape) at pose T."""
     if kind == "box":
         half = 0.5 * np.asarray(size[:3], dtype=float)
     elif kind == "sphere":

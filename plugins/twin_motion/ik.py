@@ -23,7 +23,7 @@ import numpy as np
 import ur_analytic_ik
 from pydantic import BaseModel, ConfigDict, Field
 
-from twin.plugin import Pose, UR5e
+from twin.plugin import Pose, URArm
 
 __all__ = [
     "DefensiveIK",
@@ -84,7 +84,7 @@ def _cond(J: np.ndarray) -> np.ndarray:
         return sv[:, 0] / sv[:, -1]
 
 
-def condition_numbers(kin: UR5e, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
+def condition_numbers(kin: URArm, qs: np.ndarray, frame: str = "tcp") -> np.ndarray:
     """(n,) cond(J) of `frame`'s Jacobian for (n, 6) configurations (inf at an exact singularity)."""
     return _cond(kin.jacobians_from_frames(kin.dh_frames(qs), frame))
 
@@ -96,7 +96,7 @@ class DefensiveIK:
     and thresholds.
     """
 
-    def __init__(self, kin: UR5e, params: DefensiveIKParams | None = None):
+    def __init__(self, kin: URArm, params: DefensiveIKParams | None = None):
         self.kin = kin
         self.params = params or DefensiveIKParams()
         self._tool = {f: self.kin.tool_transform(f) for f in ("tcp", "flange")}

@@ -25,7 +25,7 @@ from twin.plugin import (
     PoseGoal,
     Status,
     Trajectory,
-    UR5e,
+    URArm,
     colliding_pair,
     densify,
     first_collision,
@@ -82,7 +82,7 @@ class MotionPlannerBase:
     def __init__(self, params: MotionPlannerBase.Params | None, context: PluginContext):
         self.params = params if params is not None else self.Params()
         self.context = context  # the robot it plans for: no default arm (a UR10e config plans a UR10e)
-        self.kin: UR5e = context.kinematics
+        self.kin: URArm = context.kinematics
         settings = context.settings
         self.home = np.array(settings.robot.home, dtype=float)
         self.check_rad = float(settings.collision.check_resolution_rad)
@@ -200,7 +200,7 @@ def _with_time(result: MotionResult, elapsed: float) -> MotionResult:
     return result if result.planning_time_s else replace(result, planning_time_s=elapsed)
 
 
-def unwrap_goal(q_start: np.ndarray, q_goal: np.ndarray, kin: UR5e) -> np.ndarray:
+def unwrap_goal(q_start: np.ndarray, q_goal: np.ndarray, kin: URArm) -> np.ndarray:
     """The goal with each continuous-range joint (range > 2*pi) moved to the shortest angular difference
     from the start, where that value is inside the joint limits (seed 002's joint unwrapping)."""
     out = np.array(q_goal, dtype=float)

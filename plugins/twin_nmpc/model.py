@@ -88,14 +88,14 @@ def _exact(v: float) -> float:
 
 
 def fk_tcp_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> tuple[ca.SX, ca.SX]:
-    """Symbolic forward kinematics (standard DH parameters `dh`, `UR5e.dh`): TCP position (3,) and rotation (3, 3)."""
+    """Symbolic forward kinematics (standard DH parameters `dh`, `URArm.dh`): TCP position (3,) and rotation (3, 3)."""
     frames = fk_frames_sx(q, tcp_offset_m, dh)
     return frames[TCP_FRAME][:3, 3], frames[TCP_FRAME][:3, :3]
 
 
 def fk_frames_sx(q: ca.SX, tcp_offset_m: float, dh: DHParameters) -> dict[int, ca.SX]:
     """Symbolic DH frames 2 to 6 (elbow, wrist_1, wrist_2, wrist_3 joints, flange) and the TCP (key TCP_FRAME),
-    (4, 4) each in the base frame, for the standard DH parameters `dh` (`UR5e.dh`)."""
+    (4, 4) each in the base frame, for the standard DH parameters `dh` (`URArm.dh`)."""
     T = ca.SX.eye(4)
     out: dict[int, ca.SX] = {}
     d, a, alpha = (np.asarray(v, dtype=float) for v in (dh.d, dh.a, dh.alpha))
@@ -399,7 +399,7 @@ class NMPCProblem:
     (`cold_options`, `warm_options`: nlpsol options, e.g. {"ipopt.tol": 1e-2}).
 
     `robot_spheres` (n, 5): (frame, x, y, z, r) with frame a DH frame index (4, 5, 6) or TCP_FRAME; `dh` and
-    `tcp_offset_m` the arm's kinematics (`UR5e.dh`, `UR5e.tcp_offset_m`).
+    `tcp_offset_m` the arm's kinematics (`URArm.dh`, `URArm.tcp_offset_m`).
     Parameters of a solve (vector `p`): q0 (6), the last executed step q0 - q_{-1} (6), the step before it
     q_{-1} - q_{-2} (6), goal (3), tracked point in the TCP frame (3), table z (1),
     then per box centre (3) and half extents incl. margin (3), then per held-object sphere offset in the TCP

@@ -26,7 +26,7 @@ from twin.plugin import (
     PoseGoal,
     Settings,
     Trajectory,
-    UR5e,
+    URArm,
     densify,
     limits_from_settings,
     load_config,
@@ -96,7 +96,7 @@ def build_scene(
     return scene
 
 
-def _ik_near(kin: UR5e, T: np.ndarray, ref: np.ndarray) -> np.ndarray | None:
+def _ik_near(kin: URArm, T: np.ndarray, ref: np.ndarray) -> np.ndarray | None:
     sols = kin.ik(T, "tcp")
     if sols.shape[0] == 0:
         return None
@@ -121,7 +121,7 @@ def _box_only_scene(settings: Settings, ts: TransferScene, cache: dict[str, Plan
 def transfer_scenes(n: int = 50, seed: int = 0, *, settings: Settings | None = None) -> list[TransferScene]:
     """`n` seeded transfer scenes over the obstacle wall (deterministic for a given seed)."""
     settings = settings or load_config("warehouse")
-    kin = UR5e.from_settings(settings)
+    kin = URArm(model=settings.robot.model)
     limits = limits_from_settings(settings)
     home = np.array(settings.robot.home)
     rng = np.random.default_rng(seed)
@@ -197,7 +197,7 @@ def check_trajectory(
     ts: TransferScene,
     spheres_fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     table_scene: PlanningScene,
-    kin: UR5e,
+    kin: URArm,
 ) -> TrajectoryCheck:
     """Densify `traj` (<= 0.01 rad, <= 5 mm of TCP travel between samples) and measure with FCL: every
     proxy sphere (`spheres_fn(qs) -> (centres (m, n, 3), radii (n,))`) against the perceived box, and the

@@ -76,7 +76,7 @@ from twin.plugin import (
     PoseGoal,
     Retimer,
     Status,
-    UR5e,
+    URArm,
     colliding_pair,
     jerk_limited,
 )
@@ -150,7 +150,7 @@ class OmplPlanner(PathPlanner):
             raise DependencyMissing(reason)
         self.params = params if params is not None else self.Params()
         self.context = context  # the robot it plans for: no default arm (a UR10e config plans a UR10e)
-        self.kin: UR5e = context.kinematics
+        self.kin: URArm = context.kinematics
         self.settings = context.settings
         self._planner_setters = self._setters()
         self._default_retimer: Retimer | None = None

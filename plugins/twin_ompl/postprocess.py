@@ -21,7 +21,7 @@ from twin.plugin import TwinError, colliding_pair, densify_path
 from twin_ompl.validity import trajectory_check_points
 
 if TYPE_CHECKING:
-    from twin.plugin import MotionRequest, PlanningScene, Retimer, Trajectory, UR5e
+    from twin.plugin import MotionRequest, PlanningScene, Retimer, Trajectory, URArm
     from twin_ompl.params import OmplParams
 
 __all__ = ["add_time", "path_length", "simplify", "timed_and_checked"]
@@ -63,7 +63,7 @@ def timed_and_checked(
     retimer: Retimer,
     request: MotionRequest,
     scene: PlanningScene,
-    kin: UR5e,
+    kin: URArm,
     params: OmplParams,
     timings: dict[str, float],
 ) -> tuple[Trajectory | None, str, int | None]:

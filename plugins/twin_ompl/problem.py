@@ -29,7 +29,7 @@ import ompl.util as ou
 from twin_ompl.validity import CheckCounter, SceneMotionValidator, state_validity_checker
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, UR5e
+    from twin.plugin import PlanningScene, URArm
 
 __all__ = [
     "geometric_path",
@@ -50,7 +50,7 @@ _PI = math.pi
 _REPAIR_MARGIN_RAD = 0.3
 
 
-def sampling_bounds(kin: UR5e, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
+def sampling_bounds(kin: URArm, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
     """(6, 2) sampling bounds in rad for `joint_range` 'compact' or 'full' (see the module docstring)."""
     lim = np.asarray(kin.joint_limits, dtype=float)
     if joint_range == "full":

@@ -25,7 +25,7 @@ import ompl.base as ob
 from twin.plugin import PlanningScene
 
 if TYPE_CHECKING:
-    from twin.plugin import Trajectory, UR5e
+    from twin.plugin import Trajectory, URArm
 
 __all__ = [
     "CheckCounter",
@@ -139,7 +139,7 @@ class SceneMotionValidator(ob.MotionValidator):  # type: ignore[misc]
         return hit is None
 
 
-def trajectory_check_points(traj: Trajectory, kin: UR5e, step_rad: float, step_m: float) -> np.ndarray:
+def trajectory_check_points(traj: Trajectory, kin: URArm, step_rad: float, step_m: float) -> np.ndarray:
     """(k, 6) configurations along `traj` no more than `step_rad` apart in any joint and `step_m / 2` apart
     in TCP position (the factor 2 is `twin.planning.densify`'s margin for chords), end points included.
 

@@ -18,6 +18,6 @@ held object and self-collision are unpadded. Distances are signed: < 0 is a pene
 
 from twin.collision.rules import CollisionRules
 from twin.collision.scene import DistanceResult, FixtureSpec, PathCheck, PlanningScene
-from twin.urdf_model import read_fixture_shapes
+from twin.robot.urdf_model import read_fixture_shapes
 
 __all__ = ["CollisionRules", "DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "read_fixture_shapes"]

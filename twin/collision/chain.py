@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twin.urdf_model import RobotModel
+from twin.robot.urdf_model import RobotModel
 
 __all__ = ["CompiledChain"]
 

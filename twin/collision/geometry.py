@@ -1,7 +1,7 @@
 """FCL geometry of the planning scene: URDF collision primitives as FCL shapes, their bounding spheres,
 poses as FCL transforms, and the broadphase callbacks and requests every query reuses.
 
-Why a module of its own: this is the one place that knows how a URDF primitive (`twin.urdf_model.Shape`
+Why a module of its own: this is the one place that knows how a URDF primitive (`twin.robot.urdf_model.Shape`
 kinds) maps onto an FCL shape and how padding inflates it, so the scene, the exclusion rules and any
 other FCL user build identical geometry. Meshes are not supported: the scene needs primitives (planners
 query it millions of times, and the robot URDF is written with primitives for that reason).
@@ -17,7 +17,7 @@ import fcl
 import numpy as np
 
 from twin.errors import ConfigError
-from twin.urdf_model import RobotModel, Shape
+from twin.robot.urdf_model import RobotModel, Shape
 
 __all__ = [
     "COLLISION_REQUEST",
@@ -41,7 +41,7 @@ DISTANCE_REQUEST = fcl.DistanceRequest(enable_signed_distance=True)
 
 
 def fcl_geometry(kind: str, size: Sequence[float], pad: float = 0.0) -> Any:
-    """FCL shape of a primitive (sizes as `twin.urdf_model.Shape`), inflated by `pad` m on each side.
+    """FCL shape of a primitive (sizes as `twin.robot.urdf_model.Shape`), inflated by `pad` m on each side.
 
     A box grows by 2 pad per extent, a cylinder by pad in radius and 2 pad in length, a sphere by pad in
     radius, a capsule by pad in radius (its caps grow with it). Raises ConfigError for other kinds."""

@@ -17,12 +17,14 @@ from numpy.typing import ArrayLike
 from twin.collision.geometry import fcl_geometry, fcl_transform
 from twin.collision.spheres import EnvPrimitives, env_primitives
 from twin.errors import ConfigError, InvalidRequestError
+from twin.robot.urdf_model import read_fixture_shapes
 from twin.types import BoxBounds
-from twin.urdf_model import read_fixture_shapes
 
 __all__ = ["Obstacles", "ShapeList", "box_from_bounds", "check_pose", "check_size"]
 
-ShapeList = list[tuple[str, tuple[float, ...], np.ndarray]]  # [(kind, size, pose (4, 4))], as twin.urdf_model.Shape
+ShapeList = list[
+    tuple[str, tuple[float, ...], np.ndarray]
+]  # [(kind, size, pose (4, 4))], as twin.robot.urdf_model.Shape
 
 
 class Obstacles:

@@ -39,7 +39,7 @@ from twin.collision.rules import HELD, CollisionRules
 from twin.collision.spheres import TOUCH_M, EnvPrimitives, cover, primitive
 from twin.errors import ConfigError, InvalidRequestError
 from twin.robot.gripper import gripper_stroke_m
-from twin.urdf_model import RobotModel, Shape, pose_from_xyz_rpy
+from twin.robot.urdf_model import RobotModel, Shape, pose_from_xyz_rpy
 
 __all__ = ["RobotBody", "check_robot_model"]
 

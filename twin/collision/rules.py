@@ -29,7 +29,7 @@ import numpy as np
 from twin.collision.geometry import DISTANCE_REQUEST, fcl_geometry, fcl_transform, primitive_shapes
 from twin.errors import ConfigError
 from twin.robot.gripper import gripper_stroke_m
-from twin.urdf_model import RobotModel
+from twin.robot.urdf_model import RobotModel
 
 __all__ = [
     "CONTACT_TOL_M",

@@ -46,9 +46,9 @@ from twin.collision.obstacles import Obstacles, box_from_bounds, check_pose, che
 from twin.collision.robot_body import RobotBody
 from twin.errors import InvalidRequestError
 from twin.robot import Robot
+from twin.robot.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 from twin.timing import stage
 from twin.types import BoxBounds
-from twin.urdf_model import RobotModel, pose_from_xyz_rpy, read_fixture_shapes
 
 if TYPE_CHECKING:
     from twin.config import Settings
@@ -414,7 +414,7 @@ class PlanningScene:
 
     def environment_shapes(self) -> dict[str, list[tuple[str, tuple[float, ...], np.ndarray]]]:
         """Every environment object (fixtures and boxes) as its primitives, unpadded: name -> [(kind, size,
-        pose (4, 4) in the world frame)], kinds and sizes as twin.urdf_model.Shape. What a problem-set
+        pose (4, 4) in the world frame)], kinds and sizes as twin.robot.urdf_model.Shape. What a problem-set
         export writes, so another tool plans against exactly this world."""
         return {n: [(k, tuple(sz), T.copy()) for k, sz, T in shapes] for n, shapes in self._obstacles.shapes.items()}
 

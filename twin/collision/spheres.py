@@ -45,7 +45,7 @@ _KIND = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE, "capsule": CAPSULE}
 
 def cover(kind: str, size: Sequence[float] | np.ndarray) -> np.ndarray:
     """(k, 4) spheres (x, y, z, r) in the primitive's own frame whose union encloses it (sizes as
-    `twin.urdf_model.Shape`: box full extents, cylinder/capsule (radius, length), sphere (radius,))."""
+    `twin.robot.urdf_model.Shape`: box full extents, cylinder/capsule (radius, length), sphere (radius,))."""
     if kind == "sphere":
         return np.array([[0.0, 0.0, 0.0, float(size[0])]])
     if kind == "box":

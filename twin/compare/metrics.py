@@ -29,7 +29,7 @@ from twin.types import JointGoal, MotionRequest, MotionResult, RunSummary, Traje
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import Settings
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
     from twin.world import World
 
 __all__ = [
@@ -202,7 +202,7 @@ def path_smoothness(q: np.ndarray, step_rad: float = SMOOTHNESS_STEP_RAD) -> flo
 
 
 def trajectory_metrics(
-    traj: Trajectory, *, kin: UR5e, scene: PlanningScene, settings: Settings, jerk_dt_s: float = 1e-3
+    traj: Trajectory, *, kin: URArm, scene: PlanningScene, settings: Settings, jerk_dt_s: float = 1e-3
 ) -> tuple[dict[str, float | None], str]:
     """Duration, joint and TCP path length, max |jerk| and minimum clearance of a planned trajectory,
     and the closest pair 'robot_part->other' (why the clearance is what it is).
@@ -262,7 +262,7 @@ def timing_metrics(result: MotionResult) -> tuple[dict[str, float | None], int |
 
 
 def execute_in_physics(
-    world: World, traj: Trajectory, request: MotionRequest, *, kin: UR5e, settle_s: float = 0.5
+    world: World, traj: Trajectory, request: MotionRequest, *, kin: URArm, settle_s: float = 0.5
 ) -> tuple[dict[str, float | int | None], list[str]]:
     """Execute `traj` in `world` (reset first, so the outcome does not depend on earlier runs).
 

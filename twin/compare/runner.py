@@ -130,7 +130,7 @@ def tasks_available() -> bool:
 
 def _check_physics_robot(settings: Settings) -> None:
     """ConfigError when the runs execute in physics and the robot URDF cannot (a planning-only model)."""
-    from twin.urdf_model import RobotModel
+    from twin.robot.urdf_model import RobotModel
     from twin.world import physics_parts_missing  # it imports PyBullet with its banner silenced
 
     missing = physics_parts_missing(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))

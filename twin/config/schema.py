@@ -52,13 +52,13 @@ __all__ = [
 
 
 class RobotSettings(ConfigModel):
-    """The arm: which Universal Robots arm (`twin.ur_models`: its DH parameters, IK and datasheet joint speeds),
+    """The arm: which Universal Robots arm (`twin.robot.ur_models`: its DH parameters, IK and datasheet joint speeds),
     its URDF, home posture and joint limits (SPEC: pi rad/s, +-2pi, elbow +-pi)."""
 
     model: Literal["ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e"] = "ur5e"
     # the arm's URDF (collision model of primitives, checked against the model's DH at load; its root may sit
     # above the arm's base, and one without a tcp link gets the arm's TCP: `URArm.fit_urdf`); default the one
-    # twin ships for the model, urdf/<model>.urdf (`twin.ur_urdf`)
+    # twin ships for the model, urdf/<model>.urdf (`twin.robot.ur_urdf`)
     urdf: str = "urdf/ur5e.urdf"
     home: Q6 = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
     max_joint_vel: float = Field(math.pi, gt=0)
@@ -68,7 +68,7 @@ class RobotSettings(ConfigModel):
     # (PyBullet's positionGain), so the controller's time constant is 1 / (physics_hz * position_gain):
     # 0.15 at 480 Hz is 14 ms, the same controller as 0.3 at 240 Hz; change the two together
     position_gain: float = Field(0.15, gt=0, le=1)
-    # the joint motors' force limits, N m; default the model's (`twin.ur_models`: the UR5e's 150 and 28)
+    # the joint motors' force limits, N m; default the model's (`twin.robot.ur_models`: the UR5e's 150 and 28)
     max_joint_force: Q6 = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
     # fault models (off at 0): a sluggish controller follows the commanded joint targets through a
     # first-order lag with this time constant, and a noisy one adds this RMS (rad) to every physics step's
@@ -81,7 +81,7 @@ class RobotSettings(ConfigModel):
     def _model_defaults(cls, data: Any) -> Any:
         """The URDF and motor forces of the model chosen, where the config does not give its own."""
         if isinstance(data, dict) and data.get("model", "ur5e") != "ur5e":
-            from twin.ur_models import UR_MODELS
+            from twin.robot.ur_models import UR_MODELS
 
             model = UR_MODELS.get(str(data["model"]))
             if model is not None:  # an unknown name is the Literal's error

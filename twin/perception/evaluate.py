@@ -377,14 +377,17 @@ def run_perception(
     """
     from twin.perception.aruco import MarkerNotFound
     from twin.perception.pipeline import camera_extrinsics, make_detector
+    from twin.registry import PluginContext, default_registry
+    from twin.robot import Robot
     from twin.world import World
 
     seed = settings.seed if seed is None else int(seed)
     pipeline = settings.perception.pipeline
     timings: dict[str, float] = {}
-    det = make_detector(settings, name=detector) if pipeline == "robocup" else None
+    context = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=default_registry())
+    det = make_detector(settings, name=detector, context=context) if pipeline == "robocup" else None
     has_marker = find_marker_plate(settings) is not None
-    with World(settings, seed, renderer=renderer) as world:  # type: ignore[arg-type]
+    with World(settings, seed, renderer=renderer, robot=context.robot) as world:  # type: ignore[arg-type]
         cal_report: CalibrationReport | None = None
         if settings.camera.mount == "wrist" and has_marker:
             cap_cal = capture_frame(world, settings, pose="calibration", rng=noise_rng(seed, 1))
@@ -405,7 +408,11 @@ def run_perception(
                 log.warning("calibration: %s", e)
             timings["calibration"] = time.perf_counter() - t0
         T_base_camera = camera_extrinsics(
-            settings, cap, cal_report.T_base_camera if cal_report else None, cal_report.q if cal_report else None
+            settings,
+            cap,
+            cal_report.T_base_camera if cal_report else None,
+            cal_report.q if cal_report else None,
+            arm=context.robot.arm,
         )
         truth = world.objects()
         obstacle = None

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from twin.config import Settings
-from twin.kinematics import URArm
 from twin.perception.capture import Capture, wrist_camera_offset
+from twin.robot.kinematics import URArm
 
 __all__ = ["error_bound_m", "level_on_table", "table_disagreement", "table_plane"]
 

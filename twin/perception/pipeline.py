@@ -14,35 +14,48 @@ import numpy as np
 from twin.config import Settings
 from twin.perception.capture import Capture, wrist_camera_offset
 from twin.perception.detection import Detector
+from twin.registry import PluginContext, default_registry
+from twin.robot import Robot
+from twin.robot.kinematics import URArm
 
 __all__ = ["camera_extrinsics", "make_detector"]
 
 log = logging.getLogger("twin")
 
 
-def make_detector(settings: Settings, *, name: str | None = None, params: dict[str, Any] | None = None) -> Detector:
-    """The detector plugin named in `settings.perception.detector` (or `name`/`params`), instantiated."""
-    from twin.registry import PluginContext, default_registry
-    from twin.robot import Robot
-
+def make_detector(
+    settings: Settings,
+    *,
+    name: str | None = None,
+    params: dict[str, Any] | None = None,
+    context: PluginContext | None = None,
+) -> Detector:
+    """The detector plugin named in `settings.perception.detector` (or `name`/`params`), instantiated in the
+    run's plugin `context` (None: one made for `settings`, with its own robot)."""
+    if context is None:
+        context = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=default_registry())
     block = settings.perception.detector
-    reg = default_registry()
-    ctx = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=reg)
-    return reg.detector(name or block.name, block.params if params is None and name is None else params, ctx)
+    reg = context.registry
+    return reg.detector(name or block.name, block.params if params is None and name is None else params, context)
 
 
 def camera_extrinsics(
-    settings: Settings, capture: Capture, T_base_camera_aruco: np.ndarray | None, q_aruco: np.ndarray | None = None
+    settings: Settings,
+    capture: Capture,
+    T_base_camera_aruco: np.ndarray | None,
+    q_aruco: np.ndarray | None = None,
+    *,
+    arm: URArm,
 ) -> np.ndarray:
     """The camera pose perception uses for `capture`, per `perception.extrinsics`.
 
     fixed + auto/aruco: the ArUco estimate. wrist + auto/kinematics: forward kinematics of the measured
     joints times the configured hand-eye offset (seed 002 used TF). wrist + aruco: the hand-eye offset
     estimated from the ArUco view at `q_aruco`, carried to the capture pose by forward kinematics.
-    fixed + kinematics: the configured mount pose (nominal, no estimation).
+    fixed + kinematics: the configured mount pose (nominal, no estimation). `arm`: the run's arm (a wrist
+    camera's forward kinematics).
     """
     from twin.errors import ConfigError
-    from twin.kinematics import UR5e
 
     mode = settings.perception.extrinsics
     if mode == "auto":
@@ -55,7 +68,7 @@ def camera_extrinsics(
         return T_base_camera_aruco
     if q_aruco is None:
         raise ConfigError("a wrist camera calibrated by ArUco needs the joint angles of the calibration view")
-    kin = UR5e.from_settings(settings)
+    kin = arm
     T_tool0_camera = np.linalg.inv(kin.fk(q_aruco, "flange")) @ T_base_camera_aruco
     log.debug(
         "hand-eye from ArUco differs from the configured offset by %.4f m",

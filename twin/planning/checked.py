@@ -35,7 +35,7 @@ from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import PlannerBlock, Settings
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
 
 __all__ = [
     "FINAL_CHECK",
@@ -254,8 +254,8 @@ def robot_refusal(name: str, planner_class: type, model: str) -> str | None:
 
 def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) -> Limits:
     """The config's joint limits, each joint's speed no faster than the arm's datasheet allows
-    (`twin.ur_models`: the UR10e's base and shoulder turn at most 120 deg/s)."""
-    from twin.ur_models import ur_model
+    (`twin.robot.ur_models`: the UR10e's base and shoulder turn at most 120 deg/s)."""
+    from twin.robot.ur_models import ur_model
 
     r = settings.robot
     vel = np.minimum(float(r.max_joint_vel), ur_model(r.model).speed_limits())
@@ -312,7 +312,7 @@ def _plugin_code(name: str, doing: str) -> Iterator[None]:
 
 
 # ---- trajectory checks ----------------------------------------------------------------------------
-def densify(traj: Trajectory, kin: UR5e, *, max_step_rad: float, max_step_m: float) -> np.ndarray:
+def densify(traj: Trajectory, kin: URArm, *, max_step_rad: float, max_step_m: float) -> np.ndarray:
     """(k, 6) configurations along `traj`, no joint moving more than `max_step_rad` and the TCP no more
     than `max_step_m` between neighbours.
 
@@ -350,7 +350,7 @@ def densify_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
 
 
 def first_collision(
-    traj: Trajectory, scene: PlanningScene, kin: UR5e, *, max_step_rad: float = 0.01, max_step_m: float = 0.01
+    traj: Trajectory, scene: PlanningScene, kin: URArm, *, max_step_rad: float = 0.01, max_step_m: float = 0.01
 ) -> int | None:
     """Index (into the densified samples) of the first colliding configuration, or None if free."""
     qs = densify(traj, kin, max_step_rad=max_step_rad, max_step_m=max_step_m)
@@ -363,7 +363,7 @@ def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: UR5e) -> str | None:
+def goal_miss(goal: JointGoal | PoseGoal, q_end: np.ndarray, kin: URArm) -> str | None:
     """Why `q_end` (6,) does not reach `goal` within the goal's own tolerances, or None when it does.
 
     The one definition of "reached" for every planner: a joint goal, every joint within `tolerance_rad`;

@@ -24,7 +24,7 @@ from twin.planning.proxy_spheres import TCP_FRAME, Box, sphere_positions
 from twin.planning.receding_params import RecedingParams
 
 if TYPE_CHECKING:
-    from twin.plugin import UR5e
+    from twin.plugin import URArm
 
 __all__ = ["guess_slack", "initial_guess", "resample", "segment_hits_box"]
 
@@ -97,7 +97,7 @@ def resample(
     return out
 
 
-def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: RecedingParams) -> np.ndarray:
+def guess_slack(kin: URArm, knots: np.ndarray, sph: np.ndarray, params: RecedingParams) -> np.ndarray:
     """(N,) table-clearance slack per knot (N, 6) that makes the guess feasible for the soft table rows."""
     z = sphere_positions(kin, knots, sph)[:, :, 2]
     need = params.table_z_m + params.table_clearance_m - (z - sph[None, :, 4])
@@ -105,7 +105,7 @@ def guess_slack(kin: UR5e, knots: np.ndarray, sph: np.ndarray, params: RecedingP
 
 
 def initial_guess(
-    kin: UR5e,
+    kin: URArm,
     params: RecedingParams,
     q0: np.ndarray,
     target: np.ndarray,

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from twin.plugin import UR5e
+    from twin.plugin import URArm
 
 __all__ = [
     "CHECK_TOL_M",
@@ -61,7 +61,7 @@ CHORD_EPS2 = 1e-4
 
 def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
     """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
-    for DH frames (m, 7, 4, 4) from `UR5e.dh_frames`; frame TCP_FRAME is the TCP (`twin.planning.mpc_kernel`)."""
+    for DH frames (m, 7, 4, 4) from `URArm.dh_frames`; frame TCP_FRAME is the TCP (`twin.planning.mpc_kernel`)."""
     from twin.planning.mpc_kernel import sphere_centres_into  # numba: loaded on first use
 
     tool = np.eye(4)
@@ -148,7 +148,7 @@ def with_object(robot_sph: np.ndarray, obj: np.ndarray) -> np.ndarray:
     return np.vstack([robot_sph, np.hstack([np.full((obj.shape[0], 1), TCP_FRAME), obj])])
 
 
-def sphere_positions(kin: UR5e, qs: np.ndarray, sph: np.ndarray) -> np.ndarray:
+def sphere_positions(kin: URArm, qs: np.ndarray, sph: np.ndarray) -> np.ndarray:
     """Centres (m, n, 3) of the spheres `sph` (n, 5) at configurations `qs` (m, 6) (or one (6,)), base frame."""
     return sphere_centres(kin.dh_frames(np.atleast_2d(qs)), kin.tcp_offset_m, sph)
 
@@ -159,7 +159,7 @@ def subdivide(knots: np.ndarray, n: int) -> np.ndarray:
     return (knots[:-1, None, :] + f[None, :, None] * (knots[1:] - knots[:-1])[:, None, :]).reshape(-1, 6)
 
 
-def clearance(kin: UR5e, qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, margin: float) -> np.ndarray:
+def clearance(kin: URArm, qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, margin: float) -> np.ndarray:
     """(m, n_boxes * n_spheres) signed clearances of the spheres at qs from the boxes grown by `margin`."""
     if not boxes:
         return np.zeros((qs.shape[0], 0))
@@ -169,7 +169,7 @@ def clearance(kin: UR5e, qs: np.ndarray, sph: np.ndarray, boxes: list[Box], *, m
 
 
 def violation(
-    kin: UR5e,
+    kin: URArm,
     knots: np.ndarray,
     sph: np.ndarray,
     boxes: list[Box],
@@ -237,7 +237,7 @@ def segment_box_distance(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.nd
 
 
 def path_gaps(
-    kin: UR5e, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
+    kin: URArm, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
 ) -> np.ndarray:
     """(n_boxes,) the smallest clearance (m) of the spheres from each box (grown by the margin) along straight
     lines between `substeps` check points per step of the knot path (m+1, 6): what every MPC's box rows must
@@ -271,7 +271,7 @@ def path_gaps(
 
 
 def box_gaps(
-    kin: UR5e, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
+    kin: URArm, knots: np.ndarray, sph: np.ndarray, boxes: list[Box], *, box_margin_m: float, substeps: int
 ) -> np.ndarray:
     """(n_boxes,) the smallest guaranteed clearance (m) of the spheres from each box (grown by the margin) along
     the knot path (m+1, 6) at `substeps` check points per step: the NLP's box rows (`pair_clearance`), per box."""

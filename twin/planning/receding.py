@@ -75,8 +75,8 @@ from twin.types import JointGoal, MotionRequest, MotionResult, PoseGoal, Status,
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
     from twin.registry import PluginContext
+    from twin.robot.kinematics import URArm
 
 __all__ = ["RecedingHorizonMPC", "Solved"]
 
@@ -120,7 +120,7 @@ class RecedingHorizonMPC(WaysToStop):
     def __init__(self, params: RecedingParams | None, context: PluginContext):
         self.params = params if params is not None else self.Params()
         self.context = context
-        self.kin: UR5e = context.kinematics
+        self.kin: URArm = context.kinematics
         col = context.settings.collision
         self._resolution = {"max_step_rad": col.check_resolution_rad, "max_step_m": col.check_resolution_m}
         self._robot_sph = robot_spheres(self.params.tool_spheres, self.params.wrist_spheres)

@@ -26,8 +26,8 @@ from twin.types import Trajectory
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
     from twin.planning.receding_params import RecedingParams
+    from twin.robot.kinematics import URArm
     from twin.types import MotionRequest
 
 __all__ = ["WaysToStop"]
@@ -44,7 +44,7 @@ class WaysToStop:
     loop (`RecedingHorizonMPC`) sets the state below; a subclass may extend `_violation`."""
 
     params: RecedingParams
-    kin: UR5e
+    kin: URArm
     name: str
     _request: MotionRequest | None
     _scene: PlanningScene | None

@@ -20,8 +20,8 @@ if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
-    from twin.kinematics import URArm
     from twin.problems.model import ProblemSet
+    from twin.robot.kinematics import URArm
     from twin.world import World
 
 __all__ = ["QueryCell", "cell_for"]

@@ -112,7 +112,7 @@ class BoxShape(_Model):
     pose: PoseSpec
 
     def dims(self) -> tuple[float, ...]:
-        """Dimensions in twin's shape convention (twin.urdf_model.Shape)."""
+        """Dimensions in twin's shape convention (twin.robot.urdf_model.Shape)."""
         return tuple(self.size)
 
 

@@ -17,7 +17,7 @@ from twin.errors import ConfigError
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
 
 __all__ = ["RandomQueries", "sample_query", "straight_free"]
 
@@ -82,7 +82,7 @@ def sample_query(
     rng: np.random.Generator,
     *,
     scene: PlanningScene,
-    kin: UR5e,
+    kin: URArm,
     home: np.ndarray,
     resolution_rad: float = 0.01,
 ) -> dict[str, Any]:
@@ -165,7 +165,7 @@ def sample_query(
     return out
 
 
-def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: UR5e, resolution_rad: float) -> bool | None:
+def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: URArm, resolution_rad: float) -> bool | None:
     """Whether the straight joint motion from the query's start to its goal is collision-free (checked
     every `resolution_rad`); for a pose goal, to the IK solution nearest the start. None when a pose goal
     has no IK solution."""

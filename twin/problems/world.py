@@ -139,7 +139,7 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
     """ConfigError unless the problem set's robot is the one `settings` loads (same URDF file name, or another
     collision model of the same arm: the set's URDF, where it is at hand, fits the config's `robot.model`; same
     arm joints in the same order)."""
-    from twin.urdf_model import RobotModel
+    from twin.robot.urdf_model import RobotModel
 
     want, have = Path(ps.robot.urdf).name, Path(settings.robot.urdf).name
     if want != have and not _same_arm(settings.resolve(ps.robot.urdf), settings):
@@ -154,12 +154,12 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
 
 def _same_arm(urdf: Path, settings: Settings) -> bool:
     """Whether a URDF file is the arm of `settings.robot.model` (its joints on the arm's DH axes)."""
-    from twin.kinematics import URArm
-    from twin.urdf_model import RobotModel
+    from twin.robot.kinematics import URArm
+    from twin.robot.urdf_model import RobotModel
 
     if not urdf.is_file():
         return False
-    arm = URArm.from_settings(settings)
+    arm = URArm(model=settings.robot.model)  # the config's arm, to check another URDF against
     return arm.urdf_mismatch(arm.fit_urdf(RobotModel.from_urdf(urdf))) is None
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from twin.errors import ConfigError
-from twin.urdf_model import RobotModel, primitive_half_extents
+from twin.robot.urdf_model import RobotModel, primitive_half_extents
 
 __all__ = ["gripper_boxes", "gripper_stroke_m"]
 

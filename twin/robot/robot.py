@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.errors import ConfigError
-from twin.kinematics import URArm
 from twin.robot.gripper import gripper_boxes, gripper_stroke_m
-from twin.urdf_model import RobotModel
+from twin.robot.kinematics import URArm
+from twin.robot.urdf_model import RobotModel
 
 if TYPE_CHECKING:
     from twin.config import Settings

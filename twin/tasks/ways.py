@@ -17,12 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.collision import PlanningScene
-from twin.kinematics import URArm
 from twin.planning import CheckedPlanner, colliding_pair
+from twin.robot.kinematics import URArm
+from twin.robot.urdf_model import primitive_half_extents
 from twin.tasks.gripper import top_down
 from twin.tasks.stage_failure import StageFailed
 from twin.types import Limits, MotionRequest, Pose, PoseGoal, Status
-from twin.urdf_model import primitive_half_extents
 
 __all__ = [
     "CHOOSE_CLEARANCE_M",

@@ -15,7 +15,7 @@ from twin.types import JointGoal, Pose, PoseGoal
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.config import Settings
-    from twin.kinematics import UR5e
+    from twin.robot.kinematics import URArm
 
 __all__ = ["Query", "contract_queries"]
 
@@ -44,7 +44,7 @@ def _top_down(p: np.ndarray, yaw: float) -> np.ndarray:
 class _Sampler:
     """Collision-free top-down configurations in the scene's reach, on the IK branch nearest `home`."""
 
-    def __init__(self, scene: PlanningScene, kin: UR5e, home: np.ndarray, rng: np.random.Generator):
+    def __init__(self, scene: PlanningScene, kin: URArm, home: np.ndarray, rng: np.random.Generator):
         self.scene, self.kin, self.home, self.rng = scene, kin, home, rng
 
     def pose(self) -> tuple[np.ndarray, float]:
@@ -86,7 +86,7 @@ class _Sampler:
 
 
 def contract_queries(
-    settings: Settings, scene: PlanningScene, kin: UR5e, n: int, seed: int, *, blocked: bool = True
+    settings: Settings, scene: PlanningScene, kin: URArm, n: int, seed: int, *, blocked: bool = True
 ) -> list[Query]:
     """`n` seeded queries in `scene`: a move of at least 0.2 m of tool travel whose straight joint motion and
     straight tool line are free; with `blocked`, one whose straight joint motion collides (a sampling planner
@@ -130,7 +130,7 @@ def contract_queries(
     )
 
 
-def _goal(kind: str, q: np.ndarray, kin: UR5e) -> JointGoal | PoseGoal:
+def _goal(kind: str, q: np.ndarray, kin: URArm) -> JointGoal | PoseGoal:
     """The goal configuration `q` as a goal of `kind`: the joints, the tool pose, or the tool position
     (orientation free, within 3 cm: what a task's transfer asks for)."""
     if kind == "joint":

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from twin.errors import InvalidRequestError
-from twin.kinematics import JOINT_NAMES
-from twin.urdf_model import RobotModel
+from twin.robot.kinematics import JOINT_NAMES
+from twin.robot.urdf_model import RobotModel
 
 __all__ = [
     "ARM_JOINT_NAMES",

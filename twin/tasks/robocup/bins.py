@@ -13,8 +13,8 @@ import numpy as np
 
 from twin.config import Settings
 from twin.errors import ConfigError
+from twin.robot.urdf_model import read_fixture_shapes
 from twin.transforms import pose_from_xyz_rpy
-from twin.urdf_model import read_fixture_shapes
 
 __all__ = ["BinGeometry", "bin_for", "bin_geometries", "read_bin_geometry"]
 

@@ -31,11 +31,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from twin.config import Settings
-from twin.kinematics import UR5e, URArm
 from twin.perception.aruco import MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture, wrist_camera_offset
 from twin.perception.mount import error_bound_m, level_on_table, table_disagreement, table_plane
 from twin.perception.pipeline import camera_extrinsics
+from twin.robot.kinematics import URArm
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate, marker_pose_in_base
 from twin.tasks.cell import Cell
 from twin.tasks.stage_failure import StageFailed
@@ -94,7 +94,7 @@ class HandEye:
             if self.uncalibrated:
                 return level_on_table(cap, settings)
             return cap.T_base_camera_nominal  # forward kinematics and the configured hand-eye transform
-        return camera_extrinsics(settings, cap, None)
+        return camera_extrinsics(settings, cap, None, arm=arm)
 
 
 def calibrate_hand_eye(cell: Cell, reach: Callable[[Cell, np.ndarray], None]) -> HandEye:
@@ -205,7 +205,7 @@ _VARIATIONS: tuple[tuple[str, float, float, float], ...] = (
 _MAX_ELEVATION_DEG = 85.0
 
 
-def view_candidates(settings: Settings, kin: UR5e, q_first: np.ndarray) -> list[tuple[str, np.ndarray]]:
+def view_candidates(settings: Settings, kin: URArm, q_first: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """(name, joints) of the other views of the marker, in the order tried: each looks at the marker's
     nominal centre (the cell layout's) from a variation of the calibration view's direction and distance;
     an IK branch of the camera pose nearest the calibration pose, within the joint limits, with the tcp at

@@ -45,10 +45,10 @@ from twin.perception.detection import Detection, Detector, SceneCloud, scene_clo
 from twin.perception.geometry import NearestNeighbors, pca, rot_z, trimmed_icp
 from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
 from twin.perception.segmentation import cluster_points, footprint, open3d
+from twin.robot.urdf_model import urdf_rgba
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.timing import stage
 from twin.transforms import rpy_to_matrix as rpy_matrix
-from twin.urdf_model import urdf_rgba
 
 __all__ = [
     "ObjectEstimate",

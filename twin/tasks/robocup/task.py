@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 
 from twin.config import Settings
-from twin.kinematics import wrap_to_pi
 from twin.perception.capture import Capture, capture_frame, prefetch_next_capture
 from twin.perception.pipeline import make_detector
+from twin.robot.kinematics import wrap_to_pi
 from twin.scene_layout import OBJECT_TEMPLATES
 from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_down
 from twin.tasks.jam import clear_after_release
@@ -509,7 +509,7 @@ def run_robocup(cell: Cell) -> list[ObjectOutcome]:
     task = settings.task.robocup
     referee = RobocupReferee(world, settings, cell.watch)  # ground truth: metrics, verdicts at the end
     bins = bin_geometries(settings)
-    detector = make_detector(settings)
+    detector = make_detector(settings, context=cell.run_context)
     targets: list[_Target] = []
     placed_in: dict[str, list[_Footprint]] = {}  # where the task released what, per bin
     home = np.array(settings.robot.home)

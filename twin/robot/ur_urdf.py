@@ -1,5 +1,5 @@
 """twin's URDF of each Universal Robots arm it ships (`urdf/<model>.urdf`), written from the arm's DH
-parameters (`twin.ur_models`) and envelope primitives: one template for the family, so every arm has the same
+parameters (`twin.robot.ur_models`) and envelope primitives: one template for the family, so every arm has the same
 links, joints and frames as urdf/ur5e.urdf (hand-written first; `tests/test_ur_urdf.py` checks this writes
 it again byte for byte) and the same gripper (copied from it).
 
@@ -9,7 +9,7 @@ lateral offsets (the distance between the shoulder and elbow planes: ur_descript
 shoulder_offset - elbow_offset). Radii, housing lengths and those offsets are scaled from the UR5e's by the
 arm's size; masses are the ur_description ones; inertias those of solid cylinders of the tubes.
 
-Regenerate after changing this: `python -m twin.ur_urdf` (writes every arm's file but the UR5e's).
+Regenerate after changing this: `python -m twin.robot.ur_urdf` (writes every arm's file but the UR5e's).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from twin.ur_models import UR_MODELS, URModel
+from twin.robot.ur_models import UR_MODELS, URModel
 
 __all__ = ["ARM_SIZES", "arm_urdf"]
 
-_URDF_DIR = Path(__file__).resolve().parent.parent / "urdf"
+_URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
 _HALF_PI = "1.5707963267948966"
 _GRIPPER_MARK = "  <!-- Robotiq 2F-85-like gripper."
 
@@ -32,7 +32,7 @@ _GRIPPER_MARK = "  <!-- Robotiq 2F-85-like gripper."
 class ArmSize:
     """What the DH parameters do not say: the size of the links' envelopes relative to the UR5e's
     (`scale`), the upper arm's and forearm's lateral offsets (m) and the link masses (kg, base to wrist 3).
-    The joints' efforts are the arm's torques (`twin.ur_models`)."""
+    The joints' efforts are the arm's torques (`twin.robot.ur_models`)."""
 
     scale: float
     upper_arm_offset_m: float

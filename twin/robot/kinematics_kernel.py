@@ -1,4 +1,4 @@
-"""The compiled half of `twin.kinematics`: the UR5e's DH frames for a batch of configurations in one numba
+"""The compiled half of `twin.robot.kinematics`: the UR5e's DH frames for a batch of configurations in one numba
 loop. A module of its own so numba is loaded only by a process that computes kinematics in bulk.
 
 Why compiled: planners and checks evaluate the chain for thousands of configurations per query (every

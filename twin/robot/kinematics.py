@@ -1,4 +1,4 @@
-"""Kinematics of a Universal Robots arm (`robot.model`, default the UR5e; `twin.ur_models` has their DH
+"""Kinematics of a Universal Robots arm (`robot.model`, default the UR5e; `twin.robot.ur_models` has their DH
 parameters): forward kinematics, every analytic IK branch, Jacobian, manipulability.
 
 Frames: `base` is the robot base (DH frame 0, z up, at the world origin); `flange` is tool0 (DH frame 6);
@@ -16,12 +16,11 @@ import numpy as np
 import ur_analytic_ik
 
 from twin.errors import InvalidRequestError
+from twin.robot.ur_models import UR_MODELS, ur_model
 from twin.timing import stage
-from twin.ur_models import UR_MODELS, ur_model
 
 if TYPE_CHECKING:
-    from twin.config import Settings
-    from twin.urdf_model import RobotModel
+    from twin.robot.urdf_model import RobotModel
 
 __all__ = [
     "DH_A",
@@ -31,7 +30,6 @@ __all__ = [
     "JOINT_NAMES",
     "TCP_OFFSET_M",
     "DHParameters",
-    "UR5e",
     "URArm",
     "dh_frames",
     "jacobian_one",
@@ -71,14 +69,14 @@ _CA, _SA = np.cos(DH_ALPHA), np.sin(DH_ALPHA)
 
 def dh_frames(qs: np.ndarray, dh: DHParameters | None = None) -> np.ndarray:
     """(n, 7, 4, 4) DH frames 0..6 (6 = flange) in the base frame for (n, 6) configurations of the arm with
-    DH parameters `dh` (default the UR5e's; compiled loop, `twin.kinematics_kernel`, loaded on first use)."""
+    DH parameters `dh` (default the UR5e's; compiled loop, `twin.robot.kinematics_kernel`, loaded on first use)."""
     if dh is None:
         return _frames(qs, DH_D, DH_A, _CA, _SA)
     return _frames(qs, dh.d, dh.a, np.cos(dh.alpha), np.sin(dh.alpha))
 
 
 def _frames(qs: np.ndarray, d: np.ndarray, a: np.ndarray, ca: np.ndarray, sa: np.ndarray) -> np.ndarray:
-    from twin.kinematics_kernel import dh_frames_into
+    from twin.robot.kinematics_kernel import dh_frames_into
 
     qs = np.atleast_2d(np.asarray(qs, dtype=float))
     if not (qs.flags.c_contiguous and qs.flags.writeable):
@@ -198,7 +196,7 @@ def _tool(frame: str, tcp_offset_m: float) -> np.ndarray:
 
 
 class URArm:
-    """Analytic kinematics of a Universal Robots arm (`model`: a `twin.ur_models` name, default the UR5e)
+    """Analytic kinematics of a Universal Robots arm (`model`: a `twin.robot.ur_models` name, default the UR5e)
     with our gripper.
 
     `q`: (6,) joint angles in rad, order shoulder_pan .. wrist_3. Poses are (4, 4) homogeneous
@@ -222,11 +220,6 @@ class URArm:
         self._tool_inv = {f: np.linalg.inv(T) for f, T in self._tool.items()}
         with stage("imports"):  # load (or, the first time on a machine, compile) the DH kernel now, not in a
             self.dh_frames(np.zeros((1, 6)))  # planner's time limit
-
-    @classmethod
-    def from_settings(cls, settings: Settings) -> URArm:
-        """The arm of a config: `robot.model`."""
-        return cls(model=settings.robot.model)
 
     def urdf_base(self, model: RobotModel) -> np.ndarray:
         """(4, 4) pose of a URDF's root link in this arm's base frame, from the first two arm joints at q = 0:
@@ -392,6 +385,3 @@ class URArm:
     def condition_number(self, q: np.ndarray, frame: str = "tcp") -> float:
         """cond(J); the seed's defensive IK penalises values above 500."""
         return float(np.linalg.cond(self.jacobian(q, frame)))
-
-
-UR5e = URArm  # the name plugins know (`twin.plugin.UR5e`, `PluginContext.kinematics`): any arm of the family
