@@ -27,11 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twin.config import PROJECT_ROOT, load_config
-from twin.perception.evaluate import Pipelines, run_perception
-from twin.tasks.robocup.perception import perceive_robocup
-from twin.tasks.warehouse.perception import perceive_warehouse
+from twin.perception.evaluate import run_perception
+from twin.tasks.pipelines import TASK_PIPELINES
 
-PIPELINES = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
+PIPELINES = TASK_PIPELINES
 
 STAGES = (
     "render",

@@ -11,9 +11,9 @@ from twin.camera import Intrinsics, RGBDFrame, camera_pose, mount_error, true_ca
 from twin.config import load_config
 from twin.errors import ConfigError
 from twin.perception.capture import capture_frame
-from twin.perception.evaluate import Pipelines, run_perception
+from twin.perception.evaluate import run_perception
 from twin.perception.noise import apply_sensor_noise, depth_noise_rms
-from twin.tasks.robocup.perception import perceive_robocup
+from twin.tasks.pipelines import TASK_PIPELINES
 from twin.tasks.warehouse.perception import perceive_warehouse
 from twin.world import World
 
@@ -21,7 +21,7 @@ pytest.importorskip("open3d")
 
 RENDERER = "tiny"
 # the pipelines scored (perception sits below the tasks that own them, so the caller hands them in)
-PIPELINES = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
+PIPELINES = TASK_PIPELINES
 
 
 def _warehouse(**extrinsic_error: float):

@@ -19,8 +19,8 @@ from twin.camera import camera_pose
 from twin.config import load_config
 from twin.perception.aruco import calibrate, transform_error
 from twin.perception.capture import capture_frame
-from twin.perception.evaluate import Pipelines, run_calibration, run_perception, true_obstacle_box
-from twin.tasks.robocup.perception import perceive_robocup
+from twin.perception.evaluate import run_calibration, run_perception, true_obstacle_box
+from twin.tasks.pipelines import TASK_PIPELINES
 from twin.tasks.warehouse.perception import perceive_warehouse
 from twin.world import World
 
@@ -29,7 +29,7 @@ pytest.importorskip("open3d")
 SEEDS = range(20)
 RENDERER = "tiny"
 # the pipelines scored (perception sits below the tasks that own them, so the caller hands them in)
-PIPELINES = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
+PIPELINES = TASK_PIPELINES
 
 
 @pytest.fixture(scope="module")

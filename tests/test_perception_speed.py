@@ -297,11 +297,10 @@ SEED_VOXEL = "perception.detector.params.voxel_m=0.004"  # the geometric detecto
 def robocup_runs():
     """Per seed: runs with the speed-ups on (twice), each off alone and both off (the old path)."""
     pytest.importorskip("open3d")
-    from twin.perception.evaluate import Pipelines, run_perception
-    from twin.tasks.robocup.perception import perceive_robocup
-    from twin.tasks.warehouse.perception import perceive_warehouse
+    from twin.perception.evaluate import run_perception
+    from twin.tasks.pipelines import TASK_PIPELINES
 
-    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
+    pipelines = TASK_PIPELINES
 
     fast = load_config("robocup")
     assert tuple(fast.perception.robocup.icp.tolerance) == (1e-4, 1e-3)  # the defaults since issue 15
@@ -347,11 +346,10 @@ def test_warehouse_seeded_plane_is_repeatable_and_finds_the_cubes_open3d_found()
     """The seeded RANSAC table plane (and the 5 mm DBSCAN grid) gives the same result for the same seed every
     time, and the same cubes with the same colours, within 1 mm, as open3d's segment_plane did."""
     pytest.importorskip("open3d")
-    from twin.perception.evaluate import Pipelines, run_perception
-    from twin.tasks.robocup.perception import perceive_robocup
-    from twin.tasks.warehouse.perception import perceive_warehouse
+    from twin.perception.evaluate import run_perception
+    from twin.tasks.pipelines import TASK_PIPELINES
 
-    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)
+    pipelines = TASK_PIPELINES
 
     fast, old = load_config("warehouse"), load_config("warehouse", OLD_WAREHOUSE)
     assert fast.perception.warehouse.plane_method == "ransac"

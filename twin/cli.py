@@ -828,13 +828,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_perceive(args: argparse.Namespace) -> int:
-    from twin.perception.evaluate import Pipelines, run_perception  # lazy: cv2
-    from twin.tasks.robocup.perception import perceive_robocup  # lazy: cv2
-    from twin.tasks.warehouse.perception import perceive_warehouse  # lazy: cv2
+    from twin.perception.evaluate import run_perception  # lazy: cv2
+    from twin.tasks.pipelines import TASK_PIPELINES  # lazy: cv2
 
     settings = _settings(args)
-    pipelines = Pipelines(warehouse=perceive_warehouse, robocup=perceive_robocup)  # the tasks' own pipelines
-    rep = run_perception(settings, pipelines=pipelines, detector=args.detector)
+    rep = run_perception(settings, pipelines=TASK_PIPELINES, detector=args.detector)
     fmt = "{:<24} {:<15} {:<15} {:<11} {:<11} {:<7} {:<7} {:>8} {:>8} {:>6}"
     print(fmt.format("object", "class", "estimate", "orient", "estimate", "color", "est", "dxy mm", "yaw deg", "S"))
     for o in rep.objects:
