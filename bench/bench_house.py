@@ -220,12 +220,19 @@ def static_report() -> dict[str, Any]:
 
 
 def run_report(config: str, seed: int) -> dict[str, Any]:
-    """Counters around one `twin run` in this process: URDF files parsed (by file), arms built (`URArm`),
-    robots built (`Robot.from_settings`) and plugin contexts made (`PluginContext`, however it is made)."""
+    """Counters around one `twin run` of `config` in this process (`counted_run`)."""
+    from twin.config import load_config
+
+    return {"config": config, **counted_run(load_config(config), seed)}
+
+
+def counted_run(settings: Any, seed: int) -> dict[str, Any]:
+    """Counters around one `run_task(settings, seed=seed)` in this process: URDF files parsed (by file), arms
+    built (`URArm`), robots built (`Robot.from_settings`) and plugin contexts made (`PluginContext`, however
+    it is made)."""
     import twin.registry as registry
     import twin.robot.kinematics as kinematics
     import twin.robot.urdf_model as urdf_model
-    from twin.config import load_config
     from twin.robot import Robot
     from twin.tasks import run_task
 
@@ -255,14 +262,14 @@ def run_report(config: str, seed: int) -> dict[str, Any]:
     registry.PluginContext.__init__ = counted_context  # type: ignore[method-assign]
     Robot.from_settings = classmethod(counted_robot)  # type: ignore[assignment,method-assign]
     try:
-        summary = run_task(load_config(config), seed=seed)
+        summary = run_task(settings, seed=seed)
     finally:
         urdf_model._parse, kinematics.URArm.__init__ = parse, arm_init  # type: ignore[method-assign]
         registry.PluginContext.__init__ = context_init  # type: ignore[method-assign]
         Robot.from_settings = robot_from  # type: ignore[method-assign]
     placed = sum(o.placed for o in summary.objects)
     done = f"{placed}/{len(summary.objects)}"
-    return {"config": config, "seed": seed, "placed": done, **dict(sorted(counts.items()))}
+    return {"seed": seed, "placed": done, **dict(sorted(counts.items()))}
 
 
 def main(argv: list[str] | None = None) -> int:
