@@ -23,6 +23,7 @@ from pydantic import (
 )
 
 from twin.config.base import Q6, ConfigModel, Vec3
+from twin.resources import data_files, packaged_path
 from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSettings
 from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
@@ -532,8 +533,6 @@ class Settings(ConfigModel):
 
         A path found nowhere resolves to where it was looked for first, for the error message.
         """
-        from twin.resources import data_files, packaged_path
-
         p = Path(path)
         if p.is_absolute():
             return p
