@@ -134,7 +134,7 @@ class DryRun:
 def tasks_available() -> bool:
     """True when `twin.tasks.run_task` can be imported (task scenarios run); else they are skipped."""
     try:
-        from twin.tasks import run_task  # noqa: F401
+        from twin.tasks import run_task  # noqa: F401  # lazy: an availability probe (ImportError: skip tasks)
     except ImportError:
         return False
     return True
@@ -142,7 +142,7 @@ def tasks_available() -> bool:
 
 def _check_physics_robot(settings: Settings) -> None:
     """ConfigError when the runs execute in physics and the robot URDF cannot (a planning-only model)."""
-    from twin.world import physics_parts_missing  # it imports PyBullet with its banner silenced
+    from twin.world import physics_parts_missing  # lazy: pybullet (imported with its banner silenced)
 
     missing = physics_parts_missing(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
     if missing:

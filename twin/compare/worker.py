@@ -88,7 +88,7 @@ def worker_init(threads: int | None = None) -> None:
 
 def _world(cell: QueryCell) -> World:
     if cell.world is None:
-        from twin.world import World
+        from twin.world import World  # lazy: pybullet
 
         cell.world = World(cell.settings, cell.settings.seed, renderer="tiny", robot=cell.robot)
     return cell.world
@@ -187,7 +187,7 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
 
 def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> None:
     try:
-        from twin.tasks import run_task
+        from twin.tasks import run_task  # lazy: tests substitute twin.tasks.run_task
     except ImportError:
         row["status"], row["reason"], row["success"] = "skipped", TASKS_UNAVAILABLE, None
         return
@@ -221,7 +221,7 @@ def task_attribution(failed: list[Any]) -> dict[str, Any]:
     its stages are those of the `transfer` group, physics during its motion included: an object dropped in
     its transfer is its failure) or one it does not ("elsewhere": the fixed stages, perception, grasping).
     Also the count of objects lost each way."""
-    from twin.tasks.cell import STAGE_GROUPS
+    from twin.tasks.cell import STAGE_GROUPS  # lazy: fcl, scipy
 
     def mine(o: Any) -> bool:
         return STAGE_GROUPS.get(o.stage or "") == "transfer"

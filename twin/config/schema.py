@@ -82,7 +82,7 @@ class RobotSettings(ConfigModel):
     def _model_defaults(cls, data: Any) -> Any:
         """The URDF and motor forces of the model chosen, where the config does not give its own."""
         if isinstance(data, dict) and data.get("model", "ur5e") != "ur5e":
-            from twin.robot.ur_models import UR_MODELS
+            from twin.robot.ur_models import UR_MODELS  # lazy: import twin stays light (twin.robot)
 
             model = UR_MODELS.get(str(data["model"]))
             if model is not None:  # an unknown name is the Literal's error

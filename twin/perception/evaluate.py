@@ -184,7 +184,7 @@ def _calibrate_in(world: World, settings: Settings, capture: Capture) -> Calibra
 def run_calibration(settings: Settings, *, seed: int | None = None, renderer: str = "auto") -> CalibrationReport:
     """Build the scene, take the calibration view (wrist: `camera.calibration_pose`), estimate
     T_base_camera from the base marker and compare it with the truth. MarkerNotFound when not visible."""
-    from twin.world import World
+    from twin.world import World  # lazy: pybullet
 
     seed = settings.seed if seed is None else int(seed)
     if find_marker_plate(settings) is None:
@@ -378,7 +378,7 @@ def run_perception(
     renders take ~100 ms each with EGL, its later ones ~15 ms); every capture's noise then comes from the
     world's own stream per capture, as in a task, and the measured frame's is another than without them.
     """
-    from twin.world import World
+    from twin.world import World  # lazy: pybullet
 
     seed = settings.seed if seed is None else int(seed)
     pipeline = settings.perception.pipeline

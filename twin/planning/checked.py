@@ -781,7 +781,7 @@ def plan(
 
     Bad input (unknown name, bad parameter) raises a TwinError; "no solution" is a status in the result.
     """
-    from twin.collision import PlanningScene
+    from twin.collision import PlanningScene  # lazy: fcl
 
     context = make_context(settings, registry, robot)
     p = make_planner(planner, context)

@@ -99,7 +99,7 @@ def cell_for(
         robot = Robot.from_settings(s)
         cell = _keep(key, QueryCell(s, robot, planning_scene(ps, s, world=world, robot=robot)))
     if cell is None:
-        from twin.collision import PlanningScene
+        from twin.collision import PlanningScene  # lazy: fcl
 
         s = load_config(config, overrides)
         # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps

@@ -767,7 +767,7 @@ class _Reader:
     as problems in it."""
 
     def __init__(self, config: str | Path, frames: FrameConvention, ignore_joints: Iterable[str], robot: str | None):
-        from twin.collision import PlanningScene
+        from twin.collision import PlanningScene  # lazy: fcl
 
         preset = MOVEIT_ROBOTS.get(robot) if robot is not None else MoveItRobot()
         if preset is None:

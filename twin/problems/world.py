@@ -180,7 +180,7 @@ def planning_scene(
     """The planning scene of a problem set in the cell `settings_for` made: its fixtures, the held box of
     `world` (default the set's; attached to the TCP) and the gripper opening the set states; for `robot`
     (default: built from `settings.robot`)."""
-    from twin.collision import PlanningScene
+    from twin.collision import PlanningScene  # lazy: fcl
 
     scene = PlanningScene.from_settings(settings, robot=robot)  # the known fixtures, the perceived ones as boxes
     # a collision model without finger joints (a spheres-only arm and gripper) has no opening to set
