@@ -405,7 +405,7 @@ class RobotBody:
     def sphere_flags(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
         """(n,) bool: False where the sphere model proves qs[i] (n, 6) clear of `env` and of itself, True
         where FCL must decide."""
-        from twin.collision.sphere_kernel import flag_configurations  # numba: loaded on first use
+        from twin.collision.sphere_kernel import flag_configurations  # lazy: numba (compiled on first use)
 
         if not (qs.flags.c_contiguous and qs.flags.writeable and qs.dtype == np.float64):
             qs = np.array(qs, dtype=float, order="C")  # one compiled specialisation: writeable C float64

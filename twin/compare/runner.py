@@ -32,6 +32,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from twin.compare.html_report import write_html
+from twin.compare.plots import write_plots
+from twin.compare.report import summarize, write_summary
 from twin.compare.spec import (
     CompareSpec,
     QueryScenario,
@@ -44,9 +47,18 @@ from twin.compare.spec import (
     load_compare_config,
     run_key,
 )
+from twin.compare.summary import Provenance
 from twin.compare.worker import TASKS_UNAVAILABLE, error_row, execute_run, worker_init
+from twin.config import load_config
 from twin.environment import environment
 from twin.errors import ConfigError, DependencyMissing, UnknownNameError
+from twin.planning import accepts_retimer, cannot_reach, declared_goal_kinds, make_context, make_planner, robot_refusal
+from twin.problems.cells import cell_for
+from twin.problems.sampling import sample_query
+from twin.problems.world import check_robot
+from twin.registry import Kind, default_registry, validate_params
+from twin.resources import config_names, packaged_config
+from twin.robot.urdf_model import RobotModel
 
 if TYPE_CHECKING:
     from twin.compare.summary import Summary
@@ -122,7 +134,7 @@ class DryRun:
 def tasks_available() -> bool:
     """True when `twin.tasks.run_task` can be imported (task scenarios run); else they are skipped."""
     try:
-        from twin.tasks import run_task  # noqa: F401
+        from twin.tasks import run_task  # noqa: F401  # lazy: an availability probe (ImportError: skip tasks)
     except ImportError:
         return False
     return True
@@ -130,8 +142,7 @@ def tasks_available() -> bool:
 
 def _check_physics_robot(settings: Settings) -> None:
     """ConfigError when the runs execute in physics and the robot URDF cannot (a planning-only model)."""
-    from twin.robot.urdf_model import RobotModel
-    from twin.world import physics_parts_missing  # it imports PyBullet with its banner silenced
+    from twin.world import physics_parts_missing  # lazy: pybullet (imported with its banner silenced)
 
     missing = physics_parts_missing(RobotModel.from_urdf(settings.resolve(settings.robot.urdf)))
     if missing:
@@ -148,11 +159,6 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
     than turning every one of its runs into an error row. With `draw_queries`, the first random query
     of each scenario is drawn, so a region that cannot yield what it asks for (`straight: blocked` with
     nothing in the way) is one error now rather than an error row per run."""
-    from twin.config import load_config
-    from twin.planning import accepts_retimer, make_context, make_planner, robot_refusal
-    from twin.problems.world import check_robot
-    from twin.registry import Kind, default_registry, validate_params
-
     source = spec.source or "<compare config>"
     settings = []
     for i, sc in enumerate(spec.scenarios):
@@ -196,9 +202,6 @@ def check_spec(spec: CompareSpec, *, instantiate: bool = True, draw_queries: boo
 def _draw_first_queries(spec: CompareSpec, source: str) -> None:
     """Draw the first random query of every query scenario (first seed), as the worker would."""
     import numpy as np
-
-    from twin.problems.cells import cell_for
-    from twin.problems.sampling import sample_query
 
     for i, sc in enumerate(spec.scenarios):
         if not isinstance(sc, QueryScenario) or sc.random is None or sc.scene is None:
@@ -468,8 +471,6 @@ def _run_local(
 
 def _shipped_config_names() -> dict[str, str]:
     """{real path on this machine: file name} of every config twin ships (`twin.resources`)."""
-    from twin.resources import config_names, packaged_config
-
     out: dict[str, str] = {}
     for name in config_names():
         p = packaged_config(name)
@@ -484,8 +485,6 @@ def _run_on_node(task: RunTask, shipped_config: str | None) -> dict[str, Any]:
     whose venv lives elsewhere would not find the driver's path). A user's own files are read at their path."""
     if shipped_config is not None:
         from dataclasses import replace
-
-        from twin.resources import packaged_config
 
         found = packaged_config(shipped_config)
         if found is None:  # an older twin on this node
@@ -588,10 +587,6 @@ def _runnable(runs: Sequence[RunTask]) -> tuple[list[RunTask], list[tuple[str, s
     query runs whose goal kind the planner declares it cannot reach (`goal_kinds`, e.g. nmpc: positions
     only), and runs on an arm the planner declares it does not plan for (`robot_models`, e.g. nmpc: the
     UR5e only). Such a pair is not a failure of the planner; it is not a comparison at all."""
-    from twin.config import load_config
-    from twin.planning import cannot_reach, declared_goal_kinds, robot_refusal
-    from twin.registry import default_registry
-
     have_tasks = tasks_available()
     classes: dict[str, type] = {}
     arms: dict[tuple[str, tuple[str, ...]], str] = {}  # (config, overrides) -> robot.model
@@ -739,10 +734,6 @@ def _write_reports(
 ) -> tuple[Summary, list[Path]]:
     """Summarize the rows and write the summary files, the plots (when asked and plotting is installed)
     and the HTML report; the summary and the files written after results.jsonl."""
-    from twin.compare.html_report import write_html
-    from twin.compare.report import summarize, write_summary
-    from twin.compare.summary import Provenance
-
     skipped_ids = {rid for rid, _ in skipped}
     skipped_pairs = Counter((r.planner_id, r.scenario) for r in runs if r.run_id in skipped_ids)
     summary = summarize(
@@ -757,8 +748,6 @@ def _write_reports(
     pictures: list[Path] = []
     if plots:
         try:
-            from twin.compare.plots import write_plots
-
             pictures = write_plots(rows, out, planners=[p.id for p in spec.planners], summary=summary)
         except DependencyMissing as e:
             log.warning("no plots: %s", e)

@@ -83,6 +83,7 @@ from twin.assets import digest
 from twin.config import PlannerBlock, apply_override, find_config, load_config, read_yaml
 from twin.config.loader import unknown_key_hint
 from twin.errors import ConfigError
+from twin.problems.mbm import mbm_problem_set
 from twin.problems.model import ProblemSet, load_problem_set
 from twin.problems.queries import query_of_problem
 from twin.problems.sampling import RandomQueries
@@ -451,8 +452,6 @@ class Case(NamedTuple):
 def config_digest(path: str | Path, overrides: Iterable[str] = ()) -> str:
     """Hash of a scene/task config as loaded (after `extends` and overrides), so an edit to the file that
     changes what a run does changes the run ids, and a comment or a moved checkout does not."""
-    from twin.config import load_config
-
     return digest(load_config(path, list(overrides)).model_dump(mode="json"), 16)
 
 
@@ -730,8 +729,6 @@ def _problem_set(ref: str, base: Path, where: str) -> tuple[ProblemSet, str]:
     MotionBenchMaker's, `twin.problems.mbm`); ConfigError naming it."""
     try:
         if ref.startswith("mbm:"):
-            from twin.problems.mbm import mbm_problem_set
-
             path = mbm_problem_set(ref.removeprefix("mbm:"))
         else:
             path = Path(ref) if Path(ref).is_absolute() else base / ref

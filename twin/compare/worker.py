@@ -33,13 +33,16 @@ from twin.compare.metrics import (
     trajectory_metrics,
 )
 from twin.compare.spec import RunTask
+from twin.config import PlannerBlock, load_config
 from twin.errors import TwinError
+from twin.planning import limit_ratios, limits_from_settings, make_context, make_planner, plan_with
 from twin.problems.cells import QueryCell, cell_for
 from twin.problems.sampling import sample_query, straight_free
+from twin.rerun_log import RerunRecording
+from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
 
 if TYPE_CHECKING:
     from twin.config import Settings
-    from twin.types import MotionRequest
     from twin.world import World
 
 __all__ = [
@@ -85,7 +88,7 @@ def worker_init(threads: int | None = None) -> None:
 
 def _world(cell: QueryCell) -> World:
     if cell.world is None:
-        from twin.world import World
+        from twin.world import World  # lazy: pybullet
 
         cell.world = World(cell.settings, cell.settings.seed, renderer="tiny", robot=cell.robot)
     return cell.world
@@ -117,9 +120,6 @@ def _drawn_query(task: RunTask, cell: QueryCell) -> dict[str, Any]:
 
 
 def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> MotionRequest:
-    from twin.planning import limits_from_settings
-    from twin.types import JointGoal, MotionRequest, Pose, PoseGoal
-
     if query.get("goal") is not None:
         goal: Any = JointGoal(query["goal"])
     else:
@@ -144,9 +144,6 @@ def _request(task: RunTask, query: dict[str, Any], settings: Settings) -> Motion
 
 
 def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> None:
-    from twin.config import PlannerBlock
-    from twin.planning import limit_ratios, make_context, make_planner, plan_with
-
     cell = cell_for(task.config, task.overrides, task.unknown_fixtures, task.problems, task.query_index)
     settings = cell.settings.model_copy(update={"seed": task.seed})
     query = dict(task.query) if task.query is not None else dict(_drawn_query(task, cell))
@@ -172,8 +169,6 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
     row["metrics"]["fallback_steps"] = None if fallback is None else int(fallback)
     row["metrics"].update(limit_metrics(limit_ratios(result)))  # a refused motion's too: why it was refused
     if rerun is not None:  # `twin replay`: the query, its plan and its verdict as a recording
-        from twin.rerun_log import RerunRecording
-
         recording = RerunRecording(rerun, scene=cell.scene, kin=cell.kin, recording_id=task.run_id)
         recording.query(request, result, task.planner_id)
         recording.close()
@@ -192,12 +187,10 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
 
 def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> None:
     try:
-        from twin.tasks import run_task
+        from twin.tasks import run_task  # lazy: tests substitute twin.tasks.run_task
     except ImportError:
         row["status"], row["reason"], row["success"] = "skipped", TASKS_UNAVAILABLE, None
         return
-    from twin.config import PlannerBlock, load_config
-
     # the whole planner block (params, retimer) is the transfer planner, so two variants of one planner
     # are two different task runs
     settings = load_config(task.config, task.overrides)
@@ -228,7 +221,7 @@ def task_attribution(failed: list[Any]) -> dict[str, Any]:
     its stages are those of the `transfer` group, physics during its motion included: an object dropped in
     its transfer is its failure) or one it does not ("elsewhere": the fixed stages, perception, grasping).
     Also the count of objects lost each way."""
-    from twin.tasks.cell import STAGE_GROUPS
+    from twin.tasks.cell import STAGE_GROUPS  # lazy: fcl, scipy
 
     def mine(o: Any) -> bool:
         return STAGE_GROUPS.get(o.stage or "") == "transfer"

@@ -23,6 +23,7 @@ from pydantic import (
 )
 
 from twin.config.base import Q6, ConfigModel, Vec3
+from twin.resources import data_files, packaged_path
 from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSettings
 from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
@@ -81,7 +82,7 @@ class RobotSettings(ConfigModel):
     def _model_defaults(cls, data: Any) -> Any:
         """The URDF and motor forces of the model chosen, where the config does not give its own."""
         if isinstance(data, dict) and data.get("model", "ur5e") != "ur5e":
-            from twin.robot.ur_models import UR_MODELS
+            from twin.robot.ur_models import UR_MODELS  # lazy: import twin stays light (twin.robot)
 
             model = UR_MODELS.get(str(data["model"]))
             if model is not None:  # an unknown name is the Literal's error
@@ -532,8 +533,6 @@ class Settings(ConfigModel):
 
         A path found nowhere resolves to where it was looked for first, for the error message.
         """
-        from twin.resources import data_files, packaged_path
-
         p = Path(path)
         if p.is_absolute():
             return p

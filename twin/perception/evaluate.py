@@ -27,9 +27,13 @@ from scipy.optimize import linear_sum_assignment
 
 from twin.camera import true_camera_pose
 from twin.config import Settings
-from twin.perception.aruco import Calibration, calibrate, transform_error
+from twin.errors import ConfigError
+from twin.perception.aruco import Calibration, MarkerNotFound, calibrate, transform_error
 from twin.perception.capture import Capture, capture_frame, noise_rng, prefetch_next_capture
 from twin.perception.detection import detection_label, with_ground_truth
+from twin.perception.pipeline import camera_extrinsics, make_detector
+from twin.registry import PluginContext, default_registry
+from twin.robot import Robot
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.transforms import rpy_to_matrix as rpy_matrix
 from twin.types import BoxBounds, quat_to_matrix
@@ -180,8 +184,7 @@ def _calibrate_in(world: World, settings: Settings, capture: Capture) -> Calibra
 def run_calibration(settings: Settings, *, seed: int | None = None, renderer: str = "auto") -> CalibrationReport:
     """Build the scene, take the calibration view (wrist: `camera.calibration_pose`), estimate
     T_base_camera from the base marker and compare it with the truth. MarkerNotFound when not visible."""
-    from twin.errors import ConfigError
-    from twin.world import World
+    from twin.world import World  # lazy: pybullet
 
     seed = settings.seed if seed is None else int(seed)
     if find_marker_plate(settings) is None:
@@ -375,11 +378,7 @@ def run_perception(
     renders take ~100 ms each with EGL, its later ones ~15 ms); every capture's noise then comes from the
     world's own stream per capture, as in a task, and the measured frame's is another than without them.
     """
-    from twin.perception.aruco import MarkerNotFound
-    from twin.perception.pipeline import camera_extrinsics, make_detector
-    from twin.registry import PluginContext, default_registry
-    from twin.robot import Robot
-    from twin.world import World
+    from twin.world import World  # lazy: pybullet
 
     seed = settings.seed if seed is None else int(seed)
     pipeline = settings.perception.pipeline

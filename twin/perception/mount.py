@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from twin.camera import camera_pose, point_cloud
 from twin.config import Settings
 from twin.perception.capture import Capture, wrist_camera_offset
 from twin.robot.kinematics import URArm
@@ -26,8 +27,7 @@ _PLANE_STRIDE = 4  # every 4th pixel in each direction: ~19 000 points from 640 
 def table_plane(cap: Capture) -> tuple[np.ndarray, float] | None:
     """The dominant plane of the depth image in the camera frame: (unit normal towards the camera, the
     camera's distance from it m); None when no plane holds `_PLANE_MIN_INLIERS` of the points."""
-    from twin.camera import point_cloud
-    from twin.perception.geometry import fit_plane_ransac
+    from twin.perception.geometry import fit_plane_ransac  # lazy: scipy
 
     pts, _ = point_cloud(cap.frame, stride=_PLANE_STRIDE)
     if len(pts) < 500:
@@ -81,8 +81,6 @@ def error_bound_m(settings: Settings, arm: URArm, *, levelled: bool = False) -> 
     height measured): t + rho r, rho that corner's level distance from the camera (a turn about the vertical
     and a level shift are what is left). The region, not the image: a fixed camera's image reaches past the
     table, where no object is looked for."""
-    from twin.camera import camera_pose
-
     cam = settings.camera
     t, r = cam.mount_tolerance.translation_m, math.radians(cam.mount_tolerance.rotation_deg)
     if cam.mount == "wrist":

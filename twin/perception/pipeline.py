@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from twin.config import Settings
+from twin.errors import ConfigError
 from twin.perception.capture import Capture, wrist_camera_offset
 from twin.perception.detection import Detector
 from twin.registry import PluginContext, default_registry
@@ -55,8 +56,6 @@ def camera_extrinsics(
     fixed + kinematics: the configured mount pose (nominal, no estimation). `arm`: the run's arm (a wrist
     camera's forward kinematics).
     """
-    from twin.errors import ConfigError
-
     mode = settings.perception.extrinsics
     if mode == "auto":
         mode = "aruco" if capture.mount == "fixed" else "kinematics"

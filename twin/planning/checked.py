@@ -25,16 +25,18 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.errors import InvalidRequestError, PlanningError, PluginCrashed, TwinError
+from twin.config import PlannerBlock
+from twin.errors import ConfigError, InvalidRequestError, PlanningError, PluginCrashed, TwinError
 from twin.limit_check import LIMIT_TOLERANCE, LimitExcess, limit_excess, stitched
-from twin.registry import PluginContext, Registry, default_registry
+from twin.registry import Kind, PluginContext, Registry, default_registry
 from twin.robot import Robot
+from twin.robot.ur_models import ur_model
 from twin.timing import stage
 from twin.types import BoxBounds, JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Status, Trajectory
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
-    from twin.config import PlannerBlock, Settings
+    from twin.config import Settings
     from twin.robot.kinematics import URArm
 
 __all__ = [
@@ -255,8 +257,6 @@ def robot_refusal(name: str, planner_class: type, model: str) -> str | None:
 def limits_from_settings(settings: Settings, *, tcp_speed: float | None = None) -> Limits:
     """The config's joint limits, each joint's speed no faster than the arm's datasheet allows
     (`twin.robot.ur_models`: the UR10e's base and shoulder turn at most 120 deg/s)."""
-    from twin.robot.ur_models import ur_model
-
     r = settings.robot
     vel = np.minimum(float(r.max_joint_vel), ur_model(r.model).speed_limits())
     return Limits(vel, np.full(6, float(r.max_joint_acc)), np.full(6, float(r.max_joint_jerk)), tcp_speed)
@@ -275,23 +275,16 @@ def make_context(settings: Settings, registry: Registry | None = None, robot: Ro
 def make_planner(block: PlannerBlock | str, context: PluginContext) -> CheckedPlanner:
     """Instantiate a planner from a config block `{name, params, retimer}` or a bare name, wrapped in the
     one check every planner gets (`CheckedPlanner`)."""
-    from twin.config import PlannerBlock
-    from twin.registry import Kind
-
     if isinstance(block, str):
         block = PlannerBlock(name=block)
     entry = context.registry.entry(block.name, (Kind.PLANNER, Kind.RECEDING_HORIZON))
     refusal = robot_refusal(block.name, entry.load(), context.kinematics.model)
     if refusal is not None:
-        from twin.errors import ConfigError
-
         raise ConfigError(refusal)
     with _plugin_code(block.name, "its constructor"):
         planner = context.registry.planner(block.name, block.params, context)
     if block.retimer is not None:
         if not accepts_retimer(type(planner)):
-            from twin.errors import ConfigError
-
             raise ConfigError(f"planner {block.name!r} produces trajectories itself and takes no retimer")
         planner.set_retimer(context.registry.retimer(block.retimer, block.retimer_params, context))
     return CheckedPlanner(
@@ -788,7 +781,7 @@ def plan(
 
     Bad input (unknown name, bad parameter) raises a TwinError; "no solution" is a status in the result.
     """
-    from twin.collision import PlanningScene
+    from twin.collision import PlanningScene  # lazy: fcl
 
     context = make_context(settings, registry, robot)
     p = make_planner(planner, context)

@@ -62,7 +62,7 @@ CHORD_EPS2 = 1e-4
 def sphere_centres(frames: np.ndarray, tcp_offset_m: float, spheres: np.ndarray) -> np.ndarray:
     """Numeric twin of the NLP's sphere model: centres (m, n, 3) of spheres (n, 5) = (frame, x, y, z, r)
     for DH frames (m, 7, 4, 4) from `URArm.dh_frames`; frame TCP_FRAME is the TCP (`twin.planning.mpc_kernel`)."""
-    from twin.planning.mpc_kernel import sphere_centres_into  # numba: loaded on first use
+    from twin.planning.mpc_kernel import sphere_centres_into  # lazy: numba (compiled on first use)
 
     tool = np.eye(4)
     tool[2, 3] = tcp_offset_m

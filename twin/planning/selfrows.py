@@ -68,7 +68,7 @@ def self_pairs(sph: np.ndarray) -> np.ndarray:
 
 def pair_gaps(centres: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """(m, P) how far apart the spheres (centres (m, n, 3), radii (n,)) of each pair (P, 2) are (< 0: overlapping)."""
-    from twin.planning.mpc_kernel import pair_gaps_into  # numba: loaded on first use
+    from twin.planning.mpc_kernel import pair_gaps_into  # lazy: numba (compiled on first use)
 
     gap = np.empty((centres.shape[0], pairs.shape[0]))
     pair_gaps_into(np.ascontiguousarray(centres), np.ascontiguousarray(radii, dtype=float), pairs, gap)

@@ -42,13 +42,14 @@ __all__ = [
 
 
 def __getattr__(name: str) -> Any:
-    # these load the planning scene and the robot model (FCL, kinematics) only when asked for
+    # the exporters load the robot model, the query cells and the sampler (14 more twin modules, no heavy
+    # library: FCL and PyBullet load only when a cell is built), so reading a problem file does not
     if name == "export_problem_set":
-        from twin.problems.export import export_problem_set
+        from twin.problems.export import export_problem_set  # lazy: import twin.problems stays light
 
         return export_problem_set
     if name in ("problem_set_from_moveit", "problem_set_from_moveit_dir"):
-        from twin.problems import moveit
+        from twin.problems import moveit  # lazy: import twin.problems stays light
 
         return getattr(moveit, name)
     raise AttributeError(f"module 'twin.problems' has no attribute {name!r}")

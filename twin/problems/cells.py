@@ -14,6 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from twin.config import load_config
+from twin.problems.model import load_problem_set
+from twin.problems.world import check_robot, planning_scene, settings_for
 from twin.robot import Robot
 
 if TYPE_CHECKING:
@@ -54,8 +57,6 @@ _SETS: dict[str, ProblemSet] = {}  # problem sets read in this process, by path
 def _problem_set(path: str) -> ProblemSet:
     ps = _SETS.get(path)
     if ps is None:
-        from twin.problems.model import load_problem_set
-
         ps = _SETS[path] = load_problem_set(path)
     return ps
 
@@ -90,9 +91,6 @@ def cell_for(
     key: _CellKey = (config, overrides, unknown_fixtures, problems, own)
     cell = _CELLS.get(key)
     if cell is None and problems is not None:
-        from twin.config import load_config
-        from twin.problems.world import check_robot, planning_scene, settings_for
-
         ps = _problem_set(problems)
         s = load_config(config, overrides)
         check_robot(ps, s, source=problems)
@@ -101,8 +99,7 @@ def cell_for(
         robot = Robot.from_settings(s)
         cell = _keep(key, QueryCell(s, robot, planning_scene(ps, s, world=world, robot=robot)))
     if cell is None:
-        from twin.collision import PlanningScene
-        from twin.config import load_config
+        from twin.collision import PlanningScene  # lazy: fcl
 
         s = load_config(config, overrides)
         # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import ValidationError
 
+from twin.config import find_config
 from twin.errors import ConfigError
 from twin.problems.cells import cell_for
 from twin.problems.model import ProblemSet
@@ -46,8 +47,6 @@ def export_problem_set(
     (RandomQueries fields: goal, straight, regions, clearances; `count` is the argument).
 
     Raises ConfigError for a bad config, bad `random` fields or a region that yields no query."""
-    from twin.config import find_config
-
     path = str(find_config(config).resolve())
     scenario = name or Path(path).stem
     try:

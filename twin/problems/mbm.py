@@ -14,7 +14,11 @@ import tarfile
 from pathlib import Path
 from typing import IO
 
+from twin.assets import write_atomic
 from twin.errors import ConfigError
+from twin.problems.model import save_problem_set
+from twin.problems.moveit import problem_set_from_moveit_dir
+from twin.resources import cache_dir
 
 __all__ = ["MBM_PREFIX", "SCENES", "SDIST", "mbm_problem_set", "mbm_problems_dir", "mbm_spherized_urdf"]
 
@@ -25,8 +29,6 @@ _SET_VERSION = "v1"  # bump when the importer's output changes: the cached sets 
 
 
 def _cache() -> Path:
-    from twin.resources import cache_dir
-
     return cache_dir("mbm")
 
 
@@ -44,8 +46,6 @@ def mbm_spherized_urdf() -> Path:
     """MBM's spheres-only collision model of the UR5 with its Robotiq 2F-85 (`ur5_spherized.urdf`, the model
     VAMP plans with; root `offset_link`, the world frame of the problems), taken from the sdist on first use.
     Usable as `robot.urdf` with `robot.model: ur5` for planning (no finger joints: it cannot run physics)."""
-    from twin.assets import write_atomic
-
     path = _cache() / "ur5_spherized.urdf"
     if not path.is_file():
         write_atomic(path, _sdist_member("resources/ur5/ur5_spherized.urdf").read())
@@ -78,9 +78,6 @@ def mbm_problem_set(name: str) -> Path:
         raise ConfigError(f"unknown MotionBenchMaker set {name!r}; known: " + ", ".join(f"ur5/{s}" for s in SCENES))
     path = _cache() / "sets" / f"{scene}-{_SET_VERSION}.json"
     if not path.is_file():
-        from twin.problems.model import save_problem_set
-        from twin.problems.moveit import problem_set_from_moveit_dir
-
         ps = problem_set_from_moveit_dir(mbm_problems_dir() / f"{scene}_ur5", robot="ur5", name=scene)
         tmp = save_problem_set(ps, path.with_suffix(f".{os.getpid()}.tmp"))
         os.replace(tmp, path)  # whole or not at all: two processes may import it at once

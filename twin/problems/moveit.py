@@ -67,6 +67,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from twin.config import find_config, load_config
 from twin.config.loader import read_yaml
 from twin.errors import ConfigError
 from twin.messages import one_line, short_repr
@@ -83,6 +84,7 @@ from twin.problems.model import (
     WorldSpec,
 )
 from twin.problems.world import robot_spec
+from twin.resources import packaged_config
 from twin.transforms import pose_from_xyz_rpy
 
 if TYPE_CHECKING:
@@ -617,9 +619,6 @@ def _reject_path_constraints(request: _At) -> None:
 def _config_ref(config: str | Path) -> tuple[str, Path]:
     """(what `source.config` records, the config file): a shipped config by its name, so the set plans
     anywhere; another by its absolute path."""
-    from twin.config import find_config
-    from twin.resources import packaged_config
-
     path = find_config(config).resolve()
     shipped = packaged_config(path.name)
     return (path.name if shipped is not None and shipped.resolve() == path else str(path)), path
@@ -768,8 +767,7 @@ class _Reader:
     as problems in it."""
 
     def __init__(self, config: str | Path, frames: FrameConvention, ignore_joints: Iterable[str], robot: str | None):
-        from twin.collision import PlanningScene
-        from twin.config import load_config
+        from twin.collision import PlanningScene  # lazy: fcl
 
         preset = MOVEIT_ROBOTS.get(robot) if robot is not None else MoveItRobot()
         if preset is None:

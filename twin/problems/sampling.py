@@ -14,6 +14,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from twin.errors import ConfigError
+from twin.types import Pose
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
@@ -95,8 +96,6 @@ def sample_query(
     Raises ConfigError when the region yields no valid configuration in a few thousand draws, or no pair
     with the asked straight motion in a few hundred valid pairs.
     """
-    from twin.types import Pose
-
     start_box, goal_box = _box(random, ""), _box(random, "goal_")
     want = random.get("straight", "any")
 
@@ -169,8 +168,6 @@ def straight_free(query: dict[str, Any], *, scene: PlanningScene, kin: URArm, re
     """Whether the straight joint motion from the query's start to its goal is collision-free (checked
     every `resolution_rad`); for a pose goal, to the IK solution nearest the start. None when a pose goal
     has no IK solution."""
-    from twin.types import Pose
-
     start = np.asarray(query["start"], dtype=float)
     if query.get("goal") is not None:
         goal = np.asarray(query["goal"], dtype=float)

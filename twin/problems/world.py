@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from twin.assets import digest
+from twin.assets import digest, write_atomic
+from twin.config.schema import FixtureSettings
 from twin.errors import ConfigError
 from twin.problems.model import (
     BoxShape,
@@ -28,6 +29,9 @@ from twin.problems.model import (
     SphereShape,
     WorldSpec,
 )
+from twin.resources import cache_dir
+from twin.robot.kinematics import URArm
+from twin.robot.urdf_model import RobotModel
 from twin.transforms import matrix_to_rpy
 
 if TYPE_CHECKING:
@@ -106,9 +110,6 @@ def _geometry(prim: BoxShape | CylinderShape | SphereShape) -> str:
 def object_urdf(obj: CollisionObject) -> Path:
     """The URDF of one object (a static link whose collision and visual elements are its primitives, in
     the world frame), written to twin's cache on first use."""
-    from twin.assets import write_atomic
-    from twin.resources import cache_dir
-
     body = []
     for prim in obj.primitives:
         o, g = _origin(prim.pose.matrix()), _geometry(prim)
@@ -139,8 +140,6 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
     """ConfigError unless the problem set's robot is the one `settings` loads (same URDF file name, or another
     collision model of the same arm: the set's URDF, where it is at hand, fits the config's `robot.model`; same
     arm joints in the same order)."""
-    from twin.robot.urdf_model import RobotModel
-
     want, have = Path(ps.robot.urdf).name, Path(settings.robot.urdf).name
     if want != have and not _same_arm(settings.resolve(ps.robot.urdf), settings):
         raise ConfigError(
@@ -154,9 +153,6 @@ def check_robot(ps: ProblemSet, settings: Settings, *, source: str = "problem se
 
 def _same_arm(urdf: Path, settings: Settings) -> bool:
     """Whether a URDF file is the arm of `settings.robot.model` (its joints on the arm's DH axes)."""
-    from twin.robot.kinematics import URArm
-    from twin.robot.urdf_model import RobotModel
-
     if not urdf.is_file():
         return False
     arm = URArm(model=settings.robot.model)  # the config's arm, to check another URDF against
@@ -168,8 +164,6 @@ def settings_for(ps: ProblemSet, base: Settings, *, world: WorldSpec | None = No
     problem's own: `ps.world_of(i)`) as its only fixtures and no loose objects: the cell a problem is
     planned and executed in. Perceived boxes are fixtures marked `known: false` (in the physics; added to
     the planning scene as boxes)."""
-    from twin.config.schema import FixtureSettings
-
     spec = ps.world if world is None else world
     perceived = set(spec.perceived_boxes)
     fixtures = [
@@ -186,7 +180,7 @@ def planning_scene(
     """The planning scene of a problem set in the cell `settings_for` made: its fixtures, the held box of
     `world` (default the set's; attached to the TCP) and the gripper opening the set states; for `robot`
     (default: built from `settings.robot`)."""
-    from twin.collision import PlanningScene
+    from twin.collision import PlanningScene  # lazy: fcl
 
     scene = PlanningScene.from_settings(settings, robot=robot)  # the known fixtures, the perceived ones as boxes
     # a collision model without finger joints (a spheres-only arm and gripper) has no opening to set

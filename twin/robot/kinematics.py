@@ -76,7 +76,7 @@ def dh_frames(qs: np.ndarray, dh: DHParameters | None = None) -> np.ndarray:
 
 
 def _frames(qs: np.ndarray, d: np.ndarray, a: np.ndarray, ca: np.ndarray, sa: np.ndarray) -> np.ndarray:
-    from twin.robot.kinematics_kernel import dh_frames_into
+    from twin.robot.kinematics_kernel import dh_frames_into  # lazy: numba (compiled on first use)
 
     qs = np.atleast_2d(np.asarray(qs, dtype=float))
     if not (qs.flags.c_contiguous and qs.flags.writeable):

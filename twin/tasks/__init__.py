@@ -35,7 +35,7 @@ log = logging.getLogger("twin")
 def make_task(settings: Settings, context: PluginContext | None = None) -> Any:
     """The task plugin named by `settings.task.kind`, built with its validated `task.params`; an unknown
     name raises UnknownNameError listing the registered tasks."""
-    from twin.planning import make_context
+    from twin.planning import make_context  # lazy: breaks the cycle twin.config <-> twin.tasks
 
     context = context or make_context(settings)
     return context.registry.task(settings.task.kind, settings.task.params, context)
@@ -82,17 +82,17 @@ def run_task(
     address is logged; the viewer keeps serving after the run). `on_stage(text)` is told each stage as it starts,
     `on_objects(done, total)` how many of the objects the task knows of it is done with (`Cell.objects_done`).
     Bad config or planner names raise before anything is simulated."""
-    from twin.config import with_planner
-    from twin.planning import make_context
-    from twin.recording import Recorder
-    from twin.tasks.cell import Cell, stage_planners
+    from twin.config import with_planner  # lazy: breaks the cycle twin.config <-> twin.tasks
+    from twin.planning import make_context  # lazy: breaks the cycle twin.config <-> twin.tasks
+    from twin.recording import Recorder  # lazy: breaks the cycle twin.config <-> twin.tasks
+    from twin.tasks.cell import Cell, stage_planners  # lazy: fcl, scipy
 
     if planner is not None:
         settings = with_planner(settings, "transfer", planner)
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record, speed=record_speed) if record else None
     if rerun or rerun_serve:
-        from twin.rerun_log import rerun_module
+        from twin.rerun_log import rerun_module  # lazy: breaks the cycle twin.config <-> twin.tasks
 
         rerun_module()  # a missing SDK fails here, before anything is built
     t0 = time.perf_counter()
@@ -104,7 +104,7 @@ def run_task(
             if recorder is not None:
                 recorder.landmarks = tuple(_landmarks_of(task))
             with stage("imports"):  # pybullet prints a banner on import: only once the input is known good
-                from twin.world import World
+                from twin.world import World  # lazy: pybullet
 
             world = World(settings, seed=seed, gui=gui, robot=context.robot)
         with world:
@@ -114,8 +114,8 @@ def run_task(
                 recorder.attach(world)
             recording = None
             if rerun or rerun_serve:
-                from twin.collision import PlanningScene
-                from twin.rerun_log import RerunRecording
+                from twin.collision import PlanningScene  # lazy: fcl
+                from twin.rerun_log import RerunRecording  # lazy: breaks the cycle twin.config <-> twin.tasks
 
                 recording = RerunRecording(
                     rerun,

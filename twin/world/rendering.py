@@ -4,15 +4,12 @@ from __future__ import annotations
 
 import importlib.util
 import logging
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.camera import Intrinsics, RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix, look_at
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_fds, quiet_stdout
-
-if TYPE_CHECKING:
-    from twin.camera import Intrinsics, RGBDFrame
 
 __all__ = ["EGL_WARM_UP_FRAMES", "load_egl_renderer", "render_rgbd", "warm_up_egl"]
 
@@ -43,8 +40,6 @@ def load_egl_renderer(client_id: int) -> bool:
 
 def warm_up_egl(client_id: int) -> None:
     """Render the EGL renderer's shadowless first frames (`EGL_WARM_UP_FRAMES`), 1x1, unseen."""
-    from twin.camera import Intrinsics, gl_projection_matrix, gl_view_matrix, look_at
-
     view = gl_view_matrix(look_at((1.0, 0.0, 1.0), (0.0, 0.0, 0.0)))
     projection = gl_projection_matrix(Intrinsics(1, 1, 1.0, 1.0), 0.05, 5.0)
     with stage("rendering"), quiet_stdout():
@@ -66,8 +61,6 @@ def render_rgbd(
     """An RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, by the EGL
     renderer (warmed up: `warm_up_egl`) or TinyRenderer. Depth is converted from PyBullet's non-linear
     z-buffer to metres along the optical axis."""
-    from twin.camera import RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix
-
     with stage("rendering"), quiet_stdout(egl):
         _, _, rgba, zbuf, _ = pb.getCameraImage(
             intrinsics.width,
