@@ -183,6 +183,13 @@ def static_report() -> dict[str, Any]:
         edges.setdefault(module, set())
         for target, in_function, line, reason in _imports(module, path, known):
             edges[module].add(target)
+            # importing a.b.c first runs a and a.b (their __init__): an edge to each, but not to the importer's
+            # own packages (already being initialised when one of their modules imports a sibling)
+            parts = target.split(".")
+            for k in range(1, len(parts)):
+                parent = ".".join(parts[:k])
+                if parent in known and not (module == parent or module.startswith(parent + ".")):
+                    edges[module].add(parent)
             if in_function:
                 local[module].add(line)
                 if not reason:

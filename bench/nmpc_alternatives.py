@@ -31,7 +31,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-import twin_nmpc.model as model
+import twin_nmpc.nlp as model
 from twin.config import PlannerBlock, Settings
 from twin.planning import make_context, make_planner, plan_with
 from twin_nmpc.scenarios import build_scene, transfer_scenes

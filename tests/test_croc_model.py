@@ -11,7 +11,7 @@ pytest.importorskip("crocoddyl")
 
 from twin.planning.proxy_spheres import TCP_FRAME, robot_spheres, sphere_centres  # noqa: E402
 from twin.plugin import URArm  # noqa: E402
-from twin_croc.model import TCP_FRAME_NAME, arm_model, dh_frame_name, sphere_frames  # noqa: E402
+from twin_croc.pinocchio_arm import TCP_FRAME_NAME, arm_model, dh_frame_name, sphere_frames  # noqa: E402
 from twin_nmpc.params import NMPCParams  # noqa: E402
 
 

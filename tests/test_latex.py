@@ -28,7 +28,7 @@ from twin.compare.stats import wilson_ci
 from twin.compare.summary import Provenance
 from twin.errors import ConfigError
 from twin.problems import ProblemSet
-from twin.problems.model import JointGoalSpec, Problem, RobotSpec
+from twin.problems.problem_set import JointGoalSpec, Problem, RobotSpec
 
 # (planner, scenario) -> (successes, runs): counts whose Wilson interval differs from the bootstrap's and the
 # normal approximation's (2/2 is [34, 100] here, [100, 100] there)

@@ -18,7 +18,7 @@ from tests.cli_runner import twin
 from twin.config import Settings, load_config
 from twin.errors import ConfigError
 from twin.problems import load_problem_set, problem_set_from_moveit_dir
-from twin.problems.model import BoxShape, CylinderShape
+from twin.problems.problem_set import BoxShape, CylinderShape
 from twin.transforms import pose_from_xyz_rpy
 
 ARM = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]

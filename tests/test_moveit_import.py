@@ -23,8 +23,8 @@ import yaml
 from twin.config import load_config
 from twin.errors import ConfigError
 from twin.problems import load_problem_set, save_problem_set
-from twin.problems.model import BoxShape, CylinderShape, JointGoalSpec, PoseGoalSpec, ProblemSet, SphereShape
 from twin.problems.moveit import problem_set_from_moveit
+from twin.problems.problem_set import BoxShape, CylinderShape, JointGoalSpec, PoseGoalSpec, ProblemSet, SphereShape
 from twin.problems.world import planning_scene, settings_for
 from twin.transforms import quat_to_matrix
 

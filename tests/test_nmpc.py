@@ -42,7 +42,7 @@ from twin.planning.proxy_spheres import (
 from twin.registry import Kind, default_registry
 from twin.testing import contract_queries, limit_violations
 from twin.types import BoxBounds, JointGoal, MotionRequest, MotionResult, Pose, PoseGoal, Status, Trajectory
-from twin_nmpc.model import ProblemShape, fk_frames_sx
+from twin_nmpc.nlp import ProblemShape, fk_frames_sx
 from twin_nmpc.params import NMPCParams
 from twin_nmpc.planner import NMPCPlanner
 from twin_nmpc.scenarios import CUBE_SIZE_M, build_scene, check_trajectory, transfer_scenes
@@ -366,7 +366,7 @@ def test_start_with_a_sphere_in_the_box_is_an_invalid_start(nmpc, scenes, settin
 
 
 def test_failed_solves_follow_the_last_feasible_plan_then_stop_safely(ctx, scenes, settings, monkeypatch):
-    from twin_nmpc.model import NMPCProblem
+    from twin_nmpc.nlp import NMPCProblem
 
     planner = make_planner(PlannerBlock(name="nmpc", params=dict(SEED000, horizon=6)), ctx)
     ts = scenes[4]
@@ -401,7 +401,7 @@ def test_failed_solves_follow_the_last_feasible_plan_then_stop_safely(ctx, scene
 
 
 def test_a_failed_cold_solve_follows_its_checked_guess(nmpc, scenes, settings, ctx, monkeypatch):
-    from twin_nmpc.model import NMPCProblem
+    from twin_nmpc.nlp import NMPCProblem
 
     planner = nmpc
     real = NMPCProblem.solve
@@ -599,7 +599,7 @@ def test_the_nlp_is_built_once_per_process_and_before_the_first_step(nmpc, ctx, 
     """NLPs are shared by planners with the same parameters, and the shape a run expects (`prebuild_boxes`;
     by default one box per fixture perception reports: the warehouse wall) is built at construction: the
     first (timed) step of a warehouse transfer builds nothing."""
-    from twin_nmpc import model
+    from twin_nmpc import nlp
 
     a, b = NMPCPlanner(NMPCParams(**SEED000), ctx), NMPCPlanner(NMPCParams(**SEED000), ctx)
     one_box = ProblemShape(30, 1, 0, 2)
@@ -609,7 +609,7 @@ def test_the_nlp_is_built_once_per_process_and_before_the_first_step(nmpc, ctx, 
     def no_build(*args, **kwargs):
         raise AssertionError("an NLP was built")
 
-    monkeypatch.setattr(model.NMPCProblem, "__init__", no_build)
+    monkeypatch.setattr(nlp.NMPCProblem, "__init__", no_build)
     c = NMPCPlanner(NMPCParams(**SEED000), ctx)
     ts = scenes[0]
     c.reset(ts.request, build_scene(settings, ts))

@@ -19,8 +19,15 @@ from scipy.spatial import cKDTree
 
 from twin.camera import Intrinsics, RGBDFrame, point_cloud
 from twin.config import load_config
-from twin.perception.geometry import NearestNeighbors, Plane, fit_plane, fit_plane_ransac, kabsch, transform_points
-from twin.perception.geometry import trimmed_icp as fast_icp
+from twin.perception.cloud_geometry import (
+    NearestNeighbors,
+    Plane,
+    fit_plane,
+    fit_plane_ransac,
+    kabsch,
+    transform_points,
+)
+from twin.perception.cloud_geometry import trimmed_icp as fast_icp
 from twin.perception.noise import _depth_edges, apply_sensor_noise, depth_noise_rms
 from twin.tasks.robocup.perception import object_template_points
 from twin.transforms import rpy_to_matrix

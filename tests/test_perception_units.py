@@ -14,9 +14,9 @@ import pytest
 from twin.camera import Intrinsics, RGBDFrame
 from twin.config import load_config, settings_from_dict
 from twin.errors import ConfigError, InvalidRequestError
+from twin.perception.cloud_geometry import fit_plane_ransac, rot_z, trimmed_icp
 from twin.perception.colors import classify_color, palette
 from twin.perception.evaluate import match, score, yaw_error_deg
-from twin.perception.geometry import fit_plane_ransac, rot_z, trimmed_icp
 from twin.perception.noise import apply_sensor_noise, depth_noise_rms
 from twin.tasks.robocup.perception import (
     classify_orientation,
@@ -347,7 +347,7 @@ def test_wrist_capture_gives_metric_depth_and_a_cloud_on_the_table():
     and the camera 0.72 m above it (the depth buffer is converted correctly)."""
     from twin.camera import point_cloud
     from twin.perception.capture import capture_frame
-    from twin.perception.geometry import transform_points
+    from twin.perception.cloud_geometry import transform_points
     from twin.world import World
 
     s = load_config(ROOT / "configs" / "robocup.yaml", ["world.objects.items=[]", "camera.noise.enabled=false"])

@@ -139,9 +139,9 @@ _LAZY: dict[str, str] = {
     # tasks: the cell a task drives, and the judge of its outcome (physics ground truth)
     "Cell": "twin.tasks.cell",
     "StageFailed": "twin.tasks.stage_failure",
-    "GripStatus": "twin.tasks.gripper",
-    "GraspCheck": "twin.tasks.gripper",
-    "top_down": "twin.tasks.gripper",
+    "GripStatus": "twin.tasks.grasping",
+    "GraspCheck": "twin.tasks.grasping",
+    "top_down": "twin.tasks.grasping",
     "ObjectOutcome": "twin.types",
     "Verdict": "twin.tasks.judge",
     "judge_in_zone": "twin.tasks.judge",
@@ -310,7 +310,7 @@ if TYPE_CHECKING:
     from twin.robot.urdf_model import urdf_rgba
     from twin.scene_layout import OBJECT_TEMPLATES
     from twin.tasks.cell import Cell
-    from twin.tasks.gripper import GraspCheck, GripStatus, top_down
+    from twin.tasks.grasping import GraspCheck, GripStatus, top_down
     from twin.tasks.judge import Verdict, judge_in_bin, judge_in_zone
     from twin.tasks.stage_failure import StageFailed
     from twin.timing import stage

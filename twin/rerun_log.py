@@ -147,7 +147,7 @@ class RerunRecording:
             sinks.append(rr.GrpcSink(self.live.grpc_url))
         self.rec.set_sinks(*sinks)
         self.rec.send_blueprint(self._layout())
-        from twin.collision.geometry import primitive_shapes  # lazy: fcl
+        from twin.collision.fcl_shapes import primitive_shapes  # lazy: fcl
 
         self._scene, self._kin = scene, kin
         self._names = list(kin.joint_names)

@@ -30,7 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from twin.plugin import SelfRows, Weights  # the seed's cost weights, nmpc's too
-from twin_croc.model import TCP_FRAME_NAME, arm_model, sphere_frames
+from twin_croc.pinocchio_arm import TCP_FRAME_NAME, arm_model, sphere_frames
 
 if TYPE_CHECKING:
     from twin.plugin import URArm

@@ -13,7 +13,7 @@ declares the latter), and two spheres guard the wrist links.
 Why these choices:
 * Building an NLP costs ~1.5 s expanded (fastest solves) or ~0.1 s mapped, a solve ~15 ms: NLPs are built
   once per process and problem shape (number of boxes, number of held-object spheres) and shared by every
-  planner instance with the same parameters (`twin_nmpc.model.cached_problem`); the shapes a run expects
+  planner instance with the same parameters (`twin_nmpc.nlp.cached_problem`); the shapes a run expects
   (`prebuild_boxes`) are built expanded when the planner is constructed, not inside a timed step, and a
   shape first met inside a step is built mapped (a RoboCup run meets one per count of objects left on
   the table: 57 s of building became 2 s). Each solve only changes parameters and is
@@ -37,7 +37,7 @@ Why these choices:
   `goal_kinds` (positions) and what the result's info counts. The NLP's step, step-change and jerk rows are
   the velocity, acceleration and jerk limits of what a segment declares.
 
-The pieces: `twin_nmpc.params` (the parameter model), `twin_nmpc.model` (the NLP and its cache); from twin's
+The pieces: `twin_nmpc.params` (the parameter model), `twin_nmpc.nlp` (the NLP and its cache); from twin's
 core, through `twin.plugin`, what it shares with `croc`: `twin.planning.receding_params` (the shared parameters,
 the default spheres), `twin.planning.proxy_spheres` (the proxy spheres and the numpy check of a plan),
 `twin.planning.guess` (the cold solve's initial guess), `twin.planning.braking` (stops within the bounds),
@@ -73,7 +73,7 @@ from twin.plugin import (
     subdivide,
     with_object,
 )
-from twin_nmpc.model import NMPCProblem, ProblemShape, SolveOutput, cached_problem
+from twin_nmpc.nlp import NMPCProblem, ProblemShape, SolveOutput, cached_problem
 from twin_nmpc.params import NMPCParams
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """FCL collision checking for the arm in its cell (pybullet-free).
 
-* `twin.collision.geometry`: URDF collision primitives as FCL shapes (padding, bounding spheres,
+* `twin.collision.fcl_shapes`: URDF collision primitives as FCL shapes (padding, bounding spheres,
   transforms, broadphase callbacks); meshes are rejected.
 * `twin.collision.rules`: the allowed-collision rules (which robot link pairs are never tested, the
   reference-configuration contact rule, what a held object is tested against).

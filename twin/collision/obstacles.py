@@ -14,7 +14,7 @@ import fcl
 import numpy as np
 from numpy.typing import ArrayLike
 
-from twin.collision.geometry import fcl_geometry, fcl_transform
+from twin.collision.fcl_shapes import fcl_geometry, fcl_transform
 from twin.collision.spheres import EnvPrimitives, env_primitives
 from twin.errors import ConfigError, InvalidRequestError
 from twin.robot.urdf_model import read_fixture_shapes

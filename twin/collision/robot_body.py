@@ -25,7 +25,7 @@ import fcl
 import numpy as np
 
 from twin.collision.chain import CompiledChain
-from twin.collision.geometry import (
+from twin.collision.fcl_shapes import (
     COLLISION_REQUEST,
     DISTANCE_REQUEST,
     FAR,

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
-from twin.collision.geometry import DISTANCE_REQUEST, fcl_geometry, fcl_transform, primitive_shapes
+from twin.collision.fcl_shapes import DISTANCE_REQUEST, fcl_geometry, fcl_transform, primitive_shapes
 from twin.errors import ConfigError
 from twin.robot.gripper import gripper_stroke_m
 from twin.robot.urdf_model import RobotModel

@@ -36,12 +36,12 @@ import fcl
 import numpy as np
 from numpy.typing import ArrayLike
 
-from twin.collision.geometry import DISTANCE_REQUEST as _DREQ
-from twin.collision.geometry import FAR as _FAR
-from twin.collision.geometry import CollideFlag as _CollideFlag
-from twin.collision.geometry import DistanceAccumulator as _DistAcc
-from twin.collision.geometry import collide_callback as _collide_cb
-from twin.collision.geometry import distance_callback as _distance_cb
+from twin.collision.fcl_shapes import DISTANCE_REQUEST as _DREQ
+from twin.collision.fcl_shapes import FAR as _FAR
+from twin.collision.fcl_shapes import CollideFlag as _CollideFlag
+from twin.collision.fcl_shapes import DistanceAccumulator as _DistAcc
+from twin.collision.fcl_shapes import collide_callback as _collide_cb
+from twin.collision.fcl_shapes import distance_callback as _distance_cb
 from twin.collision.obstacles import Obstacles, box_from_bounds, check_pose, check_size
 from twin.collision.robot_body import RobotBody
 from twin.errors import InvalidRequestError

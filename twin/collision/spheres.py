@@ -85,7 +85,7 @@ class EnvPrimitives:
 
 def env_primitives(shapes: Sequence[tuple[str, Sequence[float], np.ndarray]], pad: float) -> EnvPrimitives:
     """Arrays for `shapes` [(kind, size, pose (4, 4) in the world)], each inflated by `pad` m per side
-    exactly as `twin.collision.geometry.fcl_geometry` inflates it."""
+    exactly as `twin.collision.fcl_shapes.fcl_geometry` inflates it."""
     n = len(shapes)
     kind = np.zeros(n, dtype=np.int64)
     to_local = np.zeros((n, 3, 4))
@@ -103,7 +103,7 @@ def env_primitives(shapes: Sequence[tuple[str, Sequence[float], np.ndarray]], pa
 
 def primitive(kind: str, size: Sequence[float] | np.ndarray, pad: float = 0.0) -> tuple[int, np.ndarray, float]:
     """(kind code, half dimensions (3,), bounding radius) of a primitive inflated by `pad` m per side as
-    `twin.collision.geometry.fcl_geometry` inflates it: box half extents; cylinder and capsule (radius,
+    `twin.collision.fcl_shapes.fcl_geometry` inflates it: box half extents; cylinder and capsule (radius,
     half length, 0); sphere (radius, 0, 0)."""
     if kind not in _KIND:
         raise ConfigError(f"collision shape {kind!r} is not supported by the planning scene (use primitives)")

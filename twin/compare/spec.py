@@ -84,7 +84,7 @@ from twin.config import PlannerBlock, apply_override, find_config, load_config, 
 from twin.config.loader import unknown_key_hint
 from twin.errors import ConfigError
 from twin.problems.mbm import mbm_problem_set
-from twin.problems.model import ProblemSet, load_problem_set
+from twin.problems.problem_set import ProblemSet, load_problem_set
 from twin.problems.queries import query_of_problem
 from twin.problems.sampling import RandomQueries
 

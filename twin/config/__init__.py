@@ -1,7 +1,8 @@
 """Validated configuration: YAML files loaded into typed pydantic models.
 
-`twin.config.schema` holds the models of the cell and `Settings` (the two reference tasks' own models
-live with their tasks, `twin.tasks.<name>.settings`), `twin.config.loader` reads files (`extends`, `--set`
+`twin.config.schema` holds the models of the cell and `Settings` (the two reference tasks' own models are
+`twin.config.robocup` and `twin.config.warehouse`: below the tasks, so the config never imports a task),
+`twin.config.loader` reads files (`extends`, `--set`
 overrides, config names, one-line errors worded by `twin.messages`). Import from here: every name below
 stays importable from `twin.config` whichever module defines it.
 """
@@ -20,6 +21,7 @@ from twin.config.loader import (
     swap_planner,
     with_planner,
 )
+from twin.config.robocup import GraspEntry, IcpSettings, RobocupPerceptionSettings, RobocupTaskSettings
 from twin.config.schema import (
     DEFAULT_PLANNERS,
     STAGE_GROUPS,
@@ -45,9 +47,8 @@ from twin.config.schema import (
     UnmodelledObstacleSettings,
     WorldSettings,
 )
+from twin.config.warehouse import WarehousePerceptionSettings, WarehouseTaskSettings
 from twin.messages import one_line, short_repr
-from twin.tasks.robocup.settings import GraspEntry, IcpSettings, RobocupPerceptionSettings, RobocupTaskSettings
-from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
 __all__ = [
     "DEFAULT_PLANNERS",

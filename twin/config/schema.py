@@ -2,7 +2,7 @@
 detector blocks, and `Settings`, everything a run needs.
 
 Every model is frozen and rejects unknown keys (`ConfigModel`). The task and perception models of the two
-reference tasks live with their tasks (`twin.tasks.robocup.settings`, `twin.tasks.warehouse.settings`);
+reference tasks live with their tasks (`twin.config.robocup`, `twin.config.warehouse`);
 `TaskSettings` names the task plugin to run and `PerceptionSettings` the perception pipeline.
 """
 
@@ -23,9 +23,9 @@ from pydantic import (
 )
 
 from twin.config.base import Q6, ConfigModel, Vec3
+from twin.config.robocup import RobocupPerceptionSettings, RobocupTaskSettings
+from twin.config.warehouse import WarehousePerceptionSettings, WarehouseTaskSettings
 from twin.resources import data_files, packaged_path
-from twin.tasks.robocup.settings import RobocupPerceptionSettings, RobocupTaskSettings
-from twin.tasks.warehouse.settings import WarehousePerceptionSettings, WarehouseTaskSettings
 
 __all__ = [
     "DEFAULT_PLANNERS",

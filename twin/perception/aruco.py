@@ -161,7 +161,7 @@ def _plane_constrained_pose(
     nominal corners onto those points gives the in-plane position and the rotation about the normal.
     Returns None when the dominant plane does not hold the marker (then PnP alone is used).
     """
-    from twin.perception.geometry import fit_plane_ransac  # lazy: scipy
+    from twin.perception.cloud_geometry import fit_plane_ransac  # lazy: scipy
 
     pts, _ = point_cloud(frame, stride=2)
     if len(pts) < 500:

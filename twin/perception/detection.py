@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 
 from twin.camera import RGBDFrame, point_cloud
-from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
+from twin.perception.cloud_geometry import Plane, fit_plane_ransac, transform_points
 from twin.timing import stage
 
 if TYPE_CHECKING:

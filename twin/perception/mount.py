@@ -27,7 +27,7 @@ _PLANE_STRIDE = 4  # every 4th pixel in each direction: ~19 000 points from 640 
 def table_plane(cap: Capture) -> tuple[np.ndarray, float] | None:
     """The dominant plane of the depth image in the camera frame: (unit normal towards the camera, the
     camera's distance from it m); None when no plane holds `_PLANE_MIN_INLIERS` of the points."""
-    from twin.perception.geometry import fit_plane_ransac  # lazy: scipy
+    from twin.perception.cloud_geometry import fit_plane_ransac  # lazy: scipy
 
     pts, _ = point_cloud(cap.frame, stride=_PLANE_STRIDE)
     if len(pts) < 500:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from twin.perception.geometry import NearestNeighbors, Plane
+from twin.perception.cloud_geometry import NearestNeighbors, Plane
 from twin.perception.open3d_import import load_open3d
 
 __all__ = ["Cluster", "Footprint", "cluster_points", "footprint", "open3d", "plane_to_frame"]

@@ -1,6 +1,6 @@
 """The proxy spheres the MPCs keep out of the obstacle boxes, and the numpy check of a plan's hard constraints.
 
-Both MPCs (`twin_nmpc.model`'s NLP, `twin_croc`'s OCP) model the gripper, the wrist and a held box as spheres
+Both MPCs (`twin_nmpc.nlp`'s NLP, `twin_croc`'s OCP) model the gripper, the wrist and a held box as spheres
 (frame, x, y, z, r): `robot_spheres` from the parameters, `object_spheres` covering the held box, `with_object`
 both together. Every plan is checked again here, independently of the solver's own view, before a step of it
 is executed (`violation`): joint steps, their change and the change of that (acceleration, jerk), joint
@@ -51,7 +51,7 @@ Box = tuple[str, np.ndarray, np.ndarray]
 
 CHECK_TOL_M = 5e-4  # the numpy re-check of the hard constraints accepts this much below the margin
 TCP_FRAME = 7  # sphere frame code of the TCP (DH frames are 0..6)
-# the smoothing of the box rows, shared by every MPC's rows (`twin_nmpc.model`) and their numeric twins here:
+# the smoothing of the box rows, shared by every MPC's rows (`twin_nmpc.nlp`) and their numeric twins here:
 DISTANCE_EPS2 = 1e-10  # (10 um)^2 under the distance's square root (feasible distances are >= r anyway)
 # under the chord's square root: (1 cm)^2. A robot standing still (the horizon's tail, once at the goal)
 # has zero chords, where sqrt(x^2 + eps) has curvature 1/sqrt(eps): with (10 um)^2 that was 1e5, IPOPT

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from twin.problems.model import (
+from twin.problems.problem_set import (
     FORMAT,
     VERSION,
     Problem,

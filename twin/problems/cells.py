@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from twin.config import load_config
-from twin.problems.model import load_problem_set
+from twin.problems.problem_set import load_problem_set
 from twin.problems.world import check_robot, planning_scene, settings_for
 from twin.robot import Robot
 
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from twin.collision import PlanningScene
     from twin.collision.scene import UnknownFixtures
     from twin.config import Settings
-    from twin.problems.model import ProblemSet
+    from twin.problems.problem_set import ProblemSet
     from twin.robot.kinematics import URArm
     from twin.world import World
 

@@ -20,7 +20,7 @@ from pydantic import ValidationError
 from twin.config import find_config
 from twin.errors import ConfigError
 from twin.problems.cells import cell_for
-from twin.problems.model import ProblemSet
+from twin.problems.problem_set import ProblemSet
 from twin.problems.queries import problem_of_query
 from twin.problems.sampling import RandomQueries, sample_query
 from twin.problems.world import robot_spec, world_of_scene

@@ -16,8 +16,8 @@ from typing import IO
 
 from twin.assets import write_atomic
 from twin.errors import ConfigError
-from twin.problems.model import save_problem_set
 from twin.problems.moveit import problem_set_from_moveit_dir
+from twin.problems.problem_set import save_problem_set
 from twin.resources import cache_dir
 
 __all__ = ["MBM_PREFIX", "SCENES", "SDIST", "mbm_problem_set", "mbm_problems_dir", "mbm_spherized_urdf"]

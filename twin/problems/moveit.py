@@ -71,7 +71,7 @@ from twin.config import find_config, load_config
 from twin.config.loader import read_yaml
 from twin.errors import ConfigError
 from twin.messages import one_line, short_repr
-from twin.problems.model import (
+from twin.problems.problem_set import (
     BoxShape,
     CollisionObject,
     CylinderShape,

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.problems.model import JointGoalSpec, PoseGoalSpec, PoseSpec, Problem
+from twin.problems.problem_set import JointGoalSpec, PoseGoalSpec, PoseSpec, Problem
 from twin.transforms import matrix_to_rpy, pose_from_xyz_rpy
 
 __all__ = ["problem_of_query", "query_of_problem"]

@@ -18,7 +18,7 @@ import numpy as np
 from twin.assets import digest, write_atomic
 from twin.config.schema import FixtureSettings
 from twin.errors import ConfigError
-from twin.problems.model import (
+from twin.problems.problem_set import (
     BoxShape,
     CollisionObject,
     CylinderShape,

@@ -19,10 +19,14 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
 
+from twin.config import with_planner
+from twin.planning import make_context
+from twin.recording import Recorder
+from twin.rerun_log import RerunRecording, rerun_module
 from twin.timing import collect_timings, stage
 from twin.types import CalibrationOutcome, Landmark, RunSummary
 
-if TYPE_CHECKING:  # the config's schema imports the tasks' settings modules: no import of it at load time
+if TYPE_CHECKING:
     from twin.config import PlannerBlock, Settings
     from twin.planning import CheckedPlanner
     from twin.registry import PluginContext
@@ -35,7 +39,6 @@ log = logging.getLogger("twin")
 def make_task(settings: Settings, context: PluginContext | None = None) -> Any:
     """The task plugin named by `settings.task.kind`, built with its validated `task.params`; an unknown
     name raises UnknownNameError listing the registered tasks."""
-    from twin.planning import make_context  # lazy: breaks the cycle twin.config <-> twin.tasks
 
     context = context or make_context(settings)
     return context.registry.task(settings.task.kind, settings.task.params, context)
@@ -82,9 +85,6 @@ def run_task(
     address is logged; the viewer keeps serving after the run). `on_stage(text)` is told each stage as it starts,
     `on_objects(done, total)` how many of the objects the task knows of it is done with (`Cell.objects_done`).
     Bad config or planner names raise before anything is simulated."""
-    from twin.config import with_planner  # lazy: breaks the cycle twin.config <-> twin.tasks
-    from twin.planning import make_context  # lazy: breaks the cycle twin.config <-> twin.tasks
-    from twin.recording import Recorder  # lazy: breaks the cycle twin.config <-> twin.tasks
     from twin.tasks.cell import Cell, stage_planners  # lazy: fcl, scipy
 
     if planner is not None:
@@ -92,8 +92,6 @@ def run_task(
     seed = settings.seed if seed is None else int(seed)
     recorder = Recorder(record, speed=record_speed) if record else None
     if rerun or rerun_serve:
-        from twin.rerun_log import rerun_module  # lazy: breaks the cycle twin.config <-> twin.tasks
-
         rerun_module()  # a missing SDK fails here, before anything is built
     t0 = time.perf_counter()
     with collect_timings() as clock:
@@ -115,7 +113,6 @@ def run_task(
             recording = None
             if rerun or rerun_serve:
                 from twin.collision import PlanningScene  # lazy: fcl
-                from twin.rerun_log import RerunRecording  # lazy: breaks the cycle twin.config <-> twin.tasks
 
                 recording = RerunRecording(
                     rerun,

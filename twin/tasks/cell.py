@@ -5,7 +5,7 @@ config (`planners.<group>`), so swapping a planner is a config change; `--planne
 
 The cell senses (joints, gripper, camera frames for the trace), grasps, and executes checked motions; what it
 decides with lives beside it: the choice of a way before moving (`twin.tasks.ways`), the ways round a refused
-motion (`twin.tasks.detours`), a grasp judged from the finger position (`twin.tasks.gripper`), a stage's
+motion (`twin.tasks.detours`), a grasp judged from the finger position (`twin.tasks.grasping`), a stage's
 failure (`twin.tasks.stage_failure`). Its methods stay the one face a task and a plugin use.
 """
 
@@ -34,7 +34,7 @@ from twin.planning import (
 )
 from twin.registry import PluginContext
 from twin.tasks import detours, jam
-from twin.tasks.gripper import (
+from twin.tasks.grasping import (
     GRIPPER_POLL_S,
     GraspCheck,
     GripperReading,
@@ -465,7 +465,7 @@ class Cell:
         speed_m_s: float | None = None,
     ) -> GraspCheck:
         """Close force-limited, settle, and judge the grasp by the finger position alone
-        (`twin.tasks.gripper.grasp_check`, against the width range (min, max) m the task expects between the
+        (`twin.tasks.grasping.grasp_check`, against the width range (min, max) m the task expects between the
         fingers, from the perceived class and orientation). `force_n`, `speed_m_s`: a gentler grip than the
         gripper's defaults."""
         self.world.close_gripper(force_n=force_n, speed_m_s=speed_m_s)
@@ -489,7 +489,7 @@ class Cell:
 
     def check_holding(self) -> GraspCheck:
         """Is the grasped object still between the fingers? Judged from the finger position after a short
-        poll (fingers whose object just left need a moment to start closing): `twin.tasks.gripper.holding_check`."""
+        poll (fingers whose object just left need a moment to start closing): `twin.tasks.grasping.holding_check`."""
         self.settle(GRIPPER_POLL_S)
         return holding_check(self.read_gripper(), self.grasp, self.settings.gripper)
 

@@ -48,7 +48,7 @@ import numpy as np
 from twin.camera import Intrinsics, true_camera_pose
 from twin.perception.noise import apply_sensor_noise
 from twin.robot.urdf_model import primitive_half_extents
-from twin.tasks.gripper import top_down
+from twin.tasks.grasping import top_down
 from twin.tasks.judge import body_between_fingers  # the simulated contact monitor's, as at a grasp
 from twin.tasks.stage_failure import StageFailed
 from twin.timing import stage

@@ -20,7 +20,7 @@ from twin.collision import PlanningScene
 from twin.planning import CheckedPlanner, colliding_pair
 from twin.robot.kinematics import URArm
 from twin.robot.urdf_model import primitive_half_extents
-from twin.tasks.gripper import top_down
+from twin.tasks.grasping import top_down
 from twin.tasks.stage_failure import StageFailed
 from twin.types import Limits, MotionRequest, Pose, PoseGoal, Status
 

@@ -52,10 +52,10 @@ starts and goals), `judge` (limits, time slack, sameness), `recorder` (what the 
 `checker` (asking the requests and judging every rule), `check` (`check_planner`, `assert_conformant`).
 """
 
+from twin.testing.allowances import LIMIT_TOLERANCE, START_TOLERANCE_RAD, limit_violations, time_slack_s
 from twin.testing.check import DEFAULT_CONFIG, assert_conformant, check_planner
-from twin.testing.judge import LIMIT_TOLERANCE, START_TOLERANCE_RAD, limit_violations, time_slack_s
-from twin.testing.queries import Query, contract_queries
-from twin.testing.rules import RULES, CheckResult, ConformanceReport
+from twin.testing.contract import RULES, CheckResult, ConformanceReport
+from twin.testing.seeded_queries import Query, contract_queries
 
 __all__ = [
     "DEFAULT_CONFIG",

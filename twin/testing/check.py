@@ -12,8 +12,8 @@ from twin.config import PlannerBlock, load_config
 from twin.errors import InvalidRequestError
 from twin.planning import make_context, make_planner
 from twin.registry import Registry, plugin_manager
-from twin.testing.checker import _Checker
-from twin.testing.rules import RULES, ConformanceReport
+from twin.testing.contract import RULES, ConformanceReport
+from twin.testing.examiner import _Checker
 
 if TYPE_CHECKING:
     from twin.config import Settings

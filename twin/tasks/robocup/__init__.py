@@ -31,7 +31,7 @@ __all__ = [
 
 
 def __getattr__(attr: str) -> Any:
-    """The task's names, imported on first use: the config schema imports `twin.tasks.robocup.settings`,
+    """The task's names, imported on first use: the config schema imports `twin.config.robocup`,
     which must not pull in the task's state machine (and with it the config) while the config loads."""
     if attr in __all__:
         return getattr(importlib.import_module("twin.tasks.robocup.task"), attr)

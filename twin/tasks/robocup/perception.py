@@ -41,8 +41,8 @@ import numpy as np
 
 from twin.camera import RGBDFrame
 from twin.config import RobocupPerceptionSettings, Settings
+from twin.perception.cloud_geometry import NearestNeighbors, pca, rot_z, trimmed_icp
 from twin.perception.detection import Detection, Detector, SceneCloud, scene_cloud
-from twin.perception.geometry import NearestNeighbors, pca, rot_z, trimmed_icp
 from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
 from twin.perception.segmentation import cluster_points, footprint, open3d
 from twin.robot.urdf_model import urdf_rgba

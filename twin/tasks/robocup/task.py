@@ -703,7 +703,7 @@ def _target_for(est: ObjectEstimate, targets: list[_Target]) -> _Target:
 
 class RobocupTask:
     """The RoboCup ARM sorting task as a task plugin (name `robocup`). Its settings are the config's
-    `task.robocup` and `perception.robocup` sections (models in `twin.tasks.robocup.settings`)."""
+    `task.robocup` and `perception.robocup` sections (models in `twin.config.robocup`)."""
 
     def __init__(self, params: None, context: PluginContext) -> None:
         self.context = context

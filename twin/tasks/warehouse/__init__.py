@@ -16,7 +16,7 @@ __all__ = [
 
 
 def __getattr__(attr: str) -> Any:
-    """The task's names, imported on first use: the config schema imports `twin.tasks.warehouse.settings`,
+    """The task's names, imported on first use: the config schema imports `twin.config.warehouse`,
     which must not pull in the task's state machine (and with it the config) while the config loads."""
     if attr in __all__:
         return getattr(importlib.import_module("twin.tasks.warehouse.task"), attr)

@@ -25,8 +25,8 @@ import numpy as np
 
 from twin.camera import RGBDFrame, point_cloud
 from twin.config import WarehousePerceptionSettings
+from twin.perception.cloud_geometry import Plane, fit_plane_ransac, transform_points
 from twin.perception.colors import classify_color
-from twin.perception.geometry import Plane, fit_plane_ransac, transform_points
 from twin.perception.occlusion import PARTIAL_VIEW_TOL_M, fit_partly_seen_box
 from twin.perception.segmentation import Cluster, cluster_points, footprint, open3d, plane_to_frame
 from twin.timing import stage

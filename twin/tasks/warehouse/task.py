@@ -257,7 +257,7 @@ def run_warehouse(cell: Cell) -> list[ObjectOutcome]:
 
 class WarehouseTask:
     """The warehouse sorting task as a task plugin (name `warehouse`). Its settings are the config's
-    `task.warehouse` and `perception.warehouse` sections (models in `twin.tasks.warehouse.settings`)."""
+    `task.warehouse` and `perception.warehouse` sections (models in `twin.config.warehouse`)."""
 
     def __init__(self, params: None, context: PluginContext) -> None:
         self.context = context

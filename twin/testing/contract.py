@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from twin.testing.judge import time_slack_s
+from twin.testing.allowances import time_slack_s
 
 __all__ = ["RULES", "CheckResult", "ConformanceReport"]
 

@@ -21,7 +21,7 @@ from twin.planning import (
     jerk_limited,
     limits_from_settings,
 )
-from twin.testing.judge import (
+from twin.testing.allowances import (
     LIMIT_TOLERANCE,
     START_TOLERANCE_RAD,
     _same,
@@ -29,9 +29,9 @@ from twin.testing.judge import (
     limit_violations,
     time_slack_s,
 )
-from twin.testing.queries import _goal, _served_goal, _top_down, contract_queries
+from twin.testing.contract import RULES, CheckResult, _Verdict
 from twin.testing.recorder import _Outcome, _Recorder, _TimingPlant
-from twin.testing.rules import RULES, CheckResult, _Verdict
+from twin.testing.seeded_queries import _goal, _served_goal, _top_down, contract_queries
 from twin.types import JointGoal, Limits, MotionRequest, MotionResult, PoseGoal, Trajectory
 
 if TYPE_CHECKING:
