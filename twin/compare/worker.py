@@ -33,7 +33,7 @@ from twin.compare.metrics import (
     trajectory_metrics,
 )
 from twin.compare.spec import RunTask
-from twin.config import PlannerBlock, load_config
+from twin.config import PlannerBlock, load_config, with_planner
 from twin.errors import TwinError
 from twin.planning import limit_ratios, limits_from_settings, make_context, make_planner, plan_with
 from twin.problems.cells import QueryCell, cell_for
@@ -193,9 +193,8 @@ def _run_task(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> N
         return
     # the whole planner block (params, retimer) is the transfer planner, so two variants of one planner
     # are two different task runs
-    settings = load_config(task.config, task.overrides)
     block = PlannerBlock(**task.planner)
-    settings = settings.model_copy(update={"planners": settings.planners.model_copy(update={"transfer": block})})
+    settings = with_planner(load_config(task.config, task.overrides), "transfer", block)
     summary = run_task(settings, seed=task.seed, config_name=os.path.basename(task.config), rerun=rerun)
     m = task_metrics(summary)
     row["metrics"].update(m)
