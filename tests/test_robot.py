@@ -57,3 +57,15 @@ def test_ur5e_is_a_deprecated_alias_of_the_arm() -> None:
     for module in (twin, twin.plugin):
         with pytest.warns(DeprecationWarning, match="use .*URArm"):
             assert module.UR5e is URArm
+
+
+def test_the_planning_scene_takes_the_robot_s_model_and_sphere_cover() -> None:
+    from twin.collision import PlanningScene
+
+    robot = Robot.from_settings(load_config("robocup"))
+    scene = PlanningScene.from_settings(load_config("robocup"), robot=robot)
+    assert scene.model is robot.model
+    body = scene._body  # the robot's collision body: its covers are the robot's, not made again
+    assert len(body._shape_covers) == len(robot.sphere_cover) > 0
+    assert all(a is b for a, b in zip(body._shape_covers, robot.sphere_cover, strict=True))
+    assert all(a is b for a, b in zip(scene.padded(0.01)._body._shape_covers, robot.sphere_cover, strict=True))

@@ -97,8 +97,11 @@ class RobotBody:
         tcp_link: str = "tcp",
         finger_opening_m: float | None = None,
         held: tuple[str, np.ndarray, np.ndarray] | None = None,
+        covers: Sequence[np.ndarray] | None = None,
     ):
-        """`held`: (name, size (3,), pose in the tcp frame (4, 4)) of a box the gripper holds, or None."""
+        """`held`: (name, size (3,), pose in the tcp frame (4, 4)) of a box the gripper holds, or None.
+        `covers`: the sphere cover of each of the model's shapes, in `model.shapes()` order (the robot's,
+        `Robot.sphere_cover`); None: covered here."""
         check_robot_model(model, tcp_link)
         self.model = m = model
         self.tcp_link = tcp_link
@@ -120,7 +123,10 @@ class RobotBody:
             self._shape_objects.append(fcl.CollisionObject(geom))
             self.object_of[id(geom)] = self._shape_objects[-1]
         self._shape_radius = [bounding_radius(s.kind, s.size) for s in self.shapes]
-        self._shape_covers = [cover(s.kind, s.size) for s in self.shapes]  # spheres in each shape's frame
+        # spheres in each shape's frame
+        self._shape_covers = list(covers) if covers is not None else [cover(s.kind, s.size) for s in self.shapes]
+        if len(self._shape_covers) != len(self.shapes):
+            raise InvalidRequestError(f"{len(self._shape_covers)} sphere covers for {len(self.shapes)} shapes")
         self._shape_const = self._shape_constants()
         self.held: _HeldBox | None = None
         if held is not None:
@@ -138,6 +144,7 @@ class RobotBody:
         finger_opening_m: float | None = None,
         reference_configs: Iterable[Sequence[float]] = (),
         extra_excluded_pairs: Iterable[tuple[str, str]] = (),
+        covers: Sequence[np.ndarray] | None = None,
     ) -> RobotBody:
         """The body of a parsed model with its allowed-collision rules computed (`CollisionRules.from_model`:
         the reference postures are measured here, once; `copy` reuses them). The model and the opening are
@@ -148,12 +155,17 @@ class RobotBody:
         rules = CollisionRules.from_model(
             model, tcp_link=tcp_link, reference_configs=reference_configs, extra_excluded_pairs=extra_excluded_pairs
         )
-        return cls(model, rules, tcp_link=tcp_link, finger_opening_m=finger_opening_m)
+        return cls(model, rules, tcp_link=tcp_link, finger_opening_m=finger_opening_m, covers=covers)
 
     def copy(self) -> RobotBody:
         """An equal body with its own FCL objects (the model, the rules, the opening and the held box reused)."""
         return RobotBody(
-            self.model, self.rules, tcp_link=self.tcp_link, finger_opening_m=self._opening, held=self.held_box()
+            self.model,
+            self.rules,
+            tcp_link=self.tcp_link,
+            finger_opening_m=self._opening,
+            held=self.held_box(),
+            covers=self._shape_covers,
         )
 
     # =============================================================================================

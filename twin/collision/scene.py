@@ -108,7 +108,7 @@ class PlanningScene:
 
     def __init__(
         self,
-        robot_urdf: str | Path | RobotModel,
+        robot_urdf: str | Path | RobotModel | Robot,
         *,
         fixtures: Sequence[FixtureSpec] = (),
         padding_m: float = 0.0,
@@ -119,9 +119,14 @@ class PlanningScene:
         sphere_filter: bool = True,
     ):
         padding = _check_padding(padding_m)
-        model = robot_urdf if isinstance(robot_urdf, RobotModel) else RobotModel.from_urdf(robot_urdf)
+        covers = robot_urdf.sphere_cover if isinstance(robot_urdf, Robot) else None
+        if isinstance(robot_urdf, Robot):
+            model = robot_urdf.model
+        else:
+            model = robot_urdf if isinstance(robot_urdf, RobotModel) else RobotModel.from_urdf(robot_urdf)
         body = RobotBody.from_model(
             model,
+            covers=covers,
             tcp_link=tcp_link,
             finger_opening_m=finger_opening_m,
             reference_configs=reference_configs,
@@ -185,7 +190,7 @@ class PlanningScene:
             if f.known
         ]
         scene = cls(
-            robot.model,
+            robot,
             fixtures=fixtures,
             padding_m=settings.collision.padding_m,
             reference_configs=[settings.robot.home],

@@ -15,11 +15,7 @@ thousands of configurations 2 mrad apart) the next configurations are cleared wi
 no robot point can have moved as far as the last cleared configuration's clearance (conservative
 advancement; `CompiledChain.joint_reach` bounds how far a joint motion moves any point).
 
-Covers (built by partition, so they enclose their shape by construction):
-* box: a grid of cells no longer than `CELL_M` per side, each inside its circumscribed sphere;
-* cylinder and capsule: slabs along the axis, each inside the sphere through its rim, thin enough that
-  the sphere is at most `SLACK_M` wider than the cylinder (a capsule's caps are spheres of their own);
-* sphere: itself.
+The covers are the robot's (`twin.robot.sphere_cover`, made once per robot: `Robot.sphere_cover`).
 A sphere is "touching" when its distance is below `TOUCH_M` (10 um), well above FCL's tolerances.
 """
 
@@ -32,43 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.errors import ConfigError
+from twin.robot.sphere_cover import CELL_M, SLACK_M, cover
 
 __all__ = ["CELL_M", "SLACK_M", "TOUCH_M", "EnvPrimitives", "cover", "env_primitives", "primitive"]
 
-CELL_M = 0.02  # largest cell side of a box cover, m
-SLACK_M = 0.002  # a cylinder slab's sphere is at most this much wider than the cylinder, m
 TOUCH_M = 1e-5  # spheres closer than this to anything are left to FCL, m
 
 BOX, CYLINDER, SPHERE, CAPSULE = 0, 1, 2, 3
 _KIND = {"box": BOX, "cylinder": CYLINDER, "sphere": SPHERE, "capsule": CAPSULE}
-
-
-def cover(kind: str, size: Sequence[float] | np.ndarray) -> np.ndarray:
-    """(k, 4) spheres (x, y, z, r) in the primitive's own frame whose union encloses it (sizes as
-    `twin.robot.urdf_model.Shape`: box full extents, cylinder/capsule (radius, length), sphere (radius,))."""
-    if kind == "sphere":
-        return np.array([[0.0, 0.0, 0.0, float(size[0])]])
-    if kind == "box":
-        ext = np.array(size[:3], dtype=float)
-        counts = [max(1, math.ceil(float(e) / CELL_M - 1e-9)) for e in ext]
-        cell = ext / np.array(counts)
-        r = 0.5 * float(np.linalg.norm(cell)) * (1 + 1e-12)
-        axes = [(np.arange(counts[i]) + 0.5) * cell[i] - 0.5 * ext[i] for i in range(3)]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        return np.hstack([grid, np.full((grid.shape[0], 1), r)])
-    if kind in ("cylinder", "capsule"):
-        rho, length = float(size[0]), float(size[1])
-        slab = 2.0 * math.sqrt(2.0 * rho * SLACK_M + SLACK_M**2)
-        n = max(1, math.ceil(length / slab - 1e-9))
-        t = length / n
-        r = math.sqrt(rho**2 + 0.25 * t**2) * (1 + 1e-12)
-        z = (np.arange(n) + 0.5) * t - 0.5 * length
-        out = np.column_stack([np.zeros(n), np.zeros(n), z, np.full(n, r)])
-        if kind == "capsule":
-            caps = np.array([[0.0, 0.0, -0.5 * length, rho], [0.0, 0.0, 0.5 * length, rho]])
-            out = np.vstack([out, caps])
-        return out
-    raise ConfigError(f"collision shape {kind!r} has no sphere cover (use primitives)")
 
 
 @dataclass(frozen=True, eq=False)

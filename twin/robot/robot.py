@@ -18,6 +18,7 @@ import numpy as np
 from twin.errors import ConfigError
 from twin.robot.gripper import gripper_boxes, gripper_stroke_m
 from twin.robot.kinematics import URArm
+from twin.robot.sphere_cover import cover
 from twin.robot.urdf_model import RobotModel
 
 if TYPE_CHECKING:
@@ -30,9 +31,9 @@ __all__ = ["Robot"]
 class Robot:
     """One arm with its gripper: `arm` (DH, joint limits, IK), `urdf_model` (the URDF as read: links, joints,
     collision shapes), `model` (that model in the arm's base frame with the arm's TCP, `URArm.fit_urdf`;
-    checked against the DH kinematics when built), `urdf` as configured and `urdf_path` resolved, and the
-    gripper's geometry (`max_opening_m`,
-    `gripper_boxes`). Immutable: a planning scene or world copies what it changes."""
+    checked against the DH kinematics when built), `urdf` as configured and `urdf_path` resolved, the
+    gripper's geometry (`max_opening_m`, `gripper_boxes`) and the sphere cover of its shapes
+    (`sphere_cover`). Immutable: a planning scene or world copies what it changes."""
 
     arm: URArm
     urdf: str
@@ -72,6 +73,18 @@ class Robot:
     def max_opening_m(self) -> float:
         """The gripper's stroke: its largest total finger opening, m (0 for a URDF without finger joints)."""
         return gripper_stroke_m(self.model)
+
+    @functools.cached_property
+    def sphere_cover(self) -> tuple[np.ndarray, ...]:
+        """The conservative sphere cover of each collision shape of `model`, in `model.shapes()` order: (k, 4)
+        spheres (x, y, z, r) in the shape's frame (`twin.robot.sphere_cover.cover`). ConfigError for a mesh."""
+        covers = []
+        for shape in self.model.shapes():
+            if shape.kind == "mesh":
+                where = self.model.source  # the words the planning scene has for it (`primitive_shapes`)
+                raise ConfigError(f"{where}: link {shape.link!r} uses a mesh; the planning scene needs primitives")
+            covers.append(cover(shape.kind, shape.size))
+        return tuple(covers)
 
     def gripper_boxes(self, opening_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """(lo (3,), hi (3,)) in the tcp frame of every collision shape of the gripper at a finger opening
