@@ -51,7 +51,7 @@ def test_the_arms_differ_where_their_datasheets_do() -> None:
 
 
 def test_the_ur5e_is_the_default_and_unchanged() -> None:
-    assert URArm is URArm and URArm().model == "ur5e"
+    assert URArm().model == "ur5e"  # the default arm
     assert list(DH_D) == [0.1625, 0, 0, 0.1333, 0.0997, 0.0996] and list(DH_A) == [0, -0.425, -0.3922, 0, 0, 0]
     q = np.array([0.3, -1.2, 1.1, -1.4, -1.6, 0.2])
     assert np.array_equal(URArm().fk(q), ur_analytic_ik.ur5e.forward_kinematics(*q) @ URArm().tool_transform())
