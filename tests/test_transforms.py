@@ -92,7 +92,8 @@ def test_batched_quaternions_equal_single_ones():
 
 
 def test_old_names_are_the_same_functions():
-    from twin import types, urdf_model
+    from twin import types
+    from twin.robot import urdf_model
 
     assert types.rpy_matrix is tf.rpy_to_matrix
     assert types.matrix_to_quat is tf.matrix_to_quat and types.quat_to_matrix is tf.quat_to_matrix
