@@ -21,7 +21,11 @@ then the FCL re-check of the whole arm against the full scene). Prints, per conf
   transfers; see bench/nmpc_alternatives.py for what each alternative is);
 - every planner of `--planners` (`croc:whole_arm` is croc with `mode: whole_arm`; a planner whose extra is
   not installed is skipped with a line saying so) on the same scenes, then one table side by side with the
-  ratios to nmpc.
+  ratios to nmpc;
+- the solves inside `twin run configs/warehouse.yaml` (`--runs SEEDS`, nmpc as the config has it), per NLP
+  shape (box slots, held-object spheres; built expanded or mapped), cold and warm: solves, iterations and
+  milliseconds per solve and per iteration, beside the same for the bench scenes above, so the bench and
+  the runs cannot drift apart unseen.
 """
 
 from __future__ import annotations
@@ -160,6 +164,67 @@ def run(planner_name: str, name: str, params: dict[str, Any], n: int, seed: int)
     }
 
 
+class SolveLog:
+    """Every `NMPCProblem.solve` while it is installed (`with SolveLog() as log:`): its shape, whether the NLP
+    was built expanded, warm or cold, iterations and seconds."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[str, bool, bool, int, float]] = []
+
+    def __enter__(self) -> SolveLog:
+        from twin_nmpc.nlp import NMPCProblem
+
+        self._solve = solve = NMPCProblem.solve
+
+        def logged(problem: Any, *args: Any, **kwargs: Any) -> Any:
+            out = solve(problem, *args, **kwargs)
+            s = problem.shape
+            shape = f"boxes {s.n_boxes}, object spheres {s.n_object_spheres}"
+            self.rows.append((shape, bool(problem.expanded), bool(out.warm), int(out.iterations), out.solve_time_s))
+            return out
+
+        NMPCProblem.solve = logged  # type: ignore[method-assign]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        from twin_nmpc.nlp import NMPCProblem
+
+        NMPCProblem.solve = self._solve  # type: ignore[method-assign]
+
+    def table(self, title: str) -> None:
+        print(f"== {title}: {len(self.rows)} solves, {sum(r[4] for r in self.rows):.2f} s")
+        print(
+            f"   {'NLP shape':<28} {'built':<9} {'start':<5} {'solves':>6} {'iter med':>8} {'ms med':>7} {'ms/iter':>7}"
+        )
+        keys = sorted({(r[0], r[1], r[2]) for r in self.rows})
+        for shape, expanded, warm in keys:
+            rs = [r for r in self.rows if (r[0], r[1], r[2]) == (shape, expanded, warm)]
+            its = [r[3] for r in rs]
+            ms = [1e3 * r[4] for r in rs]
+            per = 1e3 * sum(r[4] for r in rs) / max(1, sum(its))
+            built = "expanded" if expanded else "mapped"
+            start = "warm" if warm else "cold"
+            cells = (shape, built, start, len(rs), np.median(its), np.median(ms), per)
+            print("   {:<28} {:<9} {:<5} {:>6} {:>8.0f} {:>7.1f} {:>7.1f}".format(*cells))
+        print()
+
+
+def solves_in_runs(seeds: list[int], scenes: int, seed: int) -> None:
+    """The nmpc solves of whole warehouse runs (the config's own planner block) beside the bench scenes'."""
+    from twin.tasks import run_task
+
+    settings = load_config(PROJECT_ROOT / "configs" / "warehouse.yaml")
+    with SolveLog() as bench:
+        run("nmpc", "seed000", CONFIGS["seed000"], scenes, seed)
+    bench.table(f"nmpc solves on {scenes} bench scenes (seed000)")
+    with SolveLog() as runs:
+        placed = []
+        for s in seeds:
+            summary = run_task(settings, seed=s)
+            placed.append(f"seed {s}: {sum(o.placed for o in summary.objects)}/{len(summary.objects)} placed")
+    runs.table(f"nmpc solves inside twin run configs/warehouse.yaml ({'; '.join(placed)})")
+
+
 def side_by_side(rows: list[dict[str, Any]]) -> None:
     """One line per planner and configuration, and each one's speed-up over nmpc on the same configuration."""
     print("== side by side (the same scenes; times in ms; x nmpc = nmpc's median / this one's)")
@@ -273,7 +338,11 @@ def main() -> None:
     ap.add_argument("--alternatives", type=int, default=10, help="transfers replayed through other solvers (0: skip)")
     ap.add_argument("--planners", default="nmpc,croc,croc:whole_arm", help="comma-separated; croc:whole_arm = mode")
     ap.add_argument("--queries", type=int, default=4, help="position queries per scenario and seed (0: skip)")
+    ap.add_argument("--runs", default="", help="comma-separated warehouse seeds: the solves inside twin run, alone")
     args = ap.parse_args()
+    if args.runs:
+        solves_in_runs([int(s) for s in args.runs.split(",")], args.scenes, args.seed)
+        return
     names = list(CONFIGS) if args.config == "both" else [args.config]
     rows = []
     for planner in args.planners.split(","):
