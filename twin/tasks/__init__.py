@@ -20,9 +20,6 @@ from typing import TYPE_CHECKING, Any
 from pydantic import BaseModel
 
 from twin.config import with_planner
-from twin.planning import make_context
-from twin.recording import Recorder
-from twin.rerun_log import RerunRecording, rerun_module
 from twin.timing import collect_timings, stage
 from twin.types import CalibrationOutcome, Landmark, RunSummary
 
@@ -39,6 +36,7 @@ log = logging.getLogger("twin")
 def make_task(settings: Settings, context: PluginContext | None = None) -> Any:
     """The task plugin named by `settings.task.kind`, built with its validated `task.params`; an unknown
     name raises UnknownNameError listing the registered tasks."""
+    from twin.planning import make_context  # lazy: cli start-up (twin --help imports twin.tasks)
 
     context = context or make_context(settings)
     return context.registry.task(settings.task.kind, settings.task.params, context)
@@ -85,6 +83,9 @@ def run_task(
     address is logged; the viewer keeps serving after the run). `on_stage(text)` is told each stage as it starts,
     `on_objects(done, total)` how many of the objects the task knows of it is done with (`Cell.objects_done`).
     Bad config or planner names raise before anything is simulated."""
+    from twin.planning import make_context  # lazy: cli start-up (twin --help imports twin.tasks)
+    from twin.recording import Recorder  # lazy: cli start-up
+    from twin.rerun_log import RerunRecording, rerun_module  # lazy: cli start-up
     from twin.tasks.cell import Cell, stage_planners  # lazy: fcl, scipy
 
     if planner is not None:
