@@ -119,11 +119,11 @@ class PlanningScene:
         sphere_filter: bool = True,
     ):
         padding = _check_padding(padding_m)
-        covers = robot_urdf.sphere_cover if isinstance(robot_urdf, Robot) else None
-        if isinstance(robot_urdf, Robot):
-            model = robot_urdf.model
+        if isinstance(robot_urdf, Robot):  # the run's robot: its model and sphere cover, made once
+            model, covers = robot_urdf.model, robot_urdf.sphere_cover
         else:
             model = robot_urdf if isinstance(robot_urdf, RobotModel) else RobotModel.from_urdf(robot_urdf)
+            covers = None
         body = RobotBody.from_model(
             model,
             covers=covers,

@@ -251,9 +251,9 @@ def swap_planner(
         new = PlannerBlock(name=block) if isinstance(block, str) else PlannerBlock.model_validate(block)
     except ValidationError as err:
         raise ConfigError(format_validation(f"planners.{group}", err, PlannerBlock)) from None
-    key = f"planners.{group}"
+    key = ("planners", group)
     for o in overrides:
-        if ".".join(p.strip() for p in o.split("=", 1)[0].split(".")) in (key, f"{key}.name"):  # as apply_override
+        if _override_key(o) in (key, (*key, "name")):
             raise ConfigError(
                 f"--planner {new.name} and --set {short_repr(o)} both choose the {group} planner; give one"
             )

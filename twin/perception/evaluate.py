@@ -32,8 +32,7 @@ from twin.perception.aruco import Calibration, MarkerNotFound, calibrate, transf
 from twin.perception.capture import Capture, capture_frame, noise_rng, prefetch_next_capture
 from twin.perception.detection import detection_label, with_ground_truth
 from twin.perception.pipeline import camera_extrinsics, make_detector
-from twin.registry import PluginContext, default_registry
-from twin.robot import Robot
+from twin.planning import make_context
 from twin.scene_layout import OBJECT_TEMPLATES, find_marker_plate
 from twin.transforms import rpy_to_matrix as rpy_matrix
 from twin.types import BoxBounds, quat_to_matrix
@@ -383,7 +382,7 @@ def run_perception(
     seed = settings.seed if seed is None else int(seed)
     pipeline = settings.perception.pipeline
     timings: dict[str, float] = {}
-    context = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=default_registry())
+    context = make_context(settings)
     det = make_detector(settings, name=detector, context=context) if pipeline == "robocup" else None
     has_marker = find_marker_plate(settings) is not None
     with World(settings, seed, renderer=renderer, robot=context.robot) as world:  # type: ignore[arg-type]

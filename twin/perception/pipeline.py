@@ -15,8 +15,8 @@ from twin.config import Settings
 from twin.errors import ConfigError
 from twin.perception.capture import Capture, wrist_camera_offset
 from twin.perception.detection import Detector
-from twin.registry import PluginContext, default_registry
-from twin.robot import Robot
+from twin.planning import make_context
+from twin.registry import PluginContext
 from twin.robot.kinematics import URArm
 
 __all__ = ["camera_extrinsics", "make_detector"]
@@ -34,7 +34,7 @@ def make_detector(
     """The detector plugin named in `settings.perception.detector` (or `name`/`params`), instantiated in the
     run's plugin `context` (None: one made for `settings`, with its own robot)."""
     if context is None:
-        context = PluginContext(settings=settings, robot=Robot.from_settings(settings), registry=default_registry())
+        context = make_context(settings)
     block = settings.perception.detector
     reg = context.registry
     return reg.detector(name or block.name, block.params if params is None and name is None else params, context)
@@ -67,10 +67,9 @@ def camera_extrinsics(
         return T_base_camera_aruco
     if q_aruco is None:
         raise ConfigError("a wrist camera calibrated by ArUco needs the joint angles of the calibration view")
-    kin = arm
-    T_tool0_camera = np.linalg.inv(kin.fk(q_aruco, "flange")) @ T_base_camera_aruco
+    T_tool0_camera = np.linalg.inv(arm.fk(q_aruco, "flange")) @ T_base_camera_aruco
     log.debug(
         "hand-eye from ArUco differs from the configured offset by %.4f m",
         float(np.linalg.norm(T_tool0_camera[:3, 3] - wrist_camera_offset(settings)[:3, 3])),
     )
-    return kin.fk(capture.q, "flange") @ T_tool0_camera
+    return arm.fk(capture.q, "flange") @ T_tool0_camera
