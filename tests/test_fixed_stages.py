@@ -228,7 +228,7 @@ def test_a_placed_cube_knocked_out_by_a_later_motion_is_lost_to_that_motion():
     from types import SimpleNamespace
 
     from twin.tasks.judge import DisplacementWatch
-    from twin.tasks.warehouse.referee import WarehouseReferee
+    from twin.tasks.warehouse.judge import WarehouseReferee
 
     settings = load_config(ROOT / "configs/warehouse.yaml")
     with World(settings, seed=0, renderer="tiny") as world:

@@ -23,8 +23,8 @@ from twin.tasks.judge import (
     object_bounds,
 )
 from twin.tasks.robocup import BinGeometry, bin_geometries, read_bin_geometry
-from twin.tasks.robocup.referee import RobocupReferee
-from twin.tasks.warehouse.referee import WarehouseReferee
+from twin.tasks.robocup.judge import RobocupReferee
+from twin.tasks.warehouse.judge import WarehouseReferee
 from twin.transforms import pose_from_xyz_rpy
 from twin.types import Pose
 from twin.world import ObjectState, World

@@ -260,12 +260,12 @@ GT_READS = re.compile(
     r"|true_pose|(?<!needs_)ground_truth\s*="
 )
 # Where ground truth may be read: judging and metrics, and the detector labelled ORACLE.
-GT_ALLOWED = ("judge", "referee", "metric", "oracle")  # referee: a task package's judge
+GT_ALLOWED = ("judge", "metric", "oracle")
 
 
 def test_tasks_and_planners_decide_without_ground_truth():
     """Tasks decide "grasped / slipped / placed next" from sensor readings, planners from the planning scene;
-    reading the simulator's truth is for files named judge, referee, metric or oracle."""
+    reading the simulator's truth is for files named judge, metric or oracle."""
     files = [*(ROOT / "twin" / "tasks").rglob("*.py"), *(ROOT / "plugins").rglob("*.py")]
     state_machines = [ROOT / "twin" / "tasks" / t / "task.py" for t in ("robocup", "warehouse")]
     checked = []

@@ -6,7 +6,7 @@ name in `settings.task.kind`; the built-in ones are `robocup` and `warehouse` (`
 
 The tasks decide with what a real cell senses (camera frames, joint encoders, the gripper's finger
 position); the simulator's ground truth is read only by the judging: `twin.tasks.judge` and each task's
-referee (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`: verdicts, metrics, the labelled oracle
+referee (`twin.tasks.robocup.judge`, `twin.tasks.warehouse.judge`: verdicts, metrics, the labelled oracle
 detector's hand-off).
 """
 

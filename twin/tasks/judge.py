@@ -10,7 +10,7 @@ referee), in four roles:
   table (its bottom within a few mm of the table top) with its centre inside the zone.
 - **Metrics**: which true object an estimate was (pose error, per-object cycle time).
 - **Referees**: what every task's referee shares (`Referee`, the displacements each motion caused); each
-  task's own referee lives in its package (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`).
+  task's own referee lives in its package (`twin.tasks.robocup.judge`, `twin.tasks.warehouse.judge`).
 - **Simulator plumbing** that must not feed a task's decisions: the body between the fingers for the
   simulated contact monitor, and the ground truth handed to a detector labelled ORACLE.
 """
@@ -242,7 +242,7 @@ def stage_of(error: str | None) -> str | None:
 class Referee:
     """Ground truth of one run, the part every task's referee shares: the world, the settings, the true
     objects at the start (`truth`, by body id) and the motions' displacements (`watch`, `Cell.watch`). A task's
-    referee (`twin.tasks.robocup.referee`, `twin.tasks.warehouse.referee`) adds its matching and verdicts; the
+    referee (`twin.tasks.robocup.judge`, `twin.tasks.warehouse.judge`) adds its matching and verdicts; the
     task hands it its records, and it never answers a question the task could act on."""
 
     def __init__(self, world: World, settings: Settings, watch: DisplacementWatch | None = None) -> None:

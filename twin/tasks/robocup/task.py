@@ -7,7 +7,7 @@ object is retried from a fresh perception (`retries` times), then skipped with i
 
 The task decides with what a real cell senses: camera frames, joint encoders and the gripper's finger
 position (grasped, slipped, dropped: `Cell.close_gripper`, `Cell.check_holding`). Which true object an
-estimate was and whether it ended in its bin is for the judge (twin.tasks.robocup.referee) alone.
+estimate was and whether it ended in its bin is for the judge (twin.tasks.robocup.judge) alone.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from twin.tasks.cell import Cell, StageFailed, clear_failure, note_failure, top_
 from twin.tasks.jam import clear_after_release
 from twin.tasks.robocup.bins import BinGeometry, bin_for, bin_geometries, read_bin_geometry
 from twin.tasks.robocup.calibration import calibrate_hand_eye, relook_target
+from twin.tasks.robocup.judge import RobocupReferee, perceive_robocup_scene
 from twin.tasks.robocup.perception import ObjectEstimate, wrap_half_turn
-from twin.tasks.robocup.referee import RobocupReferee, perceive_robocup_scene
 from twin.types import ObjectOutcome
 
 if TYPE_CHECKING:

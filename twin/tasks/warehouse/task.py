@@ -4,7 +4,7 @@ at the drop location of its colour.
 
 The task decides with what a real cell senses: the camera frame, joint encoders and the gripper's finger
 position (grasped, slipped, dropped). Which true cube a perceived one was and whether it ended in its drop
-zone is for the judge (twin.tasks.warehouse.referee) alone.
+zone is for the judge (twin.tasks.warehouse.judge) alone.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from twin.perception.capture import capture_frame, prefetch_next_capture
 from twin.perception.mount import error_bound_m, level_on_table, table_plane
 from twin.tasks.cell import Cell, GraspCheck, StageFailed, clear_failure, note_failure, top_down
 from twin.tasks.jam import clear_after_release
+from twin.tasks.warehouse.judge import WarehouseReferee
 from twin.tasks.warehouse.perception import LabeledCube, WarehouseResult, perceive_warehouse
-from twin.tasks.warehouse.referee import WarehouseReferee
 from twin.types import CalibrationOutcome, Landmark, ObjectOutcome
 
 if TYPE_CHECKING:
