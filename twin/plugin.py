@@ -118,6 +118,7 @@ _LAZY: dict[str, str] = {
     # the collision world
     "PlanningScene": "twin.collision",
     "FixtureSpec": "twin.collision",
+    "SphereModel": "twin.collision",
     # settings
     "Settings": "twin.config",
     "load_config": "twin.config",
@@ -201,6 +202,7 @@ __all__ = [
     "Retimer",
     "Robot",
     "SceneCloud",
+    "SphereModel",
     "SceneView",
     "Segment",
     "SelfRows",
@@ -260,7 +262,7 @@ __all__ = [
 
 if TYPE_CHECKING:
     from twin.camera import RGBDFrame
-    from twin.collision import FixtureSpec, PlanningScene
+    from twin.collision import FixtureSpec, PlanningScene, SphereModel
     from twin.config import Settings, load_config
     from twin.perception.colors import color_distance, palette
     from twin.perception.detection import CLASSES, Detection, Detector, SceneCloud, scene_cloud

@@ -8,6 +8,7 @@
 * `twin.collision.robot_body`: the robot set up for collision checks (FCL shapes posed through the chain,
   gripper opening, held box, allowed self pairs, sphere model).
 * `twin.collision.obstacles`: the environment (fixtures and run-time boxes) as padded FCL objects.
+* `twin.collision.planning_model`: `SphereModel`, the planning model (sphere cover, touching = collision, no FCL).
 * `twin.collision.scene`: `PlanningScene`, one robot body and one environment, with its queries (collision,
   signed distance, clearance, path checks) and edits (boxes, fixtures, gripper opening, attach/detach,
   `padded` copies).
@@ -16,8 +17,17 @@ Padding: `padding_m` inflates every environment shape (fixtures and boxes) on ea
 held object and self-collision are unpadded. Distances are signed: < 0 is a penetration.
 """
 
+from twin.collision.planning_model import SphereModel
 from twin.collision.rules import CollisionRules
 from twin.collision.scene import DistanceResult, FixtureSpec, PathCheck, PlanningScene
 from twin.robot.urdf_model import read_fixture_shapes
 
-__all__ = ["CollisionRules", "DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "read_fixture_shapes"]
+__all__ = [
+    "CollisionRules",
+    "DistanceResult",
+    "FixtureSpec",
+    "PathCheck",
+    "PlanningScene",
+    "SphereModel",
+    "read_fixture_shapes",
+]

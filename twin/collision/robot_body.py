@@ -414,17 +414,11 @@ class RobotBody:
             return best, None
         return best, (self.owner[id(res.o1)], self.owner[id(res.o2)])
 
-    def sphere_flags(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
-        """(n,) bool: False where the sphere model proves qs[i] (n, 6) clear of `env` and of itself, True
-        where FCL must decide."""
-        from twin.collision.sphere_kernel import flag_configurations  # lazy: numba (compiled on first use)
-
-        if not (qs.flags.c_contiguous and qs.flags.writeable and qs.dtype == np.float64):
-            qs = np.array(qs, dtype=float, order="C")  # one compiled specialisation: writeable C float64
-        out = np.empty(qs.shape[0], dtype=bool)
+    def kernel_model(self, env: EnvPrimitives) -> tuple[Any, ...]:
+        """The sphere model against `env` as the compiled kernels take it (`twin.collision.sphere_kernel`'s
+        model tuple): this body as it is now (held object, finger opening), a snapshot."""
         ch = self.chain
-        flag_configurations(
-            qs,
+        return (
             ch.revolute,
             ch.A,
             ch.B,
@@ -445,11 +439,29 @@ class RobotBody:
             env.to_local,
             env.dims,
             env.bound,
-            TOUCH_M,
             self.reach,
             self.pair_moves,
-            out,
+            TOUCH_M,
         )
+
+    def kernel_scratch(self) -> tuple[Any, ...]:
+        """Work arrays for the kernels over this body (made again when the held object changes their sizes)."""
+        from twin.collision.sphere_kernel import new_scratch  # lazy: numba (compiled on first use)
+
+        size = (len(self.object_frame), self.sph.shape[0], len(self.pa))
+        if getattr(self, "_scratch_size", None) != size:
+            self._kernel_scratch, self._scratch_size = new_scratch(*size), size
+        return self._kernel_scratch
+
+    def sphere_flags(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
+        """(n,) bool: False where the sphere model proves qs[i] (n, 6) clear of `env` and of itself, True
+        where FCL must decide."""
+        from twin.collision.sphere_kernel import flag_configurations  # lazy: numba (compiled on first use)
+
+        if not (qs.flags.c_contiguous and qs.flags.writeable and qs.dtype == np.float64):
+            qs = np.array(qs, dtype=float, order="C")  # one compiled specialisation: writeable C float64
+        out = np.empty(qs.shape[0], dtype=bool)
+        flag_configurations(self.kernel_model(env), self.kernel_scratch(), qs, out)
         return out
 
     # ---- introspection ------------------------------------------------------------------------

@@ -43,6 +43,7 @@ from twin.collision.fcl_shapes import DistanceAccumulator as _DistAcc
 from twin.collision.fcl_shapes import collide_callback as _collide_cb
 from twin.collision.fcl_shapes import distance_callback as _distance_cb
 from twin.collision.obstacles import Obstacles, box_from_bounds, check_pose, check_size
+from twin.collision.planning_model import SphereModel
 from twin.collision.robot_body import RobotBody
 from twin.errors import InvalidRequestError
 from twin.robot import Robot
@@ -288,6 +289,12 @@ class PlanningScene:
         """(n,) bool for (n, 6) configurations: True where the conservative sphere model alone proves the
         configuration collision-free (then FCL agrees); False means "ask FCL", not "in collision"."""
         return ~self._flags(_as_qs(qs))
+
+    def sphere_model(self) -> SphereModel:
+        """The planning model of this scene as it is now (`twin.collision.planning_model`): the robot's sphere
+        cover against the padded environment, touching = in collision, no FCL. A snapshot: edits to the scene
+        after it was made (boxes, held object, opening) are not in it."""
+        return SphereModel(self._body.kernel_model(self._obstacles.primitives()), self._body.kernel_scratch())
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True when the arm at q (6,) hits the environment or itself, or the held object hits either."""

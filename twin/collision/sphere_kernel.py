@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["flag_configurations"]
+__all__ = ["evaluate", "first_flagged_motion", "flag_configurations", "new_scratch"]
 
 _MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost no square root), m
 
@@ -39,133 +39,177 @@ def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float,
     return math.sqrt(px * px + py * py + pz * pz) - d[0]
 
 
-@njit(cache=True, nogil=True)
-def flag_configurations(
-    qs: np.ndarray,
-    revolute: np.ndarray,
-    A: np.ndarray,
-    B: np.ndarray,
-    C: np.ndarray,
-    chain: np.ndarray,
-    obj_frame: np.ndarray,
-    obj_const: np.ndarray,
-    obj_kind: np.ndarray,
-    obj_dims: np.ndarray,
-    obj_radius: np.ndarray,
-    obj_env: np.ndarray,
-    sph_start: np.ndarray,
-    sph_frame: np.ndarray,
-    sph: np.ndarray,
-    pair_a: np.ndarray,
-    pair_b: np.ndarray,
-    env_kind: np.ndarray,
-    env_to_local: np.ndarray,
-    env_dims: np.ndarray,
-    env_bound: np.ndarray,
-    touch: float,
-    reach: np.ndarray,
-    pair_moves: np.ndarray,
-    out: np.ndarray,
-) -> None:
-    """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring).
+# The model, one tuple handed to every kernel (`twin.collision.robot_body.RobotBody.kernel_model` builds it):
+# revolute, A, B, C, chain (the kinematic chain, `twin.collision.chain`); per object (robot shapes, then a held
+# box): frame, pose in that frame (4, 4; its origin is the centre of its bounding sphere), primitive kind, half
+# dimensions (as `EnvPrimitives`), bounding radius, whether it is tested against the environment, and its
+# spheres sph[sph_start[o]:sph_start[o + 1]] (x, y, z in the frame, r); self pairs pair_a[p], pair_b[p]; the
+# environment (`EnvPrimitives`: kind, to_local, dims, bound); the joints' reach and the pairs' moving joints
+# (`_near_anchor`); the touch distance.
+(_REVOLUTE, _A, _B, _C, _CHAIN, _OBJ_FRAME, _OBJ_CONST, _OBJ_KIND, _OBJ_DIMS, _OBJ_RADIUS, _OBJ_ENV) = range(11)
+(_SPH_START, _SPH_FRAME, _SPH, _PAIR_A, _PAIR_B, _ENV_KIND, _ENV_TO_LOCAL, _ENV_DIMS, _ENV_BOUND) = range(11, 20)
+_REACH, _PAIR_MOVES, _TOUCH = 20, 21, 22
+# the scratch tuple (`new_scratch`)
+_F, _L, _OC, _INV, _SC, _PLACED, _POSED, _GAP_NOW, _ANCHOR_GAP, _W, _ANCHOR_Q, _QK = range(12)
 
-    Objects (robot shapes, then a held box): frame, pose in that frame (4, 4; its origin is the centre
-    of its bounding sphere), primitive kind and half dimensions (as `EnvPrimitives`), bounding radius,
-    whether it is tested against the environment, and its spheres sph[sph_start[o]:sph_start[o + 1]]
-    (x, y, z in the frame, r). Self pairs: objects pair_a[p] and pair_b[p]; a pair is clear when the
-    spheres of one miss the exact primitive of the other, tried both ways."""
-    n_obj = obj_frame.shape[0]
-    n_env = env_kind.shape[0]
-    n_pairs = pair_a.shape[0]
-    F = np.empty((7, 4, 4))
-    L = np.empty((4, 4))
-    oc = np.empty((n_obj, 3))
-    inv = np.empty((n_obj, 3, 4))
-    sc = np.empty((sph.shape[0], 3))
-    placed = np.zeros(n_obj, dtype=np.bool_)
-    posed = np.zeros(n_obj, dtype=np.bool_)
-    anchor = -1  # the last configuration cleared, and its clearance bounds (conservative advancement: `_near_anchor`)
-    anchor_env = 0.0
-    anchor_gap = np.zeros(n_pairs)
-    gap_now = np.zeros(n_pairs)
-    w = np.zeros(6)
-    for i in range(qs.shape[0]):
-        if anchor >= 0 and _near_anchor(qs, i, anchor, reach, pair_moves, anchor_env, anchor_gap, touch, w):
-            out[i] = False
+
+@njit(cache=True, nogil=True)
+def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[type-arg]
+    """Work arrays of one caller: link frames, a joint transform, object centres, inverted object poses,
+    placed sphere centres, which objects are placed and posed, the self pairs' gaps now and at the anchor,
+    the joints' share of a motion, the anchor configuration, a configuration on a motion. Made once per
+    model, reused by every call (one caller at a time)."""
+    return (
+        np.empty((7, 4, 4)),
+        np.empty((4, 4)),
+        np.empty((n_obj, 3)),
+        np.empty((n_obj, 3, 4)),
+        np.empty((n_sph, 3)),
+        np.zeros(n_obj, dtype=np.bool_),
+        np.zeros(n_obj, dtype=np.bool_),
+        np.zeros(n_pairs),
+        np.zeros(n_pairs),
+        np.zeros(6),
+        np.zeros(6),
+        np.zeros(6),
+    )
+
+
+@njit(cache=True, nogil=True)
+def evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: ignore[type-arg]
+    """(flagged, env bound) of configuration q (6,): flagged unless the spheres prove it free (see the
+    module docstring); when free, a lower bound on every robot-environment distance (capped at
+    `_MARGIN_CAP_M`), and each self pair's gap in S[_GAP_NOW]."""
+    obj_frame, obj_radius, obj_env = K[_OBJ_FRAME], K[_OBJ_RADIUS], K[_OBJ_ENV]
+    sph_start, sph = K[_SPH_START], K[_SPH]
+    env_kind, env_to_local, env_dims, env_bound = K[_ENV_KIND], K[_ENV_TO_LOCAL], K[_ENV_DIMS], K[_ENV_BOUND]
+    pair_a, pair_b, touch = K[_PAIR_A], K[_PAIR_B], K[_TOUCH]
+    F, oc, sc, placed, posed, gap_now = S[_F], S[_OC], S[_SC], S[_PLACED], S[_POSED], S[_GAP_NOW]
+    _link_frames(q, K[_REVOLUTE], K[_A], K[_B], K[_C], K[_CHAIN], F, S[_L])
+    _object_centres(F, obj_frame, K[_OBJ_CONST], oc, placed, posed)
+    m = _MARGIN_CAP_M
+    # robot (and held box) against the environment: bounding spheres first, then the object's spheres
+    for o in range(obj_frame.shape[0]):
+        if not obj_env[o]:
             continue
-        _link_frames(qs, i, revolute, A, B, C, chain, F, L)
-        _object_centres(F, obj_frame, obj_const, oc, placed, posed)
-        flagged = False
-        m = _MARGIN_CAP_M
-        # robot (and held box) against the environment: bounding spheres first, then the object's spheres
-        for o in range(n_obj):
-            if not obj_env[o]:
-                continue
-            for e in range(n_env):
-                dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
-                far = obj_radius[o] + env_bound[e, 3] + m
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 > far * far:
-                    continue  # farther than the margin: changes nothing
-                gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
-                if gap > touch:
-                    m = min(m, gap)
-                    continue
-                gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
-                gap -= obj_radius[o]
-                if gap > touch:
-                    m = min(m, gap)
-                    continue
-                if not placed[o]:
-                    _place(F, sph_start[o], sph_start[o + 1], sph_frame, sph, sc)
-                    placed[o] = True
-                gap = _spheres_gap(sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e])
-                if gap < touch:
-                    flagged = True
-                    break
+        for e in range(env_kind.shape[0]):
+            dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
+            far = obj_radius[o] + env_bound[e, 3] + m
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 > far * far:
+                continue  # farther than the margin: changes nothing
+            gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
+            if gap > touch:
                 m = min(m, gap)
-            if flagged:
+                continue
+            gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
+            gap -= obj_radius[o]
+            if gap > touch:
+                m = min(m, gap)
+                continue
+            if not placed[o]:
+                _place(F, sph_start[o], sph_start[o + 1], K[_SPH_FRAME], sph, sc)
+                placed[o] = True
+            gap = _spheres_gap(sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e])
+            if gap < touch:
+                return True, 0.0
+            m = min(m, gap)
+    # self pairs, each with its own bound (the joints between its parts move them apart)
+    obj_kind, obj_dims, obj_const, inv = K[_OBJ_KIND], K[_OBJ_DIMS], K[_OBJ_CONST], S[_INV]
+    for p in range(pair_a.shape[0]):
+        a, b = pair_a[p], pair_b[p]
+        dx, dy, dz = oc[a, 0] - oc[b, 0], oc[a, 1] - oc[b, 1], oc[a, 2] - oc[b, 2]
+        far = obj_radius[a] + obj_radius[b] + _MARGIN_CAP_M
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 > far * far:
+            gap_now[p] = _MARGIN_CAP_M
+            continue
+        gap = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
+        if gap > touch:
+            gap_now[p] = gap
+            continue
+        flagged = True
+        for a2, b2 in ((a, b), (b, a)):
+            if not placed[a2]:
+                _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
+                placed[a2] = True
+            if not posed[b2]:
+                _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
+                posed[b2] = True
+            gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
+            if gap >= touch:
+                flagged = False
+                gap_now[p] = gap
                 break
-        if not flagged:
-            # self pairs, each with its own bound (the joints between its parts move them apart)
-            for p in range(n_pairs):
-                a, b = pair_a[p], pair_b[p]
-                dx, dy, dz = oc[a, 0] - oc[b, 0], oc[a, 1] - oc[b, 1], oc[a, 2] - oc[b, 2]
-                far = obj_radius[a] + obj_radius[b] + _MARGIN_CAP_M
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 > far * far:
-                    gap_now[p] = _MARGIN_CAP_M
-                    continue
-                gap = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
-                if gap > touch:
-                    gap_now[p] = gap
-                    continue
-                flagged = True
-                for a2, b2 in ((a, b), (b, a)):
-                    if not placed[a2]:
-                        _place(F, sph_start[a2], sph_start[a2 + 1], sph_frame, sph, sc)
-                        placed[a2] = True
-                    if not posed[b2]:
-                        _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
-                        posed[b2] = True
-                    gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
-                    if gap >= touch:
-                        flagged = False
-                        gap_now[p] = gap
-                        break
-                if flagged:
-                    break
-        if not flagged:
-            anchor, anchor_env = i, m
-            anchor_gap[:] = gap_now
-        out[i] = flagged
+        if flagged:
+            return True, 0.0
+    return False, m
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> tuple[bool, float]:  # type: ignore[type-arg]
+    """`evaluate`, skipped when q is clear by the anchor's bounds (anchor_env < 0: no anchor yet); a newly
+    cleared q becomes the anchor. Returns (flagged, the anchor's env bound now)."""
+    if anchor_env >= 0.0 and _near_anchor(
+        q, S[_ANCHOR_Q], K[_REACH], K[_PAIR_MOVES], anchor_env, S[_ANCHOR_GAP], K[_TOUCH], S[_W]
+    ):
+        return False, anchor_env
+    flagged, m = evaluate(K, S, q)
+    if flagged:
+        return True, anchor_env
+    S[_ANCHOR_Q][:] = q
+    S[_ANCHOR_GAP][:] = S[_GAP_NOW]
+    return False, m
+
+
+@njit(cache=True, nogil=True)
+def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> None:  # type: ignore[type-arg]
+    """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring). Along a
+    sequence, configurations close to the last cleared one are cleared by its bounds (`_near_anchor`)."""
+    anchor_env = -1.0
+    for i in range(qs.shape[0]):
+        out[i], anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
+
+
+@njit(cache=True, nogil=True)
+def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float) -> int:  # type: ignore[type-arg]
+    """The straight joint motion a -> b in n = ceil(max |b - a| / resolution) steps: configurations
+    a + k/n (b - a), k = 1..n (a itself is not checked), evaluated coarse to fine (b first, then the
+    midpoints of ever finer halvings: `twin_ompl`'s bisection order). Returns the first k flagged, or 0 when
+    the spheres prove the whole motion free. One compiled call per motion, nothing allocated."""
+    span = 0.0
+    for j in range(6):
+        span = max(span, abs(b[j] - a[j]))
+    n = max(1, int(math.ceil(span / resolution - 1e-9)))
+    qk = S[_QK]
+    anchor_env = -1.0
+    half = 1  # the first halving's step: the largest power of two below n (every k < n is an odd multiple
+    while 2 * half < n:  # of exactly one power of two <= half, so each is evaluated once)
+        half *= 2
+    k, step = n, 0
+    while True:
+        for j in range(6):
+            qk[j] = a[j] + (k / n) * (b[j] - a[j])
+        flagged, anchor_env = _flag_with_anchor(K, S, qk, anchor_env)
+        if flagged:
+            return k
+        if step == 0:  # b done: the halvings start
+            if n == 1:
+                return 0
+            step, k = half, half
+        else:
+            k += 2 * step
+        while k >= n:
+            step //= 2
+            if step == 0:
+                return 0
+            k = step
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _near_anchor(
-    qs: np.ndarray,
-    i: int,
-    anchor: int,
+    q: np.ndarray,
+    anchor_q: np.ndarray,
     reach: np.ndarray,
     pair_moves: np.ndarray,
     anchor_env: float,
@@ -173,17 +217,17 @@ def _near_anchor(
     touch: float,
     w: np.ndarray,
 ) -> bool:
-    """Conservative advancement: whether qs[i] is clear by the bounds of the cleared qs[anchor] alone.
+    """Conservative advancement: whether q is clear by the bounds of the cleared anchor_q alone.
 
     A cleared configuration also yields a lower bound on every robot-environment distance (anchor_env,
     capped at `_MARGIN_CAP_M`) and one per self pair (anchor_gap). No point of the robot moves farther
     than sum_k |dq_k| reach[k] between two configurations (reach[k]: how far any robot point can be from
     joint k's axis), and the parts of a self pair move relative to each other only through the joints
-    between them (pair_moves[p, k] = 1), so the configurations after it that stay within all those bounds
-    are clear too, without being evaluated. `w` (6,): scratch, each joint's share of the motion."""
+    between them (pair_moves[p, k] = 1), so the configurations within all those bounds are clear too,
+    without being evaluated. `w` (6,): scratch, each joint's share of the motion."""
     moved = 0.0
     for k in range(6):
-        w[k] = abs(qs[i, k] - qs[anchor, k]) * reach[k]
+        w[k] = abs(q[k] - anchor_q[k]) * reach[k]
         moved += w[k]
     clear = moved < anchor_env - touch
     p = 0
@@ -198,8 +242,7 @@ def _near_anchor(
 
 @njit(cache=True, nogil=True, inline="always")
 def _link_frames(
-    qs: np.ndarray,
-    i: int,
+    q: np.ndarray,
     revolute: np.ndarray,
     A: np.ndarray,
     B: np.ndarray,
@@ -208,7 +251,7 @@ def _link_frames(
     F: np.ndarray,
     L: np.ndarray,
 ) -> None:
-    """The link frames at configuration qs[i]: F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k]
+    """The link frames at configuration q (6,): F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k]
     + v C[k]) for the joints in chain order (chain[:, 0] = joint index), u = sin q, v = 1 - cos q
     (revolute) or u = q, v = 0. L (4, 4): scratch."""
     F[0] = 0.0
@@ -217,12 +260,12 @@ def _link_frames(
     for c in range(chain.shape[0]):
         j = chain[c, 0]
         f = chain[c, 1]
-        q = qs[i, j]
+        qj = q[j]
         if revolute[j]:
-            u = math.sin(q)
-            v = 1.0 - math.cos(q)
+            u = math.sin(qj)
+            v = 1.0 - math.cos(qj)
         else:
-            u = q
+            u = qj
             v = 0.0
         for r in range(4):
             for s in range(4):
