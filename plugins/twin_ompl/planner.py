@@ -8,7 +8,7 @@ One `plan(request, scene)`:
    first; none -> INVALID_GOAL saying whether the pose is out of reach or every solution collides (and
    with what);
 2. planning happens on the scene with its environment inflated by `clearance_m` (5 mm; see
-   `twin_ompl.validity.padded_scene`), unless the start or every goal lies closer than that;
+   `twin.plugin.padded_scene`), unless the start or every goal lies closer than that;
 3. only with `try_direct: true` (off by default: the planner being compared is what plans): the straight
    joint-space motion to one of the nearest goals, when free, is the answer without sampling;
 4. otherwise OMPL plans in a RealVectorStateSpace(6) whose bounds are `joint_range`: 'compact' by
@@ -73,18 +73,23 @@ from twin.plugin import (
     MotionResult,
     PathPlanner,
     PlanningError,
-    PoseGoal,
     Retimer,
     Status,
     URArm,
-    colliding_pair,
+    add_time,
+    goal_set,
     jerk_limited,
+    padded_scene,
+    path_length,
+    sampling_bounds,
+    start_failure,
+    timed_and_checked,
 )
 from twin_ompl.budget import Budget, search_roadmap, stop_at_first_path
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, OptimizingOmplParams, PlannerSpec, params_model
-from twin_ompl.postprocess import add_time, path_length, simplify, timed_and_checked
-from twin_ompl.problem import geometric_path, repair_bounds, sampling_bounds, simple_setup, space_information, states
-from twin_ompl.validity import CheckCounter, padded_scene
+from twin_ompl.postprocess import simplify
+from twin_ompl.problem import geometric_path, repair_bounds, simple_setup, space_information, states
+from twin_ompl.validity import CheckCounter
 
 if TYPE_CHECKING:
     from twin.plugin import PlanningScene, PluginContext
@@ -107,8 +112,6 @@ __all__ = [
     "RRTConnect",
     "RRTstar",
     "SORRTstar",
-    "path_length",
-    "sampling_bounds",
 ]
 
 log = logging.getLogger("twin")
@@ -249,23 +252,12 @@ class OmplPlanner(PathPlanner):
         info: dict[str, Any] = {"planner": self.name, "seed": request.seed}
 
         # 1. start and goals ------------------------------------------------------------------------
-        if not kin.within_limits(start):
-            lo, hi = kin.joint_limits[:, 0], kin.joint_limits[:, 1]
-            j = int(np.argmax(np.maximum(lo - start, start - hi)))
-            return MotionResult(
-                Status.INVALID_START,
-                f"start joint {j + 1} = {start[j]:.3f} rad is outside [{lo[j]:.3f}, {hi[j]:.3f}]",
-                info=info,
-            )
-        if scene.in_collision(start):
-            return MotionResult(
-                Status.INVALID_START,
-                f"the start configuration is in collision ({colliding_pair(scene, start)})",
-                info=info,
-            )
+        refused = start_failure(kin, scene, start)
+        if refused is not None:
+            return MotionResult(refused[0], refused[1], info=info)
         joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
         bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
-        goals, failure = self._goal_set(request, scene, bounds)
+        goals, failure = goal_set(kin, scene, request, bounds, max_goals=p.max_goal_states, joint_range=p.joint_range)
         if failure is not None:
             return MotionResult(failure[0], failure[1], info=info)
         assert goals is not None
@@ -298,7 +290,9 @@ class OmplPlanner(PathPlanner):
         info.update(goal_index=att.goal_index)
         repairs = 0
         while True:
-            traj, outcome, segment = timed_and_checked(path, self._timer(), request, scene, kin, p, timings)
+            traj, outcome, segment = timed_and_checked(
+                path, self._timer(), request, scene, kin, p.verify_resolution_rad, p.verify_resolution_m, timings
+            )
             info.update(repairs=repairs, waypoints=int(path.shape[0]), path_length_rad=path_length(path))
             if traj is not None:
                 info.update(duration_s=traj.duration)
@@ -351,42 +345,6 @@ class OmplPlanner(PathPlanner):
         )
 
     # ---- steps -------------------------------------------------------------------------------------
-    def _goal_set(
-        self, request: MotionRequest, scene: PlanningScene, bounds: np.ndarray
-    ) -> tuple[np.ndarray | None, tuple[Status, str] | None]:
-        """(k, 6) collision-free goal configurations inside `bounds`, nearest to the start first."""
-        kin, start = self.kin, request.start
-        goal = request.goal
-        if isinstance(goal, JointGoal):
-            q = np.array(goal.q, dtype=float)
-            if not kin.within_limits(q):
-                return None, (Status.INVALID_GOAL, "the joint goal is outside the joint limits")
-            if scene.in_collision(q):
-                return None, (Status.INVALID_GOAL, f"the joint goal is in collision ({colliding_pair(scene, q)})")
-            return q[None], None
-        assert isinstance(goal, PoseGoal)
-        if goal.frame not in ("tcp", "flange"):
-            return None, (Status.INVALID_GOAL, f"unknown goal frame {goal.frame!r}; allowed: tcp, flange")
-        sols = kin.ik(goal.pose.matrix(), goal.frame)
-        if sols.shape[0] == 0:
-            return None, (Status.INVALID_GOAL, "the goal pose has no IK solution (out of reach)")
-        inside = np.all((sols >= bounds[:, 0] - 1e-9) & (sols <= bounds[:, 1] + 1e-9), axis=1)
-        sols = sols[inside]
-        if sols.shape[0] == 0:  # cannot happen for 'compact' (every branch has a wrap in [-pi, pi])
-            return None, (
-                Status.INVALID_GOAL,
-                f"no IK solution of the goal pose lies inside the sampling bounds ({self.params.joint_range})",
-            )
-        sols = sols[np.argsort(np.abs(sols - start).max(axis=1), kind="stable")]
-        hits = scene.in_collision_batch(sols)
-        free = sols[~hits]
-        if free.shape[0] == 0:
-            return None, (
-                Status.INVALID_GOAL,
-                f"all {sols.shape[0]} IK solutions of the goal pose collide (e.g. {colliding_pair(scene, sols[0])})",
-            )
-        return free[: self.params.max_goal_states], None
-
     def _attempt(
         self,
         start: np.ndarray,

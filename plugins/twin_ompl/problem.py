@@ -1,11 +1,9 @@
-"""The OMPL side of one sampling run: sampling bounds, the state space with the scene's validity checks, the
-start and goal states, the seeded planner object, and the planner's path read back as an array.
+"""The OMPL side of one sampling run: the state space with the scene's validity checks, the start and goal
+states, the seeded planner object, and the planner's path read back as an array.
 
 Why here, apart from the planner class: this is everything that speaks OMPL's Python bindings (2.0.1) when a
 problem is set up; `twin_ompl.planner` decides what to plan and `twin_ompl.postprocess` what to do with the
-path. Sampling bounds (`joint_range`): 'compact' = [-pi, pi] per joint widened to start +- pi and to a joint
-goal, clipped to the limits (every IK branch keeps a representative within pi of the start in each joint,
-and the sampled volume is ~1/20 of the full +-2pi box); 'full' = the joint limits.
+path. The sampling bounds (`joint_range`) are every path planner's (`twin.plugin.sampling_bounds`).
 
 Seeding: OMPL's global seed generator is re-seeded (`ou.RNG.setSeed`) with the request's seed before the
 state space is built, so every random generator of the run starts from it: the one the state space draws
@@ -17,7 +15,6 @@ gave two paths. The seed is process-global: do not plan with OMPL from two threa
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -29,12 +26,11 @@ import ompl.util as ou
 from twin_ompl.validity import CheckCounter, SceneMotionValidator, state_validity_checker
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, URArm
+    from twin.plugin import PlanningScene
 
 __all__ = [
     "geometric_path",
     "repair_bounds",
-    "sampling_bounds",
     "seed_ompl",
     "simple_setup",
     "space_information",
@@ -43,23 +39,10 @@ __all__ = [
 
 ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
-_PI = math.pi
 # a repair plans one grazing segment again inside the segment's own box widened by this much per joint: the
 # detour around a graze is local, and a small box keeps batch planners (FMT*, BFMT*), whose edges span
 # their whole sampling box, from checking long edges at the fine resolution
 _REPAIR_MARGIN_RAD = 0.3
-
-
-def sampling_bounds(kin: URArm, start: np.ndarray, joint_goal: np.ndarray | None, joint_range: str) -> np.ndarray:
-    """(6, 2) sampling bounds in rad for `joint_range` 'compact' or 'full' (see the module docstring)."""
-    lim = np.asarray(kin.joint_limits, dtype=float)
-    if joint_range == "full":
-        return lim.copy()
-    lo = np.minimum(-_PI, start - _PI)
-    hi = np.maximum(_PI, start + _PI)
-    if joint_goal is not None:
-        lo, hi = np.minimum(lo, joint_goal), np.maximum(hi, joint_goal)
-    return np.stack([np.maximum(lo, lim[:, 0]), np.minimum(hi, lim[:, 1])], axis=1)
 
 
 def repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarray:

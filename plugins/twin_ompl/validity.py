@@ -15,25 +15,19 @@ invalid from its start: they lose partial extensions, never validity.
 from __future__ import annotations
 
 import math
-import weakref
 from time import perf_counter
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import ompl.base as ob
 
 from twin.plugin import PlanningScene
 
-if TYPE_CHECKING:
-    from twin.plugin import Trajectory, URArm
-
 __all__ = [
     "CheckCounter",
     "SceneMotionValidator",
     "bisection_order",
-    "padded_scene",
     "state_validity_checker",
-    "trajectory_check_points",
 ]
 
 
@@ -137,61 +131,3 @@ class SceneMotionValidator(ob.MotionValidator):  # type: ignore[misc]
         hit = self.scene.first_collision(qs)
         self.counter.configs += n if hit is None else min(n, (hit // 32 + 1) * 32)
         return hit is None
-
-
-def trajectory_check_points(traj: Trajectory, kin: URArm, step_rad: float, step_m: float) -> np.ndarray:
-    """(k, 6) configurations along `traj` no more than `step_rad` apart in any joint and `step_m / 2` apart
-    in TCP position (the factor 2 is `twin.planning.densify`'s margin for chords), end points included.
-
-    The trajectory's own samples are dense (1 kHz), so configurations between them are interpolated
-    linearly over a cumulative "resolution units" parameter instead of re-evaluating the spline.
-    """
-    q = traj.q
-    if q.shape[0] == 1:
-        return q.copy()
-    dq = np.abs(np.diff(q, axis=0)).max(axis=1) / step_rad
-    p = kin.fk_batch(q)[:, :3, 3]
-    dp = 2.0 * np.linalg.norm(np.diff(p, axis=0), axis=1) / step_m
-    u = np.concatenate(([0.0], np.cumsum(np.maximum(dq, dp) + 1e-12)))
-    n = max(1, math.ceil(u[-1] - 1e-9))
-    targets = np.linspace(0.0, u[-1], n + 1)
-    return np.stack([np.interp(targets, u, q[:, j]) for j in range(6)], axis=1)
-
-
-# ---- clearance: the same scene with the environment inflated ------------------------------------------------
-_PADDED: weakref.WeakKeyDictionary[PlanningScene, tuple[Any, PlanningScene]] = weakref.WeakKeyDictionary()
-
-
-def _signature(scene: PlanningScene) -> tuple[Any, ...]:
-    boxes = tuple((n, sz.tobytes(), T.tobytes()) for n, (sz, T) in sorted(scene.boxes().items()))
-    held = scene.attached_box()
-    held_sig = None if held is None else (held[0], held[1].tobytes(), held[2].tobytes())
-    return (
-        tuple(scene.names()),
-        boxes,
-        held_sig,
-        float(scene.gripper_opening),
-        float(scene.padding_m),
-        scene.sphere_filter,
-    )
-
-
-def padded_scene(scene: PlanningScene, clearance_m: float) -> PlanningScene | None:
-    """A copy of `scene` whose environment (fixtures, boxes) is inflated by `clearance_m` more
-    (`PlanningScene.padded`), or None for an object that is not a planning scene (a test double).
-
-    Why: discrete checks (any resolution) can pass a path that grazes an obstacle by a fraction of a
-    millimetre between two checked states; a finer check then finds it, and execution in the world would
-    touch it. Planning and the final check on the inflated scene keep that margin instead. The copy is
-    cached per scene and made again when the scene's boxes, held object, finger opening, padding or sphere filter
-    change.
-    """
-    if not isinstance(scene, PlanningScene):
-        return None
-    sig = _signature(scene) + (float(clearance_m),)
-    cached = _PADDED.get(scene)
-    if cached is not None and cached[0] == sig:
-        return cached[1]
-    copy = scene.padded(clearance_m)
-    _PADDED[scene] = (sig, copy)
-    return copy
