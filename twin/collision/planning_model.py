@@ -30,11 +30,14 @@ import numpy as np
 from twin.errors import InvalidRequestError
 from twin.robot.sphere_cover import CELL_M, SLACK_M
 
-__all__ = ["OVERSHOOT_BOUND_M", "SphereModel", "escape"]
+__all__ = ["CONTINUOUS_FLOOR_M", "OVERSHOOT_BOUND_M", "SphereModel", "escape"]
 
 # how far a cover reaches beyond its shape at most: a box cell's circumscribed sphere beyond the middle of the
 # cell's face (cell side <= CELL_M), a cylinder slab's sphere beyond the cylinder (SLACK_M); m
 OVERSHOOT_BOUND_M = max(0.5 * (math.sqrt(3.0) - 1.0) * CELL_M, SLACK_M)
+# a continuous motion check calls a motion touching where the spheres come this close (the advancement's
+# steps shrink with the distance: closer, it would crawl), m
+CONTINUOUS_FLOOR_M = 1e-4
 
 
 class SphereModel:
@@ -51,6 +54,7 @@ class SphereModel:
         self._evaluate = sphere_kernel.evaluate
         self._flags = sphere_kernel.flag_configurations
         self._motion = sphere_kernel.first_flagged_motion
+        self._continuous = sphere_kernel.first_touch_on_motion
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True unless the spheres prove q (6,) free."""
@@ -81,6 +85,16 @@ class SphereModel:
     def motion_free(self, a: np.ndarray, b: np.ndarray, resolution_rad: float) -> bool:
         """True when every configuration of a -> b, `resolution_rad` apart, is free in the model."""
         return self.first_collision_on_motion(a, b, resolution_rad) is None
+
+    def first_touch_continuous(self, a: np.ndarray, b: np.ndarray, floor_m: float = CONTINUOUS_FLOOR_M) -> float | None:
+        """The straight joint motion a -> b checked continuously (conservative advancement: every
+        configuration on it, a and b included, proven free by the distance bounds of the configurations
+        evaluated): None when it is free, else the fraction of the motion where the spheres come within
+        `floor_m` of touching. A motion this calls free FCL calls free at any resolution."""
+        if not (math.isfinite(floor_m) and floor_m > 0):
+            raise InvalidRequestError(f"floor_m must be > 0, got {floor_m}")
+        t = self._continuous(self.kernel, self.scratch, _vector(a), _vector(b), float(floor_m))
+        return None if t < 0 else float(t)
 
 
 def escape(

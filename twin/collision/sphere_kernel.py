@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["evaluate", "first_flagged_motion", "flag_configurations", "new_scratch"]
+__all__ = ["evaluate", "first_flagged_motion", "first_touch_on_motion", "flag_configurations", "new_scratch"]
 
 _MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost no square root), m
 
@@ -204,6 +204,52 @@ def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resol
             if step == 0:
                 return 0
             k = step
+
+
+@njit(cache=True, nogil=True)
+def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
+    """The straight joint motion a -> b, checked continuously by conservative advancement: -1.0 when the
+    spheres prove every configuration of it free (a and b included), else the fraction t in [0, 1] of the
+    motion where they could not (a configuration touching, or one within `floor` m of touching, where the
+    advancement would crawl).
+
+    b is evaluated first (a blocked extension usually ends inside something). Then from t = 0: a cleared
+    configuration bounds the robot-environment distance (m) and each self pair's gap; no robot point moves
+    farther than dt * sum_k |b_k - a_k| reach[k] over dt of the motion, and a pair's parts relative to each
+    other only through the joints between them, so the motion is free up to the largest dt within every
+    bound, and the next configuration evaluated is there. Far from everything the bounds are capped at
+    `_MARGIN_CAP_M`: a step then moves no robot point more than that."""
+    touch = K[_TOUCH]
+    reach, pair_moves = K[_REACH], K[_PAIR_MOVES]
+    w, qk, gap_now = S[_W], S[_QK], S[_GAP_NOW]
+    total = 0.0
+    for k in range(6):
+        w[k] = abs(b[k] - a[k]) * reach[k]
+        total += w[k]
+    flagged, _ = evaluate(K, S, b)
+    if flagged:
+        return 1.0
+    t = 0.0
+    while True:
+        for j in range(6):
+            qk[j] = a[j] + t * (b[j] - a[j])
+        flagged, m = evaluate(K, S, qk)
+        if flagged or m - touch < floor:
+            return t
+        if total <= 0.0:
+            return -1.0
+        dt = (m - touch) / total
+        for p in range(gap_now.shape[0]):
+            rel = 0.0
+            for k in range(6):
+                rel += pair_moves[p, k] * w[k]
+            if rel > 0.0:
+                if gap_now[p] - touch < floor:
+                    return t
+                dt = min(dt, (gap_now[p] - touch) / rel)
+        t += dt
+        if t >= 1.0:
+            return -1.0
 
 
 @njit(cache=True, nogil=True, inline="always")
