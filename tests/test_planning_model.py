@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from tests.test_spheres import contact_configs, fcl_only, random_configs, scenes
 from twin.collision import PlanningScene, SphereModel
-from twin.collision.planning_model import OVERSHOOT_BOUND_M, escape
+from twin.collision.planning_model import OVERSHOOT_BOUND_M, leave_cover
 from twin.errors import InvalidRequestError
 
 
@@ -84,10 +84,10 @@ def _held_pose() -> np.ndarray:
     return pose_from_xyz_rpy((0.0, 0.01, 0.0), (0.0, 0.0, 0.3))
 
 
-def test_escape_leaves_a_start_closer_than_the_overshoot_on_an_exactly_checked_way(
+def test_leave_cover_leaves_a_start_closer_than_the_overshoot_on_an_exactly_checked_way(
     cells: dict[str, PlanningScene],
 ) -> None:
-    """A start FCL calls free that the cover calls touching (within the overshoot of something): `escape` finds
+    """A start FCL calls free that the cover calls touching (within the overshoot of something): `leave_cover` finds
     a configuration the model frees, every configuration on the way FCL-free; a start that is really in
     collision has no escape."""
     scene = cells["robocup"]
@@ -101,7 +101,7 @@ def test_escape_leaves_a_start_closer_than_the_overshoot_on_an_exactly_checked_w
         free = next((p for p in (q + rng.normal(0, 2e-3, 6) for _ in range(20)) if exact_free(p)), None)
         if free is None or not model.in_collision(free):
             continue
-        out = escape(free, random_configs(scene, 1, seed=found)[0], model, exact_free, 0.01)
+        out = leave_cover(free, random_configs(scene, 1, seed=found)[0], model, exact_free, 0.01)
         if out is None:
             continue
         found += 1
@@ -109,7 +109,7 @@ def test_escape_leaves_a_start_closer_than_the_overshoot_on_an_exactly_checked_w
         steps = np.linspace(0.0, 1.0, 30)[:, None]
         assert not fcl_only(scene, free + steps * (out - free)).any()
     assert found >= 3
-    assert escape(qs[0], qs[1], model, exact_free, 0.01) is None  # in collision itself: no way out starts free
+    assert leave_cover(qs[0], qs[1], model, exact_free, 0.01) is None  # in collision itself: no way out starts free
 
 
 def test_bad_input_is_a_typed_error(cells: dict[str, PlanningScene]) -> None:

@@ -128,6 +128,12 @@ _LAZY: dict[str, str] = {
     "PlanningScene": "twin.collision",
     "FixtureSpec": "twin.collision",
     "SphereModel": "twin.collision",
+    "leave_cover": "twin.collision.planning_model",
+    # the planning model's compiled kernels, for compiled planners (numba: call them from njit code)
+    "sphere_evaluate": "twin.collision.sphere_kernel",
+    "first_touch_on_motion": "twin.collision.sphere_kernel",
+    "first_flagged_motion": "twin.collision.sphere_kernel",
+    "KERNEL_FINGERPRINT": "twin.collision.sphere_kernel",
     # settings
     "Settings": "twin.config",
     "load_config": "twin.config",
@@ -171,6 +177,7 @@ __all__ = [
     "EXACT_ORIENTATION_TOLERANCE_RAD",
     "EXACT_POSITION_TOLERANCE_M",
     "GOAL_KINDS",
+    "KERNEL_FINGERPRINT",
     "OBJECT_TEMPLATES",
     "TCP_FRAME",
     "Box",
@@ -235,6 +242,8 @@ __all__ = [
     "densify",
     "densify_path",
     "first_collision",
+    "first_flagged_motion",
+    "first_touch_on_motion",
     "footprint",
     "goal_miss",
     "goal_set",
@@ -243,6 +252,7 @@ __all__ = [
     "jerk_limited",
     "judge_in_bin",
     "judge_in_zone",
+    "leave_cover",
     "limits_from_settings",
     "link_groups",
     "load_config",
@@ -265,6 +275,7 @@ __all__ = [
     "self_pairs",
     "self_rows",
     "self_violation",
+    "sphere_evaluate",
     "sphere_positions",
     "stage",
     "start_failure",
@@ -280,6 +291,13 @@ __all__ = [
 if TYPE_CHECKING:
     from twin.camera import RGBDFrame
     from twin.collision import FixtureSpec, PlanningScene, SphereModel
+    from twin.collision.planning_model import leave_cover
+    from twin.collision.sphere_kernel import (
+        KERNEL_FINGERPRINT,
+        first_flagged_motion,
+        first_touch_on_motion,
+        sphere_evaluate,
+    )
     from twin.config import Settings, load_config
     from twin.perception.colors import color_distance, palette
     from twin.perception.detection import CLASSES, Detection, Detector, SceneCloud, scene_cloud

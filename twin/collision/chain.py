@@ -109,20 +109,27 @@ class CompiledChain:
         chain's link offsets from the joint's child frame (on its axis) to the part's frame, plus the part's
         centre offset and bounding radius. A chain with a prismatic joint gets no bound (inf: nothing is
         cleared by advancement), as its link offsets change with the joint."""
+        per_part = self.object_reach(object_frame, object_const, object_radius)
+        return per_part.max(axis=0) if per_part.shape[0] else np.zeros(6)
+
+    def object_reach(self, object_frame: np.ndarray, object_const: np.ndarray, object_radius: np.ndarray) -> np.ndarray:
+        """(n, 6): for each part o (as `joint_reach`) and arm joint k, how far any point of part o can be from
+        joint k's axis, m (0 where joint k does not move it): a joint motion dq moves no point of part o
+        farther than sum_k |dq_k| reach[o, k]. inf for a chain with a prismatic joint."""
+        out = np.zeros((len(object_frame), 6))
         if not self.all_revolute:
-            return np.full(6, np.inf)
+            out[:] = np.inf
+            return out
         parent = self.frame_parent
-        offset = {k + 1: float(np.linalg.norm(self.A[k][:3, 3])) for k in range(6)}  # frame origin from parent's
-        reach = np.zeros(6)
+        offset = {k + 1: float(np.linalg.norm(self.A[k][:3, 3])) for k in range(6)}
         for o, f in enumerate(object_frame.tolist()):
             extent = float(np.linalg.norm(object_const[o][:3, 3])) + float(object_radius[o])
             g, path = f, 0.0
-            while g != 0:  # every joint whose child frame is g or an ancestor of g moves part o
-                k = g - 1
-                reach[k] = max(reach[k], path + extent)
+            while g != 0:
+                out[o, g - 1] = path + extent
                 path += offset[g]
                 g = parent[g]
-        return reach
+        return out
 
     def joints_moving(self, frames: np.ndarray) -> np.ndarray:
         """(n, 6) 1.0 where arm joint k moves frame `frames[i]` (n,), else 0.0."""

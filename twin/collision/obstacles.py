@@ -44,6 +44,7 @@ class Obstacles:
         self.owner: dict[int, str] = {}  # id(geometry) -> object name
         self.object_of: dict[int, Any] = {}  # id(geometry) -> its CollisionObject
         self._prims: EnvPrimitives | None = None  # the environment for the sphere check, built on use
+        self._inflated: dict[float, EnvPrimitives] = {}  # ... inflated by a clearance more (planning models)
 
     def copy(self, padding_m: float) -> Obstacles:
         """The same objects (fixtures stay fixtures, boxes stay boxes) with `padding_m` and new FCL objects."""
@@ -76,6 +77,7 @@ class Obstacles:
             self.object_of[id(geom)] = objs[-1][0]
         self.objects[name] = objs
         self._prims = None
+        self._inflated = {}
         self.shapes[name] = [(kind, tuple(size), np.array(pose, dtype=float)) for kind, size, pose in shapes]
         if objs:
             self.manager.registerObjects([o for o, _ in objs])
@@ -103,6 +105,7 @@ class Obstacles:
         self.boxes.pop(name, None)
         self.shapes.pop(name, None)
         self._prims = None
+        self._inflated = {}
         if objs is None:
             raise InvalidRequestError(f"no object named {name!r} in the scene; present: {list(self.objects)}")
         for o, geom in objs:
@@ -112,11 +115,20 @@ class Obstacles:
         self.fixture_names.discard(name)
         self.manager.update()
 
-    def primitives(self) -> EnvPrimitives:
-        """Every shape, padded, for the sphere check (built on first use after a change)."""
+    def primitives(self, clearance_m: float = 0.0) -> EnvPrimitives:
+        """Every shape, padded (and inflated by `clearance_m` more), for the sphere check (built on first use
+        after a change)."""
+        if clearance_m:
+            prims = self._inflated.get(clearance_m)
+            if prims is None:
+                prims = self._inflated[clearance_m] = self._primitives(self.padding_m + clearance_m)
+            return prims
         if self._prims is None:
-            self._prims = env_primitives([sh for shapes in self.shapes.values() for sh in shapes], self.padding_m)
+            self._prims = self._primitives(self.padding_m)
         return self._prims
+
+    def _primitives(self, pad: float) -> EnvPrimitives:
+        return env_primitives([sh for shapes in self.shapes.values() for sh in shapes], pad)
 
     def box_bounds(self) -> dict[str, BoxBounds]:
         """The run-time boxes as axis-aligned bounds (the AABB of a rotated box), world frame."""

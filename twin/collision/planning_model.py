@@ -12,11 +12,11 @@ something may be refused although it is free.
 The judge does not move: every path planned on this model is re-checked by the exact FCL scene before it
 counts (`twin.planning.checked.CheckedPlanner`'s final check). Start and goal states are the caller's to
 check exactly: a state FCL calls free that the model calls touching is for the planner to leave along an
-exactly checked way (`escape`).
+exactly checked way (`leave_cover`).
 
 A model is a snapshot of its scene (the held object, the finger opening and the boxes as they were when it
 was made: `PlanningScene.sphere_model`). Compiled planners call the kernels with `kernel` and `scratch`
-directly (`twin.collision.sphere_kernel`: `evaluate`, `first_flagged_motion`).
+directly (`twin.plugin`: `sphere_evaluate`, `first_touch_on_motion`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 from twin.errors import InvalidRequestError
 from twin.robot.sphere_cover import CELL_M, SLACK_M
 
-__all__ = ["CONTINUOUS_FLOOR_M", "OVERSHOOT_BOUND_M", "SphereModel", "escape"]
+__all__ = ["CONTINUOUS_FLOOR_M", "OVERSHOOT_BOUND_M", "SphereModel", "leave_cover"]
 
 # how far a cover reaches beyond its shape at most: a box cell's circumscribed sphere beyond the middle of the
 # cell's face (cell side <= CELL_M), a cylinder slab's sphere beyond the cylinder (SLACK_M); m
@@ -51,10 +51,21 @@ class SphereModel:
 
         self.kernel = kernel
         self.scratch = scratch
-        self._evaluate = sphere_kernel.evaluate
+        self._evaluate = sphere_kernel.sphere_evaluate
         self._flags = sphere_kernel.flag_configurations
         self._motion = sphere_kernel.first_flagged_motion
         self._continuous = sphere_kernel.first_touch_on_motion
+
+    def with_touch(self, touch_m: float) -> SphereModel:
+        """The same model calling a sphere touching within `touch_m` of anything (default `TOUCH_M`, 10 um):
+        a search on it keeps its states that far from touching, so a continuous check of the motions
+        between them (which refuses within `CONTINUOUS_FLOOR_M`) does not start from a state it refuses."""
+        if not (math.isfinite(touch_m) and touch_m > 0):
+            raise InvalidRequestError(f"touch_m must be > 0, got {touch_m}")
+        from twin.collision.sphere_kernel import TOUCH_SLOT  # lazy: numba (compiled on first use)
+
+        k = self.kernel
+        return SphereModel((*k[:TOUCH_SLOT], float(touch_m), *k[TOUCH_SLOT + 1 :]), self.scratch)
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True unless the spheres prove q (6,) free."""
@@ -97,7 +108,7 @@ class SphereModel:
         return None if t < 0 else float(t)
 
 
-def escape(
+def leave_cover(
     q: np.ndarray,
     toward: np.ndarray,
     model: SphereModel,

@@ -310,10 +310,17 @@ class RobotBody:
         self._ST = np.ascontiguousarray(np.transpose(np.array(S), (0, 2, 1)))
         self.obj_const = np.ascontiguousarray(np.array(S))
         self.reach = self.chain.joint_reach(self.object_frame, self.obj_const, self.obj_radius)
+        self.obj_reach = np.ascontiguousarray(
+            self.chain.object_reach(self.object_frame, self.obj_const, self.obj_radius)
+        )
         moves = self.chain.joints_moving(self.object_frame)
         # (pairs, 6) 1.0 where arm joint k moves exactly one part of self pair p (it changes their relative pose):
         # joints that move both (or neither) move the pair rigidly
         self.pair_moves = np.ascontiguousarray(np.abs(moves[self.pa] - moves[self.pb]).reshape(-1, 6))
+        # (pairs, 6) how far joint k moves one part of pair p relative to the other per radian, at most
+        self.pair_reach = np.ascontiguousarray(
+            (self.pair_moves * np.maximum(self.obj_reach[self.pa], self.obj_reach[self.pb])).reshape(-1, 6)
+        )
         self.sph = np.vstack(
             [np.hstack([c[:, :3] @ T[:3, :3].T + T[:3, 3], c[:, 3:]]) for c, T in zip(self._covers, S, strict=True)]
         )
@@ -442,6 +449,8 @@ class RobotBody:
             self.reach,
             self.pair_moves,
             TOUCH_M,
+            self.obj_reach,
+            self.pair_reach,
         )
 
     def kernel_scratch(self) -> tuple[Any, ...]:

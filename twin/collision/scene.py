@@ -290,11 +290,14 @@ class PlanningScene:
         configuration collision-free (then FCL agrees); False means "ask FCL", not "in collision"."""
         return ~self._flags(_as_qs(qs))
 
-    def sphere_model(self) -> SphereModel:
+    def sphere_model(self, clearance_m: float = 0.0) -> SphereModel:
         """The planning model of this scene as it is now (`twin.collision.planning_model`): the robot's sphere
-        cover against the padded environment, touching = in collision, no FCL. A snapshot: edits to the scene
-        after it was made (boxes, held object, opening) are not in it."""
-        return SphereModel(self._body.kernel_model(self._obstacles.primitives()), self._body.kernel_scratch())
+        cover against the padded environment inflated by `clearance_m` more, touching = in collision, no FCL.
+        A snapshot: edits to the scene after it was made (boxes, held object, opening) are not in it."""
+        c = float(clearance_m)
+        if not (math.isfinite(c) and c >= 0):
+            raise InvalidRequestError(f"clearance_m must be >= 0, got {clearance_m}")
+        return SphereModel(self._body.kernel_model(self._obstacles.primitives(c)), self._body.kernel_scratch())
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True when the arm at q (6,) hits the environment or itself, or the held object hits either."""

@@ -8,14 +8,26 @@ passes them, or numba compiles another specialisation.
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-__all__ = ["evaluate", "first_flagged_motion", "first_touch_on_motion", "flag_configurations", "new_scratch"]
+__all__ = [
+    "first_flagged_motion",
+    "first_touch_on_motion",
+    "flag_configurations",
+    "new_scratch",
+    "sphere_bounds",
+    "sphere_evaluate",
+]
 
 _MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost no square root), m
+# conservative advancement (`first_touch_on_motion`) refines the distance bounds below this, m: coarser bounds
+# (bounding spheres) make its steps short, finer ones cost more per configuration
+_ADVANCE_REFINE_M = 0.03
 
 
 @njit(cache=True, nogil=True)
@@ -45,20 +57,26 @@ def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float,
 # dimensions (as `EnvPrimitives`), bounding radius, whether it is tested against the environment, and its
 # spheres sph[sph_start[o]:sph_start[o + 1]] (x, y, z in the frame, r); self pairs pair_a[p], pair_b[p]; the
 # environment (`EnvPrimitives`: kind, to_local, dims, bound); the joints' reach and the pairs' moving joints
-# (`_near_anchor`); the touch distance.
+# (`_near_anchor`); the touch distance; per object and joint how far the joint moves its points per radian,
+# and per self pair how far it moves one part relative to the other (`first_touch_on_motion`).
 (_REVOLUTE, _A, _B, _C, _CHAIN, _OBJ_FRAME, _OBJ_CONST, _OBJ_KIND, _OBJ_DIMS, _OBJ_RADIUS, _OBJ_ENV) = range(11)
 (_SPH_START, _SPH_FRAME, _SPH, _PAIR_A, _PAIR_B, _ENV_KIND, _ENV_TO_LOCAL, _ENV_DIMS, _ENV_BOUND) = range(11, 20)
-_REACH, _PAIR_MOVES, _TOUCH = 20, 21, 22
+_REACH, _PAIR_MOVES, _TOUCH, _OBJ_REACH, _PAIR_REACH = 20, 21, 22, 23, 24
+TOUCH_SLOT = _TOUCH  # where the model tuple holds the touch distance (`SphereModel.with_touch`)
+# what a compiled caller in another file must be rebuilt for: numba's on-disk cache of a function is keyed by
+# its own file only, so a caller cached before this file changed would keep calling the old kernels
+# (`twin_compiled.search` flushes its cache when this changes)
+KERNEL_FINGERPRINT = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 # the scratch tuple (`new_scratch`)
-_F, _L, _OC, _INV, _SC, _PLACED, _POSED, _GAP_NOW, _ANCHOR_GAP, _W, _ANCHOR_Q, _QK = range(12)
+_F, _L, _OC, _INV, _SC, _PLACED, _POSED, _GAP_NOW, _ANCHOR_GAP, _W, _ANCHOR_Q, _QK, _OBJ_GAP = range(13)
 
 
 @njit(cache=True, nogil=True)
 def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[type-arg]
     """Work arrays of one caller: link frames, a joint transform, object centres, inverted object poses,
     placed sphere centres, which objects are placed and posed, the self pairs' gaps now and at the anchor,
-    the joints' share of a motion, the anchor configuration, a configuration on a motion. Made once per
-    model, reused by every call (one caller at a time)."""
+    the joints' share of a motion, the anchor configuration, a configuration on a motion, each object's
+    distance bound. Made once per model, reused by every call (one caller at a time)."""
     return (
         np.empty((7, 4, 4)),
         np.empty((4, 4)),
@@ -72,14 +90,27 @@ def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[
         np.zeros(6),
         np.zeros(6),
         np.zeros(6),
+        np.zeros(n_obj),
     )
 
 
 @njit(cache=True, nogil=True)
-def evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: ignore[type-arg]
+def sphere_evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: ignore[type-arg]
     """(flagged, env bound) of configuration q (6,): flagged unless the spheres prove it free (see the
     module docstring); when free, a lower bound on every robot-environment distance (capped at
-    `_MARGIN_CAP_M`), and each self pair's gap in S[_GAP_NOW]."""
+    `_MARGIN_CAP_M`), each object's in S[_OBJ_GAP] and each self pair's gap in S[_GAP_NOW]. The bounds are
+    the cheapest that prove the configuration free (`sphere_bounds` with refine = the touch distance)."""
+    return sphere_bounds(K, S, q, K[_TOUCH])
+
+
+@njit(cache=True, nogil=True)
+def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[bool, float]:  # type: ignore[type-arg]
+    """`sphere_evaluate`, with every distance bound below `refine` m made as tight as the model allows.
+
+    A bound comes from the cheapest level that exceeds `refine`: bounding sphere against bounding sphere, then
+    the bounding sphere against the exact primitive, then the object's cover against the exact primitive (a
+    self pair: each part's cover against the other's primitive, the larger). Refining further costs more per
+    configuration and buys larger steps where a motion is checked by the bounds (`first_touch_on_motion`)."""
     obj_frame, obj_radius, obj_env = K[_OBJ_FRAME], K[_OBJ_RADIUS], K[_OBJ_ENV]
     sph_start, sph = K[_SPH_START], K[_SPH]
     env_kind, env_to_local, env_dims, env_bound = K[_ENV_KIND], K[_ENV_TO_LOCAL], K[_ENV_DIMS], K[_ENV_BOUND]
@@ -88,32 +119,38 @@ def evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: 
     _link_frames(q, K[_REVOLUTE], K[_A], K[_B], K[_C], K[_CHAIN], F, S[_L])
     _object_centres(F, obj_frame, K[_OBJ_CONST], oc, placed, posed)
     m = _MARGIN_CAP_M
+    obj_gap = S[_OBJ_GAP]
     # robot (and held box) against the environment: bounding spheres first, then the object's spheres
     for o in range(obj_frame.shape[0]):
-        if not obj_env[o]:
-            continue
-        for e in range(env_kind.shape[0]):
-            dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
-            far = obj_radius[o] + env_bound[e, 3] + m
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 > far * far:
-                continue  # farther than the margin: changes nothing
-            gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
-            if gap > touch:
-                m = min(m, gap)
-                continue
-            gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
-            gap -= obj_radius[o]
-            if gap > touch:
-                m = min(m, gap)
-                continue
-            if not placed[o]:
-                _place(F, sph_start[o], sph_start[o + 1], K[_SPH_FRAME], sph, sc)
-                placed[o] = True
-            gap = _spheres_gap(sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e])
-            if gap < touch:
-                return True, 0.0
-            m = min(m, gap)
+        mo = _MARGIN_CAP_M  # this object's distance bound
+        if obj_env[o]:
+            for e in range(env_kind.shape[0]):
+                dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
+                far = obj_radius[o] + env_bound[e, 3] + mo
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 > far * far:
+                    continue  # farther than the bound so far: changes nothing
+                gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
+                if gap > refine:
+                    mo = min(mo, gap)
+                    continue
+                gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
+                gap -= obj_radius[o]
+                if gap > refine:
+                    mo = min(mo, gap)
+                    continue
+                if not placed[o]:
+                    _place(F, sph_start[o], sph_start[o + 1], K[_SPH_FRAME], sph, sc)
+                    placed[o] = True
+                gap = max(
+                    gap,
+                    _spheres_gap(sc, sph, sph_start[o], sph_start[o + 1], env_kind[e], env_to_local[e], env_dims[e]),
+                )
+                if gap < touch:
+                    return True, 0.0
+                mo = min(mo, gap)
+        obj_gap[o] = mo
+        m = min(m, mo)
     # self pairs, each with its own bound (the joints between its parts move them apart)
     obj_kind, obj_dims, obj_const, inv = K[_OBJ_KIND], K[_OBJ_DIMS], K[_OBJ_CONST], S[_INV]
     for p in range(pair_a.shape[0]):
@@ -124,11 +161,10 @@ def evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: 
         if d2 > far * far:
             gap_now[p] = _MARGIN_CAP_M
             continue
-        gap = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
-        if gap > touch:
-            gap_now[p] = gap
+        best = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
+        if best > refine:
+            gap_now[p] = best
             continue
-        flagged = True
         for a2, b2 in ((a, b), (b, a)):
             if not placed[a2]:
                 _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
@@ -137,24 +173,24 @@ def evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: 
                 _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
                 posed[b2] = True
             gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
-            if gap >= touch:
-                flagged = False
-                gap_now[p] = gap
+            best = max(best, gap)
+            if best > refine:
                 break
-        if flagged:
+        if best < touch:
             return True, 0.0
+        gap_now[p] = best
     return False, m
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> tuple[bool, float]:  # type: ignore[type-arg]
-    """`evaluate`, skipped when q is clear by the anchor's bounds (anchor_env < 0: no anchor yet); a newly
+    """`sphere_evaluate`, skipped when q is clear by the anchor's bounds (anchor_env < 0: no anchor yet); a newly
     cleared q becomes the anchor. Returns (flagged, the anchor's env bound now)."""
     if anchor_env >= 0.0 and _near_anchor(
         q, S[_ANCHOR_Q], K[_REACH], K[_PAIR_MOVES], anchor_env, S[_ANCHOR_GAP], K[_TOUCH], S[_W]
     ):
         return False, anchor_env
-    flagged, m = evaluate(K, S, q)
+    flagged, m = sphere_evaluate(K, S, q)
     if flagged:
         return True, anchor_env
     S[_ANCHOR_Q][:] = q
@@ -210,43 +246,60 @@ def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resol
 def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
     """The straight joint motion a -> b, checked continuously by conservative advancement: -1.0 when the
     spheres prove every configuration of it free (a and b included), else the fraction t in [0, 1] of the
-    motion where they could not (a configuration touching, or one within `floor` m of touching, where the
-    advancement would crawl).
+    motion where they could not (a configuration touching, or a moving part within `floor` m of touching,
+    where the advancement would crawl).
 
     b is evaluated first (a blocked extension usually ends inside something). Then from t = 0: a cleared
-    configuration bounds the robot-environment distance (m) and each self pair's gap; no robot point moves
-    farther than dt * sum_k |b_k - a_k| reach[k] over dt of the motion, and a pair's parts relative to each
-    other only through the joints between them, so the motion is free up to the largest dt within every
-    bound, and the next configuration evaluated is there. Far from everything the bounds are capped at
-    `_MARGIN_CAP_M`: a step then moves no robot point more than that."""
+    configuration bounds each object's distance to the environment and each self pair's gap; over dt of the
+    motion no point of object o moves farther than dt * sum_k |b_k - a_k| obj_reach[o, k], and the parts of a
+    pair relative to each other no farther than dt * sum_k |b_k - a_k| pair_reach[p, k] (only the joints
+    between them), so the motion is free up to the largest dt within every bound, and the next configuration
+    evaluated is there. A part the motion does not move keeps its distance, however small. Far from
+    everything the bounds are capped at `_MARGIN_CAP_M`: a step then moves no point more than that."""
+    for j in range(6):  # one answer for a motion, whichever way it is asked (the same configurations evaluated)
+        if a[j] != b[j]:
+            if a[j] > b[j]:
+                t = _advance(K, S, b, a, floor)
+                return t if t < 0.0 else 1.0 - t
+            break
+    return _advance(K, S, a, b, floor)
+
+
+@njit(cache=True, nogil=True)
+def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
+    """`first_touch_on_motion` from a to b."""
     touch = K[_TOUCH]
-    reach, pair_moves = K[_REACH], K[_PAIR_MOVES]
-    w, qk, gap_now = S[_W], S[_QK], S[_GAP_NOW]
-    total = 0.0
+    obj_reach, pair_reach = K[_OBJ_REACH], K[_PAIR_REACH]
+    qk, gap_now, obj_gap, dq = S[_QK], S[_GAP_NOW], S[_OBJ_GAP], S[_W]
     for k in range(6):
-        w[k] = abs(b[k] - a[k]) * reach[k]
-        total += w[k]
-    flagged, _ = evaluate(K, S, b)
+        dq[k] = abs(b[k] - a[k])
+    flagged, _ = sphere_evaluate(K, S, b)
     if flagged:
         return 1.0
     t = 0.0
     while True:
         for j in range(6):
             qk[j] = a[j] + t * (b[j] - a[j])
-        flagged, m = evaluate(K, S, qk)
-        if flagged or m - touch < floor:
+        flagged, _ = sphere_bounds(K, S, qk, _ADVANCE_REFINE_M)
+        if flagged:
             return t
-        if total <= 0.0:
-            return -1.0
-        dt = (m - touch) / total
-        for p in range(gap_now.shape[0]):
-            rel = 0.0
+        dt = np.inf
+        for o in range(obj_gap.shape[0]):
+            speed = 0.0
             for k in range(6):
-                rel += pair_moves[p, k] * w[k]
-            if rel > 0.0:
+                speed += obj_reach[o, k] * dq[k]
+            if speed > 0.0:
+                if obj_gap[o] - touch < floor:
+                    return t
+                dt = min(dt, (obj_gap[o] - touch) / speed)
+        for p in range(gap_now.shape[0]):
+            speed = 0.0
+            for k in range(6):
+                speed += pair_reach[p, k] * dq[k]
+            if speed > 0.0:
                 if gap_now[p] - touch < floor:
                     return t
-                dt = min(dt, (gap_now[p] - touch) / rel)
+                dt = min(dt, (gap_now[p] - touch) / speed)
         t += dt
         if t >= 1.0:
             return -1.0

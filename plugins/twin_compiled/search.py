@@ -1,0 +1,332 @@
+"""RRT-Connect and path shortcutting wholly in compiled code (numba), on twin's planning model.
+
+Why compiled: the search's own work (sampling, nearest neighbour, steering, tree bookkeeping) costs a few
+microseconds an iteration in Python and nothing here; with the motion checks compiled too
+(`twin.plugin.first_touch_on_motion`, the robot's sphere cover against the scene's primitives, each motion
+proven free continuously by conservative advancement), one query is one call with no Python in its loop.
+
+The search (`rrt_connect`): two trees, the start's and the goals' (every goal configuration a root); each
+iteration samples a configuration uniformly inside the bounds, extends the tree whose turn it is by at most
+`step` (joint-space L2) toward it and, when that extension is free, connects the other tree to the new node
+greedily (steps of at most `step` while they are free). It alternates the trees, like OMPL's RRTConnect.
+Nearest neighbour is a linear scan (structure of arrays, one column per joint). The random numbers are a
+xorshift64* stream seeded by the request's seed, so the same query and seed give the same path.
+
+Shortcutting (`shortcut`): greedy vertex reduction (from each kept waypoint, the farthest later waypoint
+reached by a free straight motion), then `tries` random shortcuts between two points on the path (a point
+anywhere on a segment, not only a waypoint), each kept when free and shorter.
+
+Work is bounded by `max_iterations` per call: the Python side (`twin_compiled.planner`) calls again until
+its deadline, and the trees carry over, so where a search ends depends on the work done, not on the clock,
+except at the time limit.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+from numba.core.caching import NullCache
+
+from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion
+
+__all__ = ["first_uncertified", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
+
+_START, _GOAL = 0, 1
+
+
+@njit(cache=True, nogil=True)
+def _next(rng: np.ndarray) -> float:
+    """A uniform number in [0, 1) from the xorshift64* state rng[0] (uint64), advanced."""
+    x = rng[0]
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    rng[0] = x
+    return float((x * np.uint64(2685821657736338717)) >> np.uint64(11)) / 9007199254740992.0
+
+
+def new_trees(capacity: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Empty trees for `rrt_connect`: nodes (2, 6, capacity) (per tree a column per joint), parents
+    (2, capacity), counts (2,), and the random state seeded from `seed` (never zero)."""
+    nodes = np.zeros((2, 6, capacity))
+    parents = np.full((2, capacity), -1, dtype=np.int64)
+    counts = np.zeros(2, dtype=np.int64)
+    mixed = (int(seed) * 0x9E3779B97F4A7C15 + 0x2545F4914F6CDD1D) % (1 << 64)
+    rng = np.array([mixed or 1], dtype=np.uint64)
+    return nodes, parents, counts, rng
+
+
+@njit(cache=True, nogil=True)
+def _nearest(nodes: np.ndarray, tree: int, count: int, q: np.ndarray) -> int:
+    best, best_d = 0, np.inf
+    col = nodes[tree]
+    for i in range(count):
+        d = 0.0
+        for j in range(6):
+            e = col[j, i] - q[j]
+            d += e * e
+        if d < best_d:
+            best, best_d = i, d
+    return best
+
+
+@njit(cache=True, nogil=True)
+def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float, out: np.ndarray) -> bool:
+    """out = the node i of `tree` moved toward target by at most `step` (L2); True when it reaches target."""
+    d = 0.0
+    for j in range(6):
+        e = target[j] - nodes[tree, j, i]
+        d += e * e
+    d = math.sqrt(d)
+    if d <= step:
+        out[:] = target
+        return True
+    f = step / d
+    for j in range(6):
+        out[j] = nodes[tree, j, i] + f * (target[j] - nodes[tree, j, i])
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _add(nodes: np.ndarray, parents: np.ndarray, counts: np.ndarray, tree: int, q: np.ndarray, parent: int) -> int:
+    i = counts[tree]
+    for j in range(6):
+        nodes[tree, j, i] = q[j]
+    parents[tree, i] = parent
+    counts[tree] = i + 1
+    return i
+
+
+@njit(cache=True, nogil=True)
+def motion_free(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float, floor: float) -> bool:  # type: ignore[type-arg]
+    """Is the straight motion a -> b free in the planning model? resolution > 0: its configurations that far
+    apart (max-abs joint step), coarse to fine, a assumed free; resolution <= 0: continuously (conservative
+    advancement, a and b included; `floor` m from touching counts as touching)."""
+    if resolution > 0.0:
+        return first_flagged_motion(K, S, a, b, resolution) == 0
+    return first_touch_on_motion(K, S, a, b, floor) < 0.0
+
+
+@njit(cache=True, nogil=True)
+def _free(
+    K: tuple,  # type: ignore[type-arg]
+    S: tuple,  # type: ignore[type-arg]
+    nodes: np.ndarray,
+    tree: int,
+    i: int,
+    q: np.ndarray,
+    resolution: float,
+    floor: float,
+    a: np.ndarray,
+) -> bool:
+    """Is the motion from node i of `tree` to q free (`motion_free`)?"""
+    for j in range(6):
+        a[j] = nodes[tree, j, i]
+    return motion_free(K, S, a, q, resolution, floor)
+
+
+@njit(cache=True, nogil=True)
+def rrt_connect(
+    K: tuple,  # type: ignore[type-arg]
+    S: tuple,  # type: ignore[type-arg]
+    lo: np.ndarray,
+    hi: np.ndarray,
+    step: float,
+    resolution: float,
+    floor: float,
+    max_iterations: int,
+    nodes: np.ndarray,
+    parents: np.ndarray,
+    counts: np.ndarray,
+    rng: np.ndarray,
+    turn: np.ndarray,
+) -> tuple[int, int, int]:
+    """Grow the trees (start tree 0 and goal tree 1, roots already added) for at most `max_iterations`
+    iterations or until they connect or fill up. Returns (status, start-tree node, goal-tree node):
+    status 1 connected (at those nodes, equal configurations), 0 not yet, -1 a tree is full. `turn[0]` is
+    the tree extended next, carried between calls."""
+    capacity = nodes.shape[2]
+    q_rand = np.empty(6)
+    q_new = np.empty(6)
+    q_next = np.empty(6)
+    a = np.empty(6)
+    for _ in range(max_iterations):
+        if counts[0] >= capacity - 1 or counts[1] >= capacity - 1:
+            return -1, -1, -1
+        t = turn[0]
+        o = 1 - t
+        turn[0] = o
+        for j in range(6):
+            q_rand[j] = lo[j] + _next(rng) * (hi[j] - lo[j])
+        near = _nearest(nodes, t, counts[t], q_rand)
+        _steer(nodes, t, near, q_rand, step, q_new)
+        if not _free(K, S, nodes, t, near, q_new, resolution, floor, a):
+            continue
+        new = _add(nodes, parents, counts, t, q_new, near)
+        # connect the other tree to the new node, step by step while free
+        m = _nearest(nodes, o, counts[o], q_new)
+        while counts[o] < capacity - 1:
+            reached = _steer(nodes, o, m, q_new, step, q_next)
+            if not _free(K, S, nodes, o, m, q_next, resolution, floor, a):
+                break
+            m = _add(nodes, parents, counts, o, q_next, m)
+            if reached:
+                return (1, new, m) if t == _START else (1, m, new)
+    return 0, -1, -1
+
+
+@njit(cache=True, nogil=True)
+def tree_path(nodes: np.ndarray, parents: np.ndarray, start_node: int, goal_node: int) -> np.ndarray:
+    """(m, 6) waypoints: the start tree's root to start_node, then goal_node back to its goal root (the two
+    nodes are the same configuration; it appears once)."""
+    n0 = 0
+    i = start_node
+    while i >= 0:
+        n0 += 1
+        i = parents[0, i]
+    n1 = 0
+    i = parents[1, goal_node]
+    while i >= 0:
+        n1 += 1
+        i = parents[1, i]
+    out = np.empty((n0 + n1, 6))
+    i = start_node
+    for k in range(n0 - 1, -1, -1):
+        for j in range(6):
+            out[k, j] = nodes[0, j, i]
+        i = parents[0, i]
+    i = parents[1, goal_node]
+    for k in range(n0, n0 + n1):
+        for j in range(6):
+            out[k, j] = nodes[1, j, i]
+        i = parents[1, i]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _length(path: np.ndarray, lo: int, hi: int) -> float:
+    total = 0.0
+    for i in range(lo, hi):
+        d = 0.0
+        for j in range(6):
+            e = path[i + 1, j] - path[i, j]
+            d += e * e
+        total += math.sqrt(d)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def shortcut(
+    K: tuple,  # type: ignore[type-arg]
+    S: tuple,  # type: ignore[type-arg]
+    path: np.ndarray,
+    tries: int,
+    resolution: float,
+    floor: float,
+    rng: np.ndarray,
+) -> np.ndarray:
+    """A shorter free path with the same ends (see the module docstring), motions checked as `motion_free`."""
+    a = np.empty(6)
+    b = np.empty(6)
+    # greedy vertex reduction: from each kept waypoint, the farthest later one reached by a free motion
+    kept = np.empty(path.shape[0], dtype=np.int64)
+    nk = 0
+    i = 0
+    last = path.shape[0] - 1
+    while True:
+        kept[nk] = i
+        nk += 1
+        if i == last:
+            break
+        j = last
+        while j > i + 1:
+            a[:] = path[i]
+            b[:] = path[j]
+            if motion_free(K, S, a, b, resolution, floor):
+                break
+            j -= 1
+        i = j
+    cur = np.empty((nk, 6))
+    for k in range(nk):
+        cur[k] = path[kept[k]]
+    # random shortcuts between two points anywhere on the path
+    for _ in range(tries):
+        n = cur.shape[0]
+        if n < 3:
+            break
+        s1 = int(_next(rng) * (n - 1))
+        s2 = int(_next(rng) * (n - 1))
+        if s1 == s2:
+            continue
+        if s1 > s2:
+            s1, s2 = s2, s1
+        f1, f2 = _next(rng), _next(rng)
+        for j in range(6):
+            a[j] = cur[s1, j] + f1 * (cur[s1 + 1, j] - cur[s1, j])
+            b[j] = cur[s2, j] + f2 * (cur[s2 + 1, j] - cur[s2, j])
+        # old length between a and b, against the straight a -> b
+        d_ab = 0.0
+        d_a = 0.0
+        d_b = 0.0
+        for j in range(6):
+            d_ab += (b[j] - a[j]) ** 2
+            d_a += (cur[s1 + 1, j] - a[j]) ** 2
+            d_b += (b[j] - cur[s2, j]) ** 2
+        old = math.sqrt(d_a) + _length(cur, s1 + 1, s2) + math.sqrt(d_b)
+        if math.sqrt(d_ab) >= old - 1e-9:
+            continue
+        if not motion_free(K, S, a, b, resolution, floor):
+            continue
+        # cur[: s1 + 1], a, b, cur[s2 + 1 :] (a or b dropped where it is a waypoint already)
+        keep_a = f1 > 1e-12
+        keep_b = f2 < 1.0 - 1e-12
+        m = (s1 + 1) + int(keep_a) + int(keep_b) + (n - s2 - 1)
+        nxt = np.empty((m, 6))
+        nxt[: s1 + 1] = cur[: s1 + 1]
+        k = s1 + 1
+        if keep_a:
+            nxt[k] = a
+            k += 1
+        if keep_b:
+            nxt[k] = b
+            k += 1
+        nxt[k:] = cur[s2 + 1 :]
+        cur = nxt
+    return cur
+
+
+@njit(cache=True, nogil=True)
+def first_uncertified(K: tuple, S: tuple, path: np.ndarray, floor: float) -> int:  # type: ignore[type-arg]
+    """The first segment of `path` the continuous check does not prove free, or -1 when it proves them all."""
+    a = np.empty(6)
+    b = np.empty(6)
+    for i in range(path.shape[0] - 1):
+        a[:] = path[i]
+        b[:] = path[i + 1]
+        if first_touch_on_motion(K, S, a, b, floor) >= 0.0:
+            return i
+    return -1
+
+
+def _flush_stale_cache() -> None:
+    """Drop this module's numba cache when the planning model's kernels changed since it was compiled: numba
+    keys a cached function by its own file only, and these functions inline the kernels of another file."""
+    functions = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
+    try:
+        stamp = Path(rrt_connect._cache._cache_path) / "twin_compiled.kernel"  # type: ignore[attr-defined]
+        if stamp.exists() and stamp.read_text() == KERNEL_FINGERPRINT:
+            return
+        for f in functions:
+            f._cache.flush()
+        stamp.write_text(KERNEL_FINGERPRINT)
+    except (AttributeError, OSError) as e:  # a numba without these internals, a read-only cache: compile anew
+        logging.getLogger("twin").debug("twin_compiled: cache check failed (%r); compiling without the cache", e)
+        for f in functions:
+            f._cache = NullCache()
+
+
+_flush_stale_cache()
