@@ -46,6 +46,15 @@ class OmplParams(BaseModel):
             "(every IK branch keeps a representative); 'full' = the joint limits (+-2pi, elbow +-pi)"
         ),
     )
+    collision_model: Literal["exact", "spheres"] = Field(
+        "exact",
+        description=(
+            "what the search checks states and motions on: 'exact' = the FCL scene (behind the sphere filter); "
+            "'spheres' = the planning model (the robot's sphere cover, touching = in collision, compiled, no "
+            "FCL; a query whose start or every goal the cover refuses is planned on 'exact'). The path is "
+            "verified on the FCL scene either way"
+        ),
+    )
     validity_resolution_rad: float = Field(
         0.02, gt=0, le=0.5, description="largest joint step between two checked states of a motion (max-abs, rad)"
     )

@@ -73,7 +73,9 @@ from twin.plugin import (
     MotionResult,
     PathPlanner,
     PlanningError,
+    PlanningScene,
     Retimer,
+    SphereModel,
     Status,
     URArm,
     add_time,
@@ -92,7 +94,7 @@ from twin_ompl.problem import geometric_path, repair_bounds, simple_setup, space
 from twin_ompl.validity import CheckCounter
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, PluginContext
+    from twin.plugin import PluginContext
 
 __all__ = [
     "AORRTC",
@@ -273,13 +275,23 @@ class OmplPlanner(PathPlanner):
         if plan_scene is None:
             plan_scene, clearance = scene, 0.0
         info.update(goal_count=int(goals.shape[0]), bounds=bounds.tolist(), clearance_m=clearance)
+        search_on, info["collision_model"] = self._search_model(scene, clearance, start, goals)
         scene = plan_scene
 
         # 2.-6. plan, simplify, retime, verify; repair a grazing segment by planning it finer -----------
         counter = CheckCounter()
         timings: dict[str, float] = {}
         att = self._attempt(
-            start, goals, bounds, scene, request.seed, p.validity_resolution_rad, counter, deadline, limit, timings
+            start,
+            goals,
+            bounds,
+            search_on or scene,
+            request.seed,
+            p.validity_resolution_rad,
+            counter,
+            deadline,
+            limit,
+            timings,
         )
         info.update(direct=att.direct)
         if att.budget_spent is not None:
@@ -312,7 +324,7 @@ class OmplPlanner(PathPlanner):
                 a,
                 b[None],
                 repair_bounds(a, b, bounds),
-                scene,
+                search_on or scene,
                 request.seed + 7919 * repairs,
                 fine,
                 counter,
@@ -330,6 +342,19 @@ class OmplPlanner(PathPlanner):
                 )
             path = np.concatenate([path[: segment + 1], sub.path[1:-1], path[segment + 1 :]])
             log.debug("%s: segment %d grazed an obstacle; replanned it at %.4f rad", self.name, segment, fine)
+
+    def _search_model(
+        self, scene: PlanningScene, clearance: float, start: np.ndarray, goals: np.ndarray
+    ) -> tuple[SphereModel | None, str]:
+        """The planning model the search checks on with `collision_model: spheres` (None: the FCL scene), and
+        the model's name for the result's info. The exact scene decides a query whose start or every goal the
+        cover refuses (closer to something than the cover's overshoot)."""
+        if self.params.collision_model != "spheres" or not isinstance(scene, PlanningScene):
+            return None, "exact"
+        model = scene.sphere_model(clearance)
+        if model.in_collision(start) or model.in_collision_batch(goals).all():
+            return None, "exact (the sphere cover refuses the start or every goal)"
+        return model, "spheres"
 
     @staticmethod
     def _info(info: dict[str, Any], counter: CheckCounter, timings: dict[str, float]) -> dict[str, Any]:
@@ -350,7 +375,7 @@ class OmplPlanner(PathPlanner):
         start: np.ndarray,
         goals: np.ndarray,
         bounds: np.ndarray,
-        scene: PlanningScene,
+        scene: PlanningScene | SphereModel,
         seed: int,
         resolution: float,
         counter: CheckCounter,

@@ -26,7 +26,7 @@ import ompl.util as ou
 from twin_ompl.validity import CheckCounter, SceneMotionValidator, state_validity_checker
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene
+    from twin.plugin import PlanningScene, SphereModel
 
 __all__ = [
     "geometric_path",
@@ -54,7 +54,7 @@ def repair_bounds(a: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> np.ndarra
 
 
 def space_information(
-    bounds: np.ndarray, scene: PlanningScene, resolution_rad: float, counter: CheckCounter, seed: int
+    bounds: np.ndarray, scene: PlanningScene | SphereModel, resolution_rad: float, counter: CheckCounter, seed: int
 ) -> tuple[Any, SceneMotionValidator]:
     """OMPL SpaceInformation over RealVectorStateSpace(6) inside `bounds` (6, 2), with the scene's state
     validity checker and batched motion validator (states `resolution_rad` apart), set up; and the validator.

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import ompl.base as ob
 
-from twin.plugin import PlanningScene
+from twin.plugin import PlanningScene, SphereModel
 
 __all__ = [
     "CheckCounter",
@@ -83,7 +83,7 @@ def bisection_order(n: int) -> np.ndarray:
     return out
 
 
-def state_validity_checker(scene: PlanningScene, counter: CheckCounter) -> Any:
+def state_validity_checker(scene: PlanningScene | SphereModel, counter: CheckCounter) -> Any:
     """A plain function for `si.setStateValidityChecker`: True when the state is collision-free."""
     in_collision = scene.in_collision
 
@@ -105,7 +105,7 @@ def state_validity_checker(scene: PlanningScene, counter: CheckCounter) -> Any:
 class SceneMotionValidator(ob.MotionValidator):  # type: ignore[misc]
     """Checks the straight joint-space motion s1 -> s2 (s1 assumed valid, as OMPL does) in one batch."""
 
-    def __init__(self, si: Any, scene: PlanningScene, resolution_rad: float, counter: CheckCounter):
+    def __init__(self, si: Any, scene: PlanningScene | SphereModel, resolution_rad: float, counter: CheckCounter):
         super().__init__(si)
         self.scene = scene
         self.resolution_rad = float(resolution_rad)
@@ -126,6 +126,10 @@ class SceneMotionValidator(ob.MotionValidator):  # type: ignore[misc]
         """True when every configuration on a -> b, spaced <= resolution_rad per joint, is free (b included)."""
         d = b - a
         n = max(1, math.ceil(float(np.abs(d).max()) / self.resolution_rad - 1e-9))
+        if isinstance(self.scene, SphereModel):  # the planning model: one compiled call, coarse to fine
+            self.counter.motions += 1
+            self.counter.configs += n  # at most: the compiled call does not say how many it evaluated
+            return self.scene.first_collision_on_motion(a, b, self.resolution_rad) is None
         qs = a + bisection_order(n)[:, None] * d
         self.counter.motions += 1
         hit = self.scene.first_collision(qs)

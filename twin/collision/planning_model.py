@@ -53,6 +53,7 @@ class SphereModel:
         self.scratch = scratch
         self._evaluate = sphere_kernel.sphere_evaluate
         self._flags = sphere_kernel.flag_configurations
+        self._first = sphere_kernel.first_flagged
         self._motion = sphere_kernel.first_flagged_motion
         self._continuous = sphere_kernel.first_touch_on_motion
 
@@ -79,6 +80,15 @@ class SphereModel:
         out = np.empty(qs.shape[0], dtype=bool)
         self._flags(self.kernel, self.scratch, qs, out)
         return out
+
+    def first_collision(self, qs: np.ndarray) -> int | None:
+        """Index of the first configuration of (n, 6) qs the model calls touching (in their order, early
+        exit), or None: `PlanningScene.first_collision` on the model."""
+        qs = np.array(qs, dtype=float, order="C", ndmin=2)
+        if qs.ndim != 2 or qs.shape[1] != 6:
+            raise InvalidRequestError(f"qs must be (n, 6) joint angles, got shape {qs.shape}")
+        i = int(self._first(self.kernel, self.scratch, qs))
+        return None if i < 0 else i
 
     def first_collision_on_motion(self, a: np.ndarray, b: np.ndarray, resolution_rad: float) -> float | None:
         """The straight joint motion a -> b checked every `resolution_rad` (max-abs; b included, a not),

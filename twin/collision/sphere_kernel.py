@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "first_flagged",
     "first_flagged_motion",
     "first_touch_on_motion",
     "flag_configurations",
@@ -205,6 +206,17 @@ def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> 
     anchor_env = -1.0
     for i in range(qs.shape[0]):
         out[i], anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
+
+
+@njit(cache=True, nogil=True)
+def first_flagged(K: tuple, S: tuple, qs: np.ndarray) -> int:  # type: ignore[type-arg]
+    """The index of the first configuration of qs (n, 6) the spheres do not prove free, or -1."""
+    anchor_env = -1.0
+    for i in range(qs.shape[0]):
+        flagged, anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
+        if flagged:
+            return i
+    return -1
 
 
 @njit(cache=True, nogil=True)
