@@ -133,7 +133,7 @@ class CompiledRRTConnect(PathPlanner):
         ends = self._leave_the_cover(model, scene, start, goals, bounds, request.seed)
         add_time(timings, "model", t)
         if isinstance(ends, str):
-            return MotionResult(Status.NO_SOLUTION, ends, info=dict(info, timings=timings))
+            return MotionResult(Status.NO_SOLUTION, ends, info=_with_times(info, timings))
         head, first, lasts, tails = ends
         info.update(goal_count=int(goals.shape[0]), clearance_m=clearance, escapes=int(head.shape[0] > 1))
 
@@ -142,7 +142,7 @@ class CompiledRRTConnect(PathPlanner):
         found = self._search(search_model, first, lasts, bounds, request.seed, deadline, p.resolution_rad)
         add_time(timings, "search", t)
         if isinstance(found[0], Status):
-            return MotionResult(found[0], str(found[1]), info=dict(info, timings=timings))
+            return MotionResult(found[0], str(found[1]), info=_with_times(info, timings))
         middle, goal_index, rng = found
         t = time.perf_counter()
         if middle.shape[0] > 2:
@@ -154,7 +154,7 @@ class CompiledRRTConnect(PathPlanner):
         certified = self._certify(model, middle, bounds, request.seed, deadline)
         add_time(timings, "certify", t)
         if isinstance(certified, str):
-            return MotionResult(Status.COLLISION, certified, path=middle, info=dict(info, timings=timings))
+            return MotionResult(Status.COLLISION, certified, path=middle, info=_with_times(info, timings))
         middle, repairs = certified
         info.update(repairs=repairs)
         path = np.vstack([head[:-1], middle, tails[goal_index][1:]])
@@ -163,7 +163,7 @@ class CompiledRRTConnect(PathPlanner):
         traj, outcome, _ = timed_and_checked(
             path, self._timer(), request, scene, kin, p.verify_resolution_rad, p.verify_resolution_m, timings
         )
-        info.update(timings=timings)
+        info = _with_times(info, timings)
         if traj is None:
             status = Status.LIMIT_VIOLATION if outcome.startswith("retiming failed") else Status.COLLISION
             return MotionResult(status, outcome, path=path, info=info)
@@ -307,3 +307,8 @@ class CompiledRRTConnect(PathPlanner):
                     Status.TIMEOUT,
                     f"no path within the time limit ({calls * p.iterations_per_call} iterations, {nodes_grown} nodes)",
                 )
+
+
+def _with_times(info: dict[str, Any], timings: dict[str, float]) -> dict[str, Any]:
+    """info with each step's seconds as `<step>_time_s` (as the OMPL planners report theirs)."""
+    return dict(info, **{f"{k}_time_s": v for k, v in timings.items()})
