@@ -13,11 +13,12 @@ declares the latter), and two spheres guard the wrist links.
 Why these choices:
 * Building an NLP costs ~1.5 s expanded (fastest solves) or ~0.1 s mapped, a solve ~15 ms: NLPs are built
   once per process and problem shape (number of boxes, number of held-object spheres) and shared by every
-  planner instance with the same parameters (`twin_nmpc.nlp.cached_problem`); the shapes a run expects
-  (`prebuild_boxes`) are built expanded when the planner is constructed, not inside a timed step, and a
-  shape first met inside a step is built mapped (a RoboCup run meets one per count of objects left on
-  the table: 57 s of building became 2 s). Each solve only changes parameters and is
-  warm-started from the previous solution shifted by the executed steps, primal and dual.
+  planner instance with the same parameters (`twin_nmpc.nlp.cached_problem`); the shape a run uses (`box_slots`
+  box slots: by default the fixtures perception reports and one placed object) is built expanded when the
+  planner is constructed, not inside a timed step, and a shape first met inside a step is built mapped (a
+  RoboCup run meets one per count of objects left on the table: 57 s of building became 2 s). Each solve only
+  changes parameters and is warm-started from the previous solution shifted by the executed steps (and carried
+  on past its horizon within the bounds), primal and dual, from a small barrier (`warm_mu_init`).
 * An NLP holds only the boxes a proxy sphere comes within `box_screen_m` (0.1 m) of along the plan the solve
   starts from (the shifted last plan, or the initial guess): rows of a box far away are inactive at the
   solution and only cost evaluations (a RoboCup table holds up to 7 boxes: x 11 spheres x 2 check points x
