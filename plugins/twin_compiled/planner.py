@@ -15,7 +15,7 @@ One `plan(request, scene)`:
 5. every segment of the path is then proven free continuously (conservative advancement); one that cannot be
    is planned again with continuous checks inside its box widened by 0.3 rad and spliced in (`max_repairs`),
    so what reaches the judge is free in FCL everywhere, not only where it was sampled;
-6. the retimer (`toppra` by default, or the config block's `retimer:`) and the check of the timed trajectory
+6. the retimer (`ruckig` by default, or the config block's `retimer:`) and the check of the timed trajectory
    (`twin.plugin.timed_and_checked`; a spline that cuts a corner is timed again through denser waypoints).
 
 Then `CheckedPlanner` judges the trajectory on the exact scene like every planner's.
@@ -24,6 +24,7 @@ Then `CheckedPlanner` judges the trajectory on the exact scene like every planne
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
@@ -50,7 +51,7 @@ from twin.plugin import (
     timed_and_checked,
 )
 from twin_compiled.params import CompiledParams
-from twin_compiled.search import first_uncertified, new_trees, rrt_connect, shortcut, tree_path
+from twin_compiled.search import first_uncertified, grown, new_trees, rrt_connect, shortcut, tree_path
 
 if TYPE_CHECKING:
     from twin.plugin import PlanningScene, PluginContext
@@ -61,6 +62,7 @@ log = logging.getLogger("twin")
 
 _ESCAPE_TRIES = 16  # random directions tried when the way toward the other end does not leave the cover
 _ESCAPE_STEP_RAD = 0.002  # FCL checks the way out of the cover this often (max-abs joint step)
+_FIRST_CAPACITY = 4096  # nodes per tree at first; doubled while the search needs more (up to max_nodes)
 _REPAIR_MARGIN_RAD = 0.3  # a segment planned again is searched inside its box widened by this much per joint
 
 
@@ -151,7 +153,17 @@ class CompiledRRTConnect(PathPlanner):
             )
         add_time(timings, "simplify", t)
         t = time.perf_counter()
-        certified = self._certify(model, middle, bounds, request.seed, deadline)
+        certified = self._certify(model, middle, bounds, request.seed, deadline, limit)
+        if isinstance(certified, str) and time.perf_counter() < deadline:
+            # the coarse search's path could not be proven free: search again, every motion proven as it is added
+            found = self._search(model, first, lasts, bounds, request.seed + 1, deadline, 0.0)
+            if isinstance(found[0], Status):
+                return MotionResult(
+                    Status.COLLISION, f"{certified}; {found[1]}", path=middle, info=_with_times(info, timings)
+                )
+            middle, goal_index, rng = found
+            certified = (middle, p.max_repairs)
+            info.update(searched_again=True)
         add_time(timings, "certify", t)
         if isinstance(certified, str):
             return MotionResult(Status.COLLISION, certified, path=middle, info=_with_times(info, timings))
@@ -171,11 +183,12 @@ class CompiledRRTConnect(PathPlanner):
         return MotionResult(Status.SUCCESS, "ok", traj, path=path, info=info)
 
     def _certify(
-        self, model: SphereModel, path: np.ndarray, bounds: np.ndarray, seed: int, deadline: float
+        self, model: SphereModel, path: np.ndarray, bounds: np.ndarray, seed: int, deadline: float, limit: float
     ) -> tuple[np.ndarray, int] | str:
         """(path, repairs): every segment proven free continuously; a segment the continuous check cannot
-        prove (the search checked configurations `resolution_rad` apart) is planned again inside its box
-        widened by `_REPAIR_MARGIN_RAD` with continuous checks and spliced in. Or why not."""
+        prove (the search checked configurations `resolution_rad` apart) is planned again with continuous
+        checks and spliced in: inside its box widened by `_REPAIR_MARGIN_RAD` (a tenth of the time limit),
+        then inside the whole bounds (a quarter). Or why not."""
         p = self.params
         repairs = 0
         while True:
@@ -193,10 +206,21 @@ class CompiledRRTConnect(PathPlanner):
                 ],
                 axis=1,
             )
-            found = self._search(model, a, b[None], box, seed + 7919 * repairs, deadline, 0.0)
+            found: tuple[Any, ...] = (Status.NO_SOLUTION, "")
+            for where, share in ((box, 0.1), (bounds, 0.25)):
+                until = min(deadline, time.perf_counter() + share * limit)
+                found = self._search(model, a, b[None], where, seed + 7919 * repairs, until, 0.0)
+                if not isinstance(found[0], Status):
+                    break
             if isinstance(found[0], Status):
                 return f"path segment {i} is not proven free and planning it again failed: {found[1]}"
             path = np.vstack([path[:i], found[0], path[i + 2 :]])
+
+    def _step(self, bounds: np.ndarray) -> float:
+        """The search's step (`range_rad`; None: 20% of the bounds' diagonal, as OMPL's default range)."""
+        if self.params.range_rad is not None:
+            return self.params.range_rad
+        return 0.2 * float(np.linalg.norm(bounds[:, 1] - bounds[:, 0]))
 
     def _model(self, scene: PlanningScene, start: np.ndarray, goals: np.ndarray) -> tuple[SphereModel, float]:
         """The planning model with the clearance, unless the start or every goal lies closer than it."""
@@ -267,7 +291,12 @@ class CompiledRRTConnect(PathPlanner):
         """(path start .. goal i, i, the random state) or (status, why not); motions checked every
         `resolution` rad (<= 0: continuously)."""
         p = self.params
-        nodes, parents, counts, rng = new_trees(p.max_nodes, seed)
+        # what one iteration can add to a tree at most: the extension and a connect across the bounds
+        span = float(np.linalg.norm(bounds[:, 1] - bounds[:, 0]))
+        step = self._step(bounds)
+        room = math.ceil(span / step) + 2
+        capacity = min(p.max_nodes, max(_FIRST_CAPACITY, 4 * room, goals.shape[0] + room))
+        nodes, parents, counts, rng = new_trees(capacity, seed)
         nodes[0, :, 0] = start
         counts[0] = 1
         nodes[1, :, : goals.shape[0]] = goals.T
@@ -282,10 +311,11 @@ class CompiledRRTConnect(PathPlanner):
                 model.scratch,
                 lo,
                 hi,
-                p.range_rad,
+                step,
                 resolution,
                 p.floor_m,
                 p.iterations_per_call,
+                room,
                 nodes,
                 parents,
                 counts,
@@ -300,7 +330,11 @@ class CompiledRRTConnect(PathPlanner):
                     root = parents[1, root]
                 return path, int(root), rng
             if status < 0:
-                return Status.NO_SOLUTION, f"a tree reached max_nodes ({p.max_nodes}) without connecting"
+                if capacity >= p.max_nodes:
+                    return Status.NO_SOLUTION, f"a tree reached max_nodes ({p.max_nodes}) without connecting"
+                capacity = min(p.max_nodes, 2 * capacity)
+                nodes, parents = grown(nodes, parents, capacity)
+                continue
             if time.perf_counter() >= deadline:
                 nodes_grown = int(counts.sum())
                 return (

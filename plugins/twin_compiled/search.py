@@ -33,7 +33,7 @@ from numba.core.caching import NullCache
 
 from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion
 
-__all__ = ["first_uncertified", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
+__all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
 
 _START, _GOAL = 0, 1
 
@@ -52,12 +52,20 @@ def _next(rng: np.ndarray) -> float:
 def new_trees(capacity: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Empty trees for `rrt_connect`: nodes (2, 6, capacity) (per tree a column per joint), parents
     (2, capacity), counts (2,), and the random state seeded from `seed` (never zero)."""
-    nodes = np.zeros((2, 6, capacity))
+    nodes = np.empty((2, 6, capacity))
     parents = np.full((2, capacity), -1, dtype=np.int64)
     counts = np.zeros(2, dtype=np.int64)
     mixed = (int(seed) * 0x9E3779B97F4A7C15 + 0x2545F4914F6CDD1D) % (1 << 64)
     rng = np.array([mixed or 1], dtype=np.uint64)
     return nodes, parents, counts, rng
+
+
+def grown(nodes: np.ndarray, parents: np.ndarray, capacity: int) -> tuple[np.ndarray, np.ndarray]:
+    """The trees' arrays with room for `capacity` nodes each, their nodes kept."""
+    n, p = np.empty((2, 6, capacity)), np.full((2, capacity), -1, dtype=np.int64)
+    n[:, :, : nodes.shape[2]] = nodes
+    p[:, : parents.shape[1]] = parents
+    return n, p
 
 
 @njit(cache=True, nogil=True)
@@ -139,6 +147,7 @@ def rrt_connect(
     resolution: float,
     floor: float,
     max_iterations: int,
+    room: int,
     nodes: np.ndarray,
     parents: np.ndarray,
     counts: np.ndarray,
@@ -146,16 +155,17 @@ def rrt_connect(
     turn: np.ndarray,
 ) -> tuple[int, int, int]:
     """Grow the trees (start tree 0 and goal tree 1, roots already added) for at most `max_iterations`
-    iterations or until they connect or fill up. Returns (status, start-tree node, goal-tree node):
-    status 1 connected (at those nodes, equal configurations), 0 not yet, -1 a tree is full. `turn[0]` is
-    the tree extended next, carried between calls."""
+    iterations or until they connect. Returns (status, start-tree node, goal-tree node): status 1 connected
+    (at those nodes, equal configurations), 0 not yet, -1 a tree has fewer than `room` free slots (what one
+    iteration can add at most: the caller grows the arrays and calls again, and the search goes on exactly
+    as it would have). `turn[0]` is the tree extended next, carried between calls."""
     capacity = nodes.shape[2]
     q_rand = np.empty(6)
     q_new = np.empty(6)
     q_next = np.empty(6)
     a = np.empty(6)
     for _ in range(max_iterations):
-        if counts[0] >= capacity - 1 or counts[1] >= capacity - 1:
+        if counts[0] + room > capacity or counts[1] + room > capacity:
             return -1, -1, -1
         t = turn[0]
         o = 1 - t
