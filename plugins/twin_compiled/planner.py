@@ -50,6 +50,7 @@ from twin.plugin import (
     start_failure,
     timed_and_checked,
 )
+from twin_compiled.nearest import new_index
 from twin_compiled.params import CompiledParams
 from twin_compiled.search import first_uncertified, grown, new_trees, rrt_connect, shortcut, tree_path
 
@@ -297,6 +298,7 @@ class CompiledRRTConnect(PathPlanner):
         room = math.ceil(span / step) + 2
         capacity = min(p.max_nodes, max(_FIRST_CAPACITY, 4 * room, goals.shape[0] + room))
         nodes, parents, counts, rng = new_trees(capacity, seed)
+        index = new_index(capacity)
         nodes[0, :, 0] = start
         counts[0] = 1
         nodes[1, :, : goals.shape[0]] = goals.T
@@ -319,6 +321,7 @@ class CompiledRRTConnect(PathPlanner):
                 nodes,
                 parents,
                 counts,
+                index,
                 rng,
                 turn,
             )
@@ -334,6 +337,7 @@ class CompiledRRTConnect(PathPlanner):
                     return Status.NO_SOLUTION, f"a tree reached max_nodes ({p.max_nodes}) without connecting"
                 capacity = min(p.max_nodes, 2 * capacity)
                 nodes, parents = grown(nodes, parents, capacity)
+                index = new_index(capacity)  # built again at the next node added
                 continue
             if time.perf_counter() >= deadline:
                 nodes_grown = int(counts.sum())

@@ -9,8 +9,8 @@ The search (`rrt_connect`): two trees, the start's and the goals' (every goal co
 iteration samples a configuration uniformly inside the bounds, extends the tree whose turn it is by at most
 `step` (joint-space L2) toward it and, when that extension is free, connects the other tree to the new node
 greedily (steps of at most `step` while they are free). It alternates the trees, like OMPL's RRTConnect.
-Nearest neighbour is a linear scan (structure of arrays, one column per joint). The random numbers are a
-xorshift64* stream seeded by the request's seed, so the same query and seed give the same path.
+Nearest neighbour: a k-d tree over each tree's nodes, rebuilt as it grows (`twin_compiled.nearest`). The random
+numbers are a xorshift64* stream seeded by the request's seed, so the same query and seed give the same path.
 
 Shortcutting (`shortcut`): greedy vertex reduction (from each kept waypoint, the farthest later waypoint
 reached by a free straight motion), then `tries` random shortcuts between two points on the path (a point
@@ -32,6 +32,7 @@ from numba import njit
 from numba.core.caching import NullCache
 
 from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion
+from twin_compiled.nearest import nearest, refresh
 
 __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
 
@@ -66,20 +67,6 @@ def grown(nodes: np.ndarray, parents: np.ndarray, capacity: int) -> tuple[np.nda
     n[:, :, : nodes.shape[2]] = nodes
     p[:, : parents.shape[1]] = parents
     return n, p
-
-
-@njit(cache=True, nogil=True)
-def _nearest(nodes: np.ndarray, tree: int, count: int, q: np.ndarray) -> int:
-    best, best_d = 0, np.inf
-    col = nodes[tree]
-    for i in range(count):
-        d = 0.0
-        for j in range(6):
-            e = col[j, i] - q[j]
-            d += e * e
-        if d < best_d:
-            best, best_d = i, d
-    return best
 
 
 @njit(cache=True, nogil=True)
@@ -151,6 +138,7 @@ def rrt_connect(
     nodes: np.ndarray,
     parents: np.ndarray,
     counts: np.ndarray,
+    index: tuple,  # type: ignore[type-arg]
     rng: np.ndarray,
     turn: np.ndarray,
 ) -> tuple[int, int, int]:
@@ -172,18 +160,20 @@ def rrt_connect(
         turn[0] = o
         for j in range(6):
             q_rand[j] = lo[j] + _next(rng) * (hi[j] - lo[j])
-        near = _nearest(nodes, t, counts[t], q_rand)
+        near = nearest(nodes[t], counts[t], index, t, q_rand)
         _steer(nodes, t, near, q_rand, step, q_new)
         if not _free(K, S, nodes, t, near, q_new, resolution, floor, a):
             continue
         new = _add(nodes, parents, counts, t, q_new, near)
+        refresh(nodes[t], counts[t], index, t)
         # connect the other tree to the new node, step by step while free
-        m = _nearest(nodes, o, counts[o], q_new)
+        m = nearest(nodes[o], counts[o], index, o, q_new)
         while counts[o] < capacity - 1:
             reached = _steer(nodes, o, m, q_new, step, q_next)
             if not _free(K, S, nodes, o, m, q_next, resolution, floor, a):
                 break
             m = _add(nodes, parents, counts, o, q_next, m)
+            refresh(nodes[o], counts[o], index, o)
             if reached:
                 return (1, new, m) if t == _START else (1, m, new)
     return 0, -1, -1
