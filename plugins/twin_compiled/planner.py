@@ -37,6 +37,7 @@ from twin.plugin import (
     MotionRequest,
     MotionResult,
     PathPlanner,
+    PlanningScene,
     Retimer,
     SphereModel,
     Status,
@@ -55,7 +56,7 @@ from twin_compiled.params import CompiledParams
 from twin_compiled.search import first_uncertified, grown, new_trees, rrt_connect, shortcut, tree_path
 
 if TYPE_CHECKING:
-    from twin.plugin import PlanningScene, PluginContext
+    from twin.plugin import PluginContext
 
 __all__ = ["CompiledRRTConnect"]
 
@@ -63,6 +64,7 @@ log = logging.getLogger("twin")
 
 _ESCAPE_TRIES = 16  # random directions tried when the way toward the other end does not leave the cover
 _ESCAPE_STEP_RAD = 0.002  # FCL checks the way out of the cover this often (max-abs joint step)
+_COMPILED: list[bool] = []  # the search's compiled code is loaded in this process (once, by the first planner)
 _FIRST_CAPACITY = 4096  # nodes per tree at first; doubled while the search needs more (up to max_nodes)
 _REPAIR_MARGIN_RAD = 0.3  # a segment planned again is searched inside its box widened by this much per joint
 
@@ -100,7 +102,17 @@ class CompiledRRTConnect(PathPlanner):
         return self._default_retimer
 
     def _warm_up(self) -> None:
-        """Compile (or load) the search and time one tiny path now, not inside a request's time limit."""
+        """Compile (or load from numba's cache) the search and time one tiny path now, not inside a request's
+        time limit (compiling takes seconds; loading ~0.1 s)."""
+        if not _COMPILED:
+            scene = PlanningScene(self.context.robot)  # the robot alone: every kernel's argument types
+            model = scene.sphere_model()
+            q = np.zeros(6)
+            found = self._search(model, q, (q + 0.1)[None], np.array([[-1.0, 1.0]] * 6), 0, math.inf, 0.05)
+            path = found[0] if isinstance(found[0], np.ndarray) else np.stack([q, q + 0.1])
+            shortcut(model.kernel, model.scratch, path, 1, 0.05, 1e-4, new_trees(1, 0)[3])
+            first_uncertified(model.kernel, model.scratch, path, 1e-4)
+            _COMPILED.append(True)
         retimer = self._timer()
         try:
             retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
