@@ -144,3 +144,25 @@ def test_a_motion_the_continuous_check_frees_is_free_in_fcl_at_any_resolution(
         assert 0.0 <= t <= 1.0
     if exact.any():
         assert t is not None
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), name=st.sampled_from(["robocup", "warehouse", "mixed"]))
+def test_a_polyline_proven_free_is_free_in_fcl_everywhere(
+    cells: dict[str, PlanningScene], seed: int, name: str
+) -> None:
+    """The one-pass continuous check of a polyline (a trajectory's samples): a polyline it proves free has no
+    FCL collision anywhere (checked 20 points a segment), and one with an FCL collision is never proven past
+    the segment where it collides."""
+    scene = cells[name]
+    model = scene.sphere_model()
+    rng = np.random.default_rng(seed)
+    a = random_configs(scene, 1, seed)[0]
+    qs = a + np.cumsum(rng.uniform(-0.05, 0.05, (60, 6)), axis=0)
+    dense = np.vstack([p + np.linspace(0.0, 1.0, 20)[:, None] * (q - p) for p, q in zip(qs[:-1], qs[1:], strict=True)])
+    exact = fcl_only(scene, dense)
+    first = model.first_unproven_segment(qs)
+    if first is None:
+        assert not exact.any()
+    if exact.any():
+        assert first is not None and first <= np.flatnonzero(exact)[0] // 20

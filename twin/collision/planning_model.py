@@ -56,6 +56,7 @@ class SphereModel:
         self._first = sphere_kernel.first_flagged
         self._motion = sphere_kernel.first_flagged_motion
         self._continuous = sphere_kernel.first_touch_on_motion
+        self._polyline = sphere_kernel.first_unproven_on_polyline
 
     def with_touch(self, touch_m: float) -> SphereModel:
         """The same model calling a sphere touching within `touch_m` of anything (default `TOUCH_M`, 10 um):
@@ -106,6 +107,19 @@ class SphereModel:
     def motion_free(self, a: np.ndarray, b: np.ndarray, resolution_rad: float) -> bool:
         """True when every configuration of a -> b, `resolution_rad` apart, is free in the model."""
         return self.first_collision_on_motion(a, b, resolution_rad) is None
+
+    def first_unproven_segment(self, qs: np.ndarray, floor_m: float = CONTINUOUS_FLOOR_M) -> int | None:
+        """The polyline through (n, 6) configurations (a timed trajectory's samples) checked continuously in
+        one pass (each evaluated configuration's distance bounds spent along as many segments as they cover):
+        None when the spheres prove all of it free (then FCL agrees at any point of it), else the index of the
+        first segment they cannot prove."""
+        if not (math.isfinite(floor_m) and floor_m > 0):
+            raise InvalidRequestError(f"floor_m must be > 0, got {floor_m}")
+        qs = np.array(qs, dtype=float, order="C", ndmin=2)
+        if qs.ndim != 2 or qs.shape[1] != 6 or not np.isfinite(qs).all():
+            raise InvalidRequestError(f"qs must be finite (n, 6) joint angles, got shape {qs.shape}")
+        i = int(self._polyline(self.kernel, self.scratch, qs, float(floor_m)))
+        return None if i < 0 else i
 
     def first_touch_continuous(self, a: np.ndarray, b: np.ndarray, floor_m: float = CONTINUOUS_FLOOR_M) -> float | None:
         """The straight joint motion a -> b checked continuously (conservative advancement: every

@@ -19,6 +19,7 @@ __all__ = [
     "first_flagged",
     "first_flagged_motion",
     "first_touch_on_motion",
+    "first_unproven_on_polyline",
     "flag_configurations",
     "new_scratch",
     "sphere_bounds",
@@ -315,6 +316,65 @@ def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> 
         t += dt
         if t >= 1.0:
             return -1.0
+
+
+@njit(cache=True, nogil=True)
+def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) -> int:  # type: ignore[type-arg]
+    """The polyline through the configurations Q (n, 6) (a timed trajectory's samples: what a judge that
+    interpolates between them checks), checked continuously by conservative advancement as
+    `first_touch_on_motion` checks one segment, but in one pass: the distance bounds of an evaluated
+    configuration are spent along as many segments as they cover. Returns the index of the first segment the
+    spheres cannot prove free, or -1 when they prove the whole polyline free."""
+    touch = K[_TOUCH]
+    obj_reach, pair_reach = K[_OBJ_REACH], K[_PAIR_REACH]
+    qk, gap_now, obj_gap = S[_QK], S[_GAP_NOW], S[_OBJ_GAP]
+    n_obj, n_pairs = obj_gap.shape[0], gap_now.shape[0]
+    budget = np.empty(n_obj + n_pairs)
+    i, t = 0, 0.0
+    while i < Q.shape[0] - 1:
+        for j in range(6):
+            qk[j] = Q[i, j] + t * (Q[i + 1, j] - Q[i, j])
+        flagged, _ = sphere_bounds(K, S, qk, _ADVANCE_REFINE_M)
+        if flagged:
+            return i
+        for o in range(n_obj):
+            budget[o] = obj_gap[o] - touch
+        for p in range(n_pairs):
+            budget[n_obj + p] = gap_now[p] - touch
+        moved = False  # whether this evaluation's bounds carried the walk forward at all
+        while i < Q.shape[0] - 1:
+            # the fraction of the rest of segment i the budgets allow
+            f = 1.0 - t
+            spent = False  # a moving part's budget is below the floor
+            for o in range(n_obj + n_pairs):
+                speed = 0.0
+                for k in range(6):
+                    r = obj_reach[o, k] if o < n_obj else pair_reach[o - n_obj, k]
+                    speed += r * abs(Q[i + 1, k] - Q[i, k])
+                if speed > 0.0:
+                    if budget[o] < floor:
+                        spent = True
+                        break
+                    f = min(f, budget[o] / speed)
+            if spent:
+                break  # evaluate again here (or give up below, if these bounds carried nothing)
+            if f >= 1.0 - t:  # the whole rest of the segment: spend and go on to the next
+                for o in range(n_obj + n_pairs):
+                    speed = 0.0
+                    for k in range(6):
+                        r = obj_reach[o, k] if o < n_obj else pair_reach[o - n_obj, k]
+                        speed += r * abs(Q[i + 1, k] - Q[i, k])
+                    budget[o] -= (1.0 - t) * speed
+                i += 1
+                t = 0.0
+                moved = True
+                continue
+            t += f
+            moved = moved or f > 0.0
+            break
+        if not moved:
+            return i
+    return -1
 
 
 @njit(cache=True, nogil=True, inline="always")
