@@ -67,11 +67,12 @@ def test_warehouse_places_at_least_90_percent_of_cubes_in_their_drop_zones():
     ("settings", "planner"),
     [
         (WAREHOUSE, "ompl.rrtconnect"),
+        (WAREHOUSE, "compiled.rrtconnect"),
         (WAREHOUSE, "ruckig.movej"),
         (ROBOCUP, "ompl.rrtconnect"),
         (ROBOCUP, "seed.quintic_movej"),
     ],
-    ids=["warehouse-ompl", "warehouse-ruckig", "robocup-ompl", "robocup-quintic"],
+    ids=["warehouse-ompl", "warehouse-compiled", "warehouse-ruckig", "robocup-ompl", "robocup-quintic"],
 )
 def test_swapping_the_transfer_planner_needs_no_code_change(settings, planner):
     # (nmpc is the warehouse's own transfer planner, exercised above; RoboCup with nmpc runs in bench/)
