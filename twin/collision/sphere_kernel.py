@@ -167,6 +167,8 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
         if best > refine:
             gap_now[p] = best
             continue
+        if sph_start[a + 1] - sph_start[a] > sph_start[b + 1] - sph_start[b]:
+            a, b = b, a  # the part with fewer spheres against the other's primitive first: cheaper, as exact
         for a2, b2 in ((a, b), (b, a)):
             if not placed[a2]:
                 _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
