@@ -2,28 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from pydantic import Field
 
-from pydantic import BaseModel, ConfigDict, Field
+from twin.plugin import PathPlannerParams
 
 __all__ = ["CompiledParams"]
 
 
-class CompiledParams(BaseModel):
-    """What `compiled.rrtconnect` takes: the search, its model, the path's post-processing."""
+class CompiledParams(PathPlannerParams):
+    """What `compiled.rrtconnect` takes: every path planner's options (`twin.plugin.PathPlannerParams`; the
+    clearance is kept in the planning model, the retimer is ruckig by default) and its search's."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    time_limit_s: float | None = Field(
-        None, gt=0, description="cap on the planning time; the request's time_limit_s applies when smaller or when None"
-    )
-    joint_range: Literal["compact", "full"] = Field(
-        "compact",
-        description=(
-            "sampling bounds: 'compact' = [-pi, pi] per joint widened to start +- pi and to the joint goal "
-            "(every IK branch keeps a representative); 'full' = the joint limits"
-        ),
-    )
     range_rad: float | None = Field(
         None,
         gt=0,
@@ -52,15 +41,6 @@ class CompiledParams(BaseModel):
     max_repairs: int = Field(
         3, ge=0, le=20, description="segments planned again when the continuous check cannot prove them free"
     )
-    clearance_m: float = Field(
-        0.005,
-        ge=0,
-        le=0.05,
-        description=(
-            "planning keeps this distance to the environment (obstacles inflated in the planning model); "
-            "a query whose start or every goal lies closer is planned without it"
-        ),
-    )
     floor_m: float = Field(
         1e-4,
         gt=0,
@@ -70,9 +50,6 @@ class CompiledParams(BaseModel):
     max_nodes: int = Field(200_000, ge=100, le=5_000_000, description="capacity of each tree")
     iterations_per_call: int = Field(
         2000, ge=1, le=1_000_000, description="search iterations per compiled call (the deadline is read between)"
-    )
-    max_goal_states: int = Field(
-        64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal tree (nearest first)"
     )
     shortcut_tries: int = Field(
         50, ge=0, le=100_000, description="random shortcuts tried after the greedy vertex reduction (0: none)"
@@ -86,12 +63,6 @@ class CompiledParams(BaseModel):
             "way of at most this length (max-abs, rad) toward the other end or a random direction"
         ),
     )
-    verify_resolution_rad: float = Field(
-        0.002, ge=0, le=0.1, description="joint step of the check of the timed trajectory; 0 = no check"
-    )
-    verify_resolution_m: float = Field(
-        0.004, gt=0, le=0.05, description="TCP travel resolution of that check (checked every half of it)"
-    )
     retimer: str = Field(
         "ruckig",
         description=(
@@ -99,4 +70,3 @@ class CompiledParams(BaseModel):
             "jerk-limited, and a third of TOPP-RA's time on MBM paths"
         ),
     )
-    retimer_params: dict[str, Any] = Field(default_factory=dict, description="parameters of that retimer")

@@ -33,12 +33,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.plugin import (
-    JointGoal,
     Limits,
     MotionRequest,
     MotionResult,
     PathPlanner,
     PlanningScene,
+    QueryEnds,
     Retimer,
     SphereModel,
     Status,
@@ -46,12 +46,10 @@ from twin.plugin import (
     TwinError,
     URArm,
     add_time,
-    goal_set,
     jerk_limited,
     leave_cover,
     path_length,
-    sampling_bounds,
-    start_failure,
+    query_ends,
     timed_and_checked,
 )
 from twin_compiled.nearest import new_index
@@ -133,26 +131,20 @@ class CompiledRRTConnect(PathPlanner):
 
     def _plan(self, request: MotionRequest, scene: PlanningScene, deadline: float, limit: float) -> MotionResult:
         p, kin = self.params, self.kin
-        start = np.array(request.start, dtype=float)
         info: dict[str, Any] = {"planner": self.name, "seed": request.seed}
         timings: dict[str, float] = {}
-        refused = start_failure(kin, scene, start)
-        if refused is not None:
-            return MotionResult(refused[0], refused[1], info=info)
-        joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
-        bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
-        goals, failure = goal_set(kin, scene, request, bounds, max_goals=p.max_goal_states, joint_range=p.joint_range)
-        if failure is not None:
-            return MotionResult(failure[0], failure[1], info=info)
-        assert goals is not None
+        ends = query_ends(kin, scene, request, p)
+        if not isinstance(ends, QueryEnds):
+            return MotionResult(ends[0], ends[1], info=info)
+        start, bounds, goals = ends.start, ends.bounds, ends.goals
 
         t = time.perf_counter()
         model, clearance = self._model(scene, start, goals)
-        ends = self._leave_the_cover(model, scene, start, goals, bounds, request.seed)
+        way_out = self._leave_the_cover(model, scene, start, goals, bounds, request.seed)
         add_time(timings, "model", t)
-        if isinstance(ends, str):
-            return MotionResult(Status.NO_SOLUTION, ends, info=_with_times(info, timings))
-        head, first, lasts, tails = ends
+        if isinstance(way_out, str):
+            return MotionResult(Status.NO_SOLUTION, way_out, info=_with_times(info, timings))
+        head, first, lasts, tails = way_out
         info.update(goal_count=int(goals.shape[0]), clearance_m=clearance, escapes=int(head.shape[0] > 1))
 
         t = time.perf_counter()

@@ -18,7 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model
+from pydantic import Field, create_model
+
+from twin.plugin import PathPlannerParams
 
 __all__ = [
     "OMPL_PARAMS",
@@ -31,21 +33,10 @@ __all__ = [
 ]
 
 
-class OmplParams(BaseModel):
-    """Options shared by every `ompl.*` planner (units in the names; None = derived, see each field)."""
+class OmplParams(PathPlannerParams):
+    """Options shared by every `ompl.*` planner (units in the names; None = derived, see each field): every path
+    planner's (`twin.plugin.PathPlannerParams`) and these."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    time_limit_s: float | None = Field(
-        None, gt=0, description="cap on the planning time; the request's time_limit_s applies when smaller or when None"
-    )
-    joint_range: Literal["compact", "full"] = Field(
-        "compact",
-        description=(
-            "sampling bounds: 'compact' = [-pi, pi] per joint widened to start +- pi and to the joint goal "
-            "(every IK branch keeps a representative); 'full' = the joint limits (+-2pi, elbow +-pi)"
-        ),
-    )
     collision_model: Literal["exact", "spheres"] = Field(
         "exact",
         description=(
@@ -57,24 +48,6 @@ class OmplParams(BaseModel):
     )
     validity_resolution_rad: float = Field(
         0.02, gt=0, le=0.5, description="largest joint step between two checked states of a motion (max-abs, rad)"
-    )
-    clearance_m: float = Field(
-        0.005,
-        ge=0,
-        le=0.05,
-        description=(
-            "planning and the final check keep this distance to the environment (obstacles inflated); "
-            "0 = plan on the scene as given. A query whose start or goal lies closer is planned without it"
-        ),
-    )
-    verify_resolution_rad: float = Field(
-        0.002, ge=0, le=0.1, description="joint step of the final check of the timed trajectory; 0 = no final check"
-    )
-    verify_resolution_m: float = Field(
-        0.004,
-        gt=0,
-        le=0.05,
-        description="TCP travel resolution of the final check (checked every half of it, as twin.planning does)",
     )
     try_direct: bool = Field(
         False,
@@ -96,16 +69,9 @@ class OmplParams(BaseModel):
         le=10,
         description="rope shortcut + vertex reduction + collapse passes (stops early when nothing changes)",
     )
-    max_goal_states: int = Field(
-        64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal set (nearest first)"
-    )
     max_repairs: int = Field(
         2, ge=0, le=5, description="replans at 4x finer validity resolution if the final check finds a collision"
     )
-    retimer: str = Field(
-        "toppra", description="retimer plugin that turns the path into a trajectory (a config block's retimer: wins)"
-    )
-    retimer_params: dict[str, Any] = Field(default_factory=dict, description="parameters of that retimer")
 
 
 @dataclass(frozen=True)

@@ -67,24 +67,22 @@ import ompl.geometric as og
 from twin.plugin import (
     ConfigError,
     DependencyMissing,
-    JointGoal,
     Limits,
     MotionRequest,
     MotionResult,
     PathPlanner,
     PlanningError,
     PlanningScene,
+    QueryEnds,
     Retimer,
     SphereModel,
     Status,
     URArm,
     add_time,
-    goal_set,
     jerk_limited,
     padded_scene,
     path_length,
-    sampling_bounds,
-    start_failure,
+    query_ends,
     timed_and_checked,
 )
 from twin_ompl.budget import Budget, search_roadmap, stop_at_first_path
@@ -250,19 +248,13 @@ class OmplPlanner(PathPlanner):
     ) -> MotionResult:
         p = self.params
         kin = self.kin
-        start = np.array(request.start, dtype=float)
         info: dict[str, Any] = {"planner": self.name, "seed": request.seed}
 
         # 1. start and goals ------------------------------------------------------------------------
-        refused = start_failure(kin, scene, start)
-        if refused is not None:
-            return MotionResult(refused[0], refused[1], info=info)
-        joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
-        bounds = sampling_bounds(kin, start, joint_goal, p.joint_range)
-        goals, failure = goal_set(kin, scene, request, bounds, max_goals=p.max_goal_states, joint_range=p.joint_range)
-        if failure is not None:
-            return MotionResult(failure[0], failure[1], info=info)
-        assert goals is not None
+        ends = query_ends(kin, scene, request, p)
+        if not isinstance(ends, QueryEnds):
+            return MotionResult(ends[0], ends[1], info=info)
+        start, bounds, goals = ends.start, ends.bounds, ends.goals
         # plan (and check finely) on the scene inflated by the clearance, unless start or goal lie closer
         clearance = p.clearance_m
         plan_scene = padded_scene(scene, clearance) if clearance > 0 else None

@@ -425,32 +425,22 @@ class RobotBody:
         """The sphere model against `env` as the compiled kernels take it (`twin.collision.sphere_kernel`'s
         model tuple): this body as it is now (held object, finger opening), a snapshot."""
         ch = self.chain
+        body = (self.object_frame, self.obj_const, self._obj_kind, self.obj_dims, self.obj_radius, self._obj_env)
+        cover = (self.sph_start, self._sph_frame, self.sph, self.pa, self.pb)
+        bounds = (self.reach, self.pair_moves, TOUCH_M, self.obj_reach, self.pair_reach)
         return (
             ch.revolute,
             ch.A,
             ch.B,
             ch.C,
             ch.chain_arr,
-            self.object_frame,
-            self.obj_const,
-            self._obj_kind,
-            self.obj_dims,
-            self.obj_radius,
-            self._obj_env,
-            self.sph_start,
-            self._sph_frame,
-            self.sph,
-            self.pa,
-            self.pb,
+            *body,
+            *cover,
             env.kind,
             env.to_local,
             env.dims,
             env.bound,
-            self.reach,
-            self.pair_moves,
-            TOUCH_M,
-            self.obj_reach,
-            self.pair_reach,
+            *bounds,
         )
 
     def kernel_scratch(self) -> tuple[Any, ...]:

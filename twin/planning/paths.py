@@ -22,9 +22,11 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from twin.errors import TwinError
 from twin.planning.checked import colliding_pair, densify_path
@@ -37,15 +39,91 @@ if TYPE_CHECKING:
     from twin.types import Trajectory
 
 __all__ = [
+    "PathPlannerParams",
+    "QueryEnds",
     "add_time",
     "goal_set",
     "padded_scene",
     "path_length",
+    "query_ends",
     "sampling_bounds",
     "start_failure",
     "timed_and_checked",
     "trajectory_check_points",
 ]
+
+
+class PathPlannerParams(BaseModel):
+    """Options every path planner built on these steps takes (units in the names; None = derived): the OMPL
+    planners' and `compiled.rrtconnect`'s parameter models extend it."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    time_limit_s: float | None = Field(
+        None, gt=0, description="cap on the planning time; the request's time_limit_s applies when smaller or when None"
+    )
+    joint_range: Literal["compact", "full"] = Field(
+        "compact",
+        description=(
+            "sampling bounds: 'compact' = [-pi, pi] per joint widened to start +- pi and to the joint goal "
+            "(every IK branch keeps a representative); 'full' = the joint limits (+-2pi, elbow +-pi)"
+        ),
+    )
+    clearance_m: float = Field(
+        0.005,
+        ge=0,
+        le=0.05,
+        description=(
+            "planning and the final check keep this distance to the environment (obstacles inflated); "
+            "0 = plan on the scene as given. A query whose start or goal lies closer is planned without it"
+        ),
+    )
+    verify_resolution_rad: float = Field(
+        0.002, ge=0, le=0.1, description="joint step of the final check of the timed trajectory; 0 = no final check"
+    )
+    verify_resolution_m: float = Field(
+        0.004,
+        gt=0,
+        le=0.05,
+        description="TCP travel resolution of the final check (checked every half of it, as twin.planning does)",
+    )
+    max_goal_states: int = Field(
+        64, ge=1, le=512, description="most IK solutions of a pose goal put in the goal set (nearest first)"
+    )
+    retimer: str = Field(
+        "toppra", description="retimer plugin that turns the path into a trajectory (a config block's retimer: wins)"
+    )
+    retimer_params: dict[str, Any] = Field(default_factory=dict, description="parameters of that retimer")
+
+
+@dataclass(frozen=True)
+class QueryEnds:
+    """A query's checked ends: the start (6,), the sampling bounds (6, 2) and the goal configurations (k, 6)."""
+
+    start: np.ndarray
+    bounds: np.ndarray
+    goals: np.ndarray
+
+
+def query_ends(
+    kin: URArm, scene: PlanningScene, request: MotionRequest, params: PathPlannerParams
+) -> QueryEnds | tuple[Status, str]:
+    """The start checked (`start_failure`), the sampling bounds of `params.joint_range`, and the goal set
+    (`goal_set`); or the refusal (INVALID_START, INVALID_GOAL) and why."""
+    start = np.array(request.start, dtype=float)
+    refused = start_failure(kin, scene, start)
+    if refused is not None:
+        return refused
+    joint_goal = np.array(request.goal.q, dtype=float) if isinstance(request.goal, JointGoal) else None
+    bounds = sampling_bounds(kin, start, joint_goal, params.joint_range)
+    goals, failure = goal_set(
+        kin, scene, request, bounds, max_goals=params.max_goal_states, joint_range=params.joint_range
+    )
+    if failure is not None:
+        return failure
+    assert goals is not None
+    return QueryEnds(start, bounds, goals)
+
 
 # waypoint spacings (rad) tried in turn when the timed trajectory cuts a corner of a free path; None: as planned
 _RETIME_SPACINGS: tuple[float | None, ...] = (None, 0.02, 0.005)
