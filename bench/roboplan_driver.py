@@ -29,7 +29,8 @@ Answer: {"roboplan_version", "setup_s" (URDF, scene, groups), "results": [{"id",
 in roboplan's scene is not planned: ok false, status start_in_collision / goal_in_collision.
 
 With --check-cost N: {"roboplan_version", "results": [{"id", "obstacles", "checks", "median_us", "mean_us",
-"colliding"}]} per problem: N configurations drawn uniformly in the arm's joint limits (seeded), each checked
+"colliding"}]} per problem (with "return_samples": true in the SPEC, also "samples" [[6], ...] and "hits"
+[bool]): N configurations drawn uniformly in the arm's joint limits (seeded), each checked
 once with Scene.hasCollisions and timed alone (perf_counter around the call; the Python call is included).
 """
 
@@ -65,8 +66,9 @@ class World:
         from roboplan import core
 
         self.np, self.core = np, core
-        xml = open(spec["urdf"]).read()
-        xml = re.sub(r"<visual\b.*?</visual>", "", xml, flags=re.S)  # visual meshes: not needed, maybe absent
+        with open(spec["urdf"]) as f:
+            xml = f.read()
+        xml = re.sub(r"<visual\b.*?</visual>", "", xml, flags=re.DOTALL)  # visual meshes: not needed, maybe absent
         desc = core.loadUrdfSceneDescriptionFromXml(xml, spec.get("package_paths", []))
         self.scene = core.Scene("robot", desc)
         self.arm = list(spec["arm_joints"])
@@ -217,16 +219,18 @@ def check_cost(spec: dict[str, Any], n: int) -> dict[str, Any]:
             hit = check(q)
             times.append(time.perf_counter() - t)
             hits += bool(hit)
-        results.append(
-            {
-                "id": prob.get("id", i),
-                "obstacles": len(obstacles),
-                "checks": n,
-                "median_us": 1e6 * statistics.median(times),
-                "mean_us": 1e6 * statistics.fmean(times),
-                "colliding": hits,
-            }
-        )
+        row = {
+            "id": prob.get("id", i),
+            "obstacles": len(obstacles),
+            "checks": n,
+            "median_us": 1e6 * statistics.median(times),
+            "mean_us": 1e6 * statistics.fmean(times),
+            "colliding": hits,
+        }
+        if spec.get("return_samples"):  # for a comparison with another collision model on the same configurations
+            row["samples"] = [q[world.arm_idx].tolist() for q in qs]
+            row["hits"] = [bool(world.scene.hasCollisions(q)) for q in qs]
+        results.append(row)
     return {"roboplan_version": _version(), "results": results}
 
 
@@ -237,7 +241,11 @@ def main() -> int:
     ap.add_argument("spec", nargs="?", default=None, help="the SPEC file (default: stdin)")
     ap.add_argument("--check-cost", type=int, default=0, metavar="N", help="time N collision checks per problem")
     args = ap.parse_args()
-    spec = json.load(open(args.spec) if args.spec else sys.stdin)
+    if args.spec:
+        with open(args.spec) as f:
+            spec = json.load(f)
+    else:
+        spec = json.load(sys.stdin)
     out_fd = os.dup(1)
     os.dup2(2, 1)  # anything the C++ side prints goes to stderr; the answer alone to stdout
     try:

@@ -65,8 +65,12 @@ def roboplan_python() -> Path | str:
     probe = "import roboplan.core, roboplan.rrt"
     if py.exists() and subprocess.run([str(py), "-c", probe], capture_output=True, check=False).returncode == 0:
         return py
-    print(f"roboplan: creating {ROBOPLAN_VENV.relative_to(ROOT)} (python -m venv + pip install "
-          f"{ROBOPLAN_REQUIREMENT}) ...", file=sys.stderr, flush=True)
+    print(
+        f"roboplan: creating {ROBOPLAN_VENV.relative_to(ROOT)} (python -m venv + pip install "
+        f"{ROBOPLAN_REQUIREMENT}) ...",
+        file=sys.stderr,
+        flush=True,
+    )
     try:
         subprocess.run([sys.executable, "-m", "venv", str(ROBOPLAN_VENV)], check=True, capture_output=True, text=True)
         (ROBOPLAN_VENV / ".gitignore").write_text("# created by bench/roboplan_peer.py\n*\n")
@@ -123,7 +127,7 @@ def robot_spec(problem_set: str | Path, urdf: str | Path | None = None, *, robot
     return {
         "urdf": str(model.source),
         "arm_joints": list(model.arm_joints),
-        "fixed_positions": {j: 0.5 * opening for j in model.gripper_joints},
+        "fixed_positions": dict.fromkeys(model.gripper_joints, 0.5 * opening),
         "excluded_pairs": [list(p) for p in sorted(scene.excluded_pairs)],
         "static_links": [s for s in ps.robot.static_links if s in model.link_index],
         "base_pose": np.linalg.inv(model.root_pose).tolist(),
@@ -134,9 +138,14 @@ def _obstacles(world: Any) -> list[dict[str, Any]]:
     out = []
     for obj in world.objects:
         for i, prim in enumerate(obj.primitives):
-            size = {"box": lambda p: list(p.size), "cylinder": lambda p: [p.radius, p.length],
-                    "sphere": lambda p: [p.radius]}[prim.shape](prim)
-            out.append({"name": f"{obj.name}_{i}", "shape": prim.shape, "size": size, "pose": prim.pose.matrix().tolist()})
+            size = {
+                "box": lambda p: list(p.size),
+                "cylinder": lambda p: [p.radius, p.length],
+                "sphere": lambda p: [p.radius],
+            }[prim.shape](prim)
+            out.append(
+                {"name": f"{obj.name}_{i}", "shape": prim.shape, "size": size, "pose": prim.pose.matrix().tolist()}
+            )
     return out
 
 
@@ -174,7 +183,9 @@ def driver_spec(
     return dict(robot, problems=problems, rrt=dict(rrt or {}), shortcut=shortcut, seed=0 if seed is None else seed)
 
 
-def run_driver(python: Path, spec: dict[str, Any], *, check_cost: int = 0, timeout: float | None = None) -> dict[str, Any]:
+def run_driver(
+    python: Path, spec: dict[str, Any], *, check_cost: int = 0, timeout: float | None = None
+) -> dict[str, Any]:
     """Run roboplan_driver.py in roboplan's venv on `spec`; its JSON answer (RuntimeError when it fails)."""
     cmd = [str(python), str(DRIVER)] + (["--check-cost", str(check_cost)] if check_cost else [])
     done = subprocess.run(cmd, input=json.dumps(spec), capture_output=True, text=True, timeout=timeout, check=False)
@@ -233,10 +244,14 @@ def check_cost(
     first: int | None = 1,
     robot_model: str = "ur5",
     python: Path | None = None,
+    compare: bool = False,
 ) -> list[dict[str, Any]]:
     """The cost of one collision check in roboplan's scene of each of the first `first` problems' worlds:
     [{"id", "obstacles" (primitives), "checks", "median_us", "mean_us", "colliding"}], over `checks` seeded
-    random configurations within the arm's joint limits."""
+    random configurations within the arm's joint limits. `compare`: also "twin_colliding" and "disagree",
+    twin's planning scene's verdict on the same configurations (a check of the model handed to roboplan:
+    frames, shapes, excluded pairs), and "twin_median_us", twin's own per-check cost there (in_collision,
+    one configuration per call)."""
     if python is None:
         py = roboplan_python()
         if isinstance(py, str):
@@ -245,7 +260,22 @@ def check_cost(
     with tempfile.TemporaryDirectory() as tmp:
         path = _set_path(problem_set, Path(tmp))
         spec = driver_spec(path, robot_spec(path, urdf, robot_model=robot_model), first=first)
-        return run_driver(python, spec, check_cost=checks)["results"]
+        spec["return_samples"] = compare
+        results = run_driver(python, spec, check_cost=checks)["results"]
+        for i, r in enumerate(results if compare else []):
+            scene = _cell(path, i, urdf, robot_model).scene
+            qs = np.asarray(r.pop("samples"), dtype=float)
+            theirs = np.asarray(r.pop("hits"), dtype=bool)
+            ours = np.asarray(scene.in_collision_batch(qs), dtype=bool)
+            r["twin_colliding"] = int(ours.sum())
+            r["disagree"] = int((ours != theirs).sum())
+            times = []
+            for q in qs:
+                t = time.perf_counter()
+                scene.in_collision(q)
+                times.append(time.perf_counter() - t)
+            r["twin_median_us"] = 1e6 * float(np.median(times))
+        return results
 
 
 # ---- twin's re-check ---------------------------------------------------------------------------------------
@@ -348,12 +378,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     everything: dict[str, Any] = {}
     for label in chosen:
         urdf = models[label]
-        head = f"{'scene':<18} {'probs':>5} {'valid':>5} {'solved':>7} {'med ms':>8} {'p95 ms':>8} {'check us':>8}"
+        head = f"{'scene':<18} {'probs':>5} {'valid':>5} {'solved':>7} {'med ms':>8} {'p95 ms':>8} "
+        head += f"{'check us':>8} {'twin us':>7} {'agree':>9}"
         if args.recheck:
             head += f" {'twin valid':>10} {'collide':>7} {'ends':>5}"
         model = "twin's urdf/ur5.urdf" if urdf is None else f"MBM's {Path(urdf).name}"
-        print(f"\nroboplan RRT-Connect on MotionBenchMaker UR5, {model}, time limit {args.time_limit:g} s, "
-              f"{os.cpu_count()} CPUs here")
+        print(
+            f"\nroboplan RRT-Connect on MotionBenchMaker UR5, {model}, time limit {args.time_limit:g} s, "
+            f"{os.cpu_count()} CPUs here"
+        )
         print(head)
         print("-" * len(head))
         rows_all: list[dict[str, Any]] = []
@@ -361,16 +394,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         t0 = time.perf_counter()
         for scene in scenes:
             path = mbm_problem_set(f"ur5/{scene}")
-            rows = plan_problem_set(path, urdf, first=args.problems, time_limit_s=args.time_limit, seed=args.seed,
-                                    shortcut=args.shortcut, python=py)
-            cost = check_cost(path, urdf, checks=args.check, python=py)[0] if args.check else None
+            rows = plan_problem_set(
+                path,
+                urdf,
+                first=args.problems,
+                time_limit_s=args.time_limit,
+                seed=args.seed,
+                shortcut=args.shortcut,
+                python=py,
+            )
+            cost = check_cost(path, urdf, checks=args.check, python=py, compare=True)[0] if args.check else None
             if args.recheck:
                 rows = recheck(rows, path, urdf)
             valid = [r for r in rows if r["start_valid"] and r["goal_valid"]]
             solved = [r for r in valid if r["ok"]]
             line = f"{scene:<18} {len(rows):>5} {len(valid):>5} {len(solved):>3}/{len(valid):<3} "
             line += _ms([r["planning_time_s"] for r in solved])
-            line += f" {cost['median_us']:8.1f}" if cost else f" {'-':>8}"
+            if cost:
+                line += f" {cost['median_us']:8.1f} {cost['twin_median_us']:7.1f}"
+                line += f" {cost['checks'] - cost['disagree']:>4}/{cost['checks']:<4}"
+            else:
+                line += f" {'-':>8} {'-':>7} {'-':>9}"
             if args.recheck:
                 tv = sum(r["twin_valid"] for r in rows)
                 bad = sum(not r["twin_free"] for r in solved)
@@ -385,17 +429,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("-" * len(head))
         line = f"{'all':<18} {len(rows_all):>5} {len(valid):>5} {len(solved):>3}/{len(valid):<3} "
         line += _ms([r["planning_time_s"] for r in solved])
-        line += f" {float(np.median(costs)):8.1f}" if costs else f" {'-':>8}"
+        line += f" {float(np.median(costs)):8.1f} {'':>7} {'':>9}" if costs else f" {'-':>8} {'':>7} {'':>9}"
         if args.recheck:
             line += f" {sum(r['twin_valid'] for r in rows_all):>10} {sum(not r['twin_free'] for r in solved):>7}"
             line += f" {sum(r['twin_ends'] for r in solved):>5}"
         print(line)
         version = rows_all[0]["roboplan_version"] if rows_all else "?"
-        print(f"roboplan {version}; {time.perf_counter() - t0:.0f} s wall; planning time around RRT.plan only; "
-              f"check: median of one Scene.hasCollisions, per scene its first problem's world")
+        print(
+            f"roboplan {version}; {time.perf_counter() - t0:.0f} s wall; planning time around RRT.plan only; "
+            f"check: median of one Scene.hasCollisions, per scene its first problem's world; twin us: "
+            "twin's PlanningScene.in_collision there; agree: random configurations on which both say the same"
+        )
         if args.recheck:
-            print(f"re-check: twin's planning scene every {RESOLUTION_RAD} rad / {RESOLUTION_M * 100:g} cm of tool "
-                  "travel; 'collide': solved paths twin finds in collision; 'ends': paths from start to the goal")
+            print(
+                f"re-check: twin's planning scene every {RESOLUTION_RAD} rad / {RESOLUTION_M * 100:g} cm of tool "
+                "travel; 'collide': solved paths twin finds in collision; 'ends': paths from start to the goal"
+            )
         everything[label] = rows_all
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
