@@ -363,12 +363,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--check", type=int, default=1000, metavar="N", help="collision checks timed per scene (0: none)")
     ap.add_argument("--recheck", action="store_true", help="re-check the paths in twin's planning scene")
     ap.add_argument("--shortcut", action="store_true", help="roboplan's path shortcutting after each plan")
+    ap.add_argument(
+        "--rrt",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a roboplan RRTOptions field, e.g. collision_check_step_size=0.01 (repeatable)",
+    )
     ap.add_argument("--out", default=None, help="write every row (paths too) to this JSON file")
     args = ap.parse_args(argv)
     scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
     unknown = [s for s in scenes if s not in SCENES]
     if unknown or not scenes:
         ap.error(f"unknown scene(s) {unknown}; MotionBenchMaker's UR5 scenes: {', '.join(SCENES)}")
+    rrt: dict[str, Any] = {}
+    for item in args.rrt:
+        key, _, value = item.partition("=")
+        rrt[key.strip()] = json.loads(value.strip().lower() if value.strip().lower() in ("true", "false") else value)
     py = roboplan_python()
     if isinstance(py, str):
         print(f"roboplan is not available here: {py}")
@@ -385,6 +396,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         model = "twin's urdf/ur5.urdf" if urdf is None else f"MBM's {Path(urdf).name}"
         print(
             f"\nroboplan RRT-Connect on MotionBenchMaker UR5, {model}, time limit {args.time_limit:g} s, "
+            f"{'RRTOptions ' + json.dumps(rrt) + ', ' if rrt else ''}"
             f"{os.cpu_count()} CPUs here"
         )
         print(head)
@@ -400,6 +412,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 first=args.problems,
                 time_limit_s=args.time_limit,
                 seed=args.seed,
+                rrt=rrt,
                 shortcut=args.shortcut,
                 python=py,
             )
