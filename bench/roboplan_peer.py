@@ -56,6 +56,7 @@ __all__ = [
     "roboplan_python",
     "robot_spec",
     "run_driver",
+    "twin_cell",
 ]
 
 
@@ -111,6 +112,12 @@ def _cell(path: Path, index: int, urdf: str | Path | None, robot_model: str) -> 
     from twin.problems.cells import cell_for
 
     return cell_for(CONFIG, _overrides(urdf, robot_model), "box", problems=str(path), problem_index=index)
+
+
+def twin_cell(problem_set: str | Path, index: int, urdf: str | Path | None = None, *, robot_model: str = "ur5") -> Any:
+    """twin's cell of problem `index` of a problem-set file: the cell `twin compare` (and bench_mbm.py) plans
+    it in (`twin.problems.cells.cell_for` on the robocup config, `robot.model`, `robot.urdf` when given)."""
+    return _cell(Path(problem_set), index, urdf, robot_model)
 
 
 def robot_spec(problem_set: str | Path, urdf: str | Path | None = None, *, robot_model: str = "ur5") -> dict[str, Any]:
