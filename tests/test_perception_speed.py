@@ -202,6 +202,18 @@ def test_back_projection_is_bit_identical(holes):
         assert np.array_equal(p0, p1) and np.array_equal(c0, c1)
 
 
+@pytest.mark.parametrize("n", [1, 2, 2999, 3000, 3001, 3002, 6001, 9000, 307_199])
+def test_blocked_transform_is_bit_identical_to_the_whole_product(n):
+    rng = np.random.default_rng(n)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_to_matrix(rng.uniform(-3, 3, 3)), rng.normal(size=3)
+    pts = np.take(rng.normal(size=(n + 5, 3)), rng.permutation(n + 5)[:n], axis=0)
+    out = transform_points(T, pts)
+    assert out.dtype == np.float64 and np.array_equal(out, pts @ T[:3, :3].T + T[:3, 3])
+    strided = rng.normal(size=(2 * n, 3))[::2]  # not contiguous: the plain product
+    assert np.array_equal(transform_points(T, strided), strided @ T[:3, :3].T + T[:3, 3])
+
+
 @pytest.mark.parametrize("holes", [False, True])
 def test_sensor_noise_is_bit_identical(holes):
     noise = load_config("robocup").camera.noise
