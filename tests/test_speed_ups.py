@@ -117,13 +117,17 @@ def test_retiming_with_toppra_does_not_import_pyplot_and_pyplot_still_works() ->
         "q = np.linspace(0, 0.5, 3)[:, None] * np.ones(6)\n"
         "toppra_time_spline(np.linspace(0, 1, 3), q, Limits.uniform(1, 2, 10))\n"
         "print('pyplot loaded' if 'matplotlib.figure' in sys.modules else 'pyplot deferred')\n"
+        "print('matplotlib loaded' if 'matplotlib' in sys.modules else 'matplotlib deferred')\n"
         "import matplotlib\n"
         "matplotlib.use('Agg')\n"
+        "print(hasattr(matplotlib, '__path__'), hasattr(matplotlib, 'rcParams'))\n"
         "import matplotlib.pyplot as plt\n"
         "print(type(plt.figure()).__name__)\n"
+        "import toppra.parametrizer\n"
+        "print(type(toppra.parametrizer.plt.figure()).__name__)\n"  # TOPP-RA's own plotting
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
-    assert out == ["pyplot", "deferred", "Figure"]
+    assert out == ["pyplot", "deferred", "matplotlib", "deferred", "True", "True", "Figure", "Figure"]
 
 
 def test_open3d_loads_without_dash_and_its_plotly_drawing_still_works() -> None:
