@@ -254,3 +254,28 @@ def test_position_round_off_is_not_a_violation_and_the_end_is_judged_where_it_is
         "acceleration",
         "jerk",
     }
+
+
+def test_thinning_keeps_the_samples_a_search_after_each_kept_one_keeps() -> None:
+    from twin.limit_check import _thinned
+
+    def reference(t, min_dt):  # before issue 41: one search after each kept sample
+        n = t.shape[0]
+        if n < 2 or float(np.diff(t).min()) >= min_dt:
+            return np.arange(n)
+        keep = [0]
+        while (j := int(np.searchsorted(t, t[keep[-1]] + min_dt, side="left"))) < n:
+            keep.append(j)
+        if keep[-1] != n - 1:
+            if len(keep) > 1 and t[-1] - t[keep[-1]] < min_dt:
+                keep[-1] = n - 1
+            else:
+                keep.append(n - 1)
+        return np.array(keep)
+
+    rng = np.random.default_rng(41)
+    for trial in range(200):
+        n = int(rng.integers(1, 400))
+        t = np.cumsum(rng.choice([0.0, 0.0005, 0.001, 0.004], n)) if trial % 2 else np.arange(n) * 0.001
+        min_dt = float(rng.choice([0.0005, 0.001, 0.002, 0.0037, 0.01]))
+        assert np.array_equal(_thinned(t, min_dt), reference(t, min_dt))

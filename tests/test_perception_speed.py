@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from twin.camera import Intrinsics, RGBDFrame, point_cloud
+from twin.camera import Intrinsics, RGBDFrame, point_cloud, point_cloud_within
 from twin.config import load_config
 from twin.perception.cloud_geometry import (
     NearestNeighbors,
@@ -200,6 +200,31 @@ def test_back_projection_is_bit_identical(holes):
         p1, c1 = point_cloud(frame, stride=stride)
         assert p0.dtype == p1.dtype and c0.dtype == c1.dtype
         assert np.array_equal(p0, p1) and np.array_equal(c0, c1)
+
+
+@pytest.mark.parametrize("holes", [False, True])
+def test_back_projection_within_depth_limits_is_the_cloud_filtered(holes):
+    frame = depth_frame(np.random.default_rng(4), holes=holes)
+    H, W = frame.depth_m.shape
+    pts, rgb = point_cloud(frame)
+    v, u = np.nonzero(frame.depth_m > 0)
+    for lo, hi in ((0.0, 10.0), (0.3, 0.9), (0.65, 0.7), (5.0, 6.0)):
+        keep = np.flatnonzero((pts[:, 2] >= lo) & (pts[:, 2] <= hi))  # scene_cloud before issue 41
+        p1, c1, pix1 = point_cloud_within(frame, lo, hi)
+        assert np.array_equal(p1, pts[keep]) and np.array_equal(c1, rgb[keep])
+        assert np.array_equal(pix1, (v * W + u)[keep]) and p1.dtype == pts.dtype and c1.dtype == rgb.dtype
+
+
+@pytest.mark.parametrize("n", [1, 2, 2999, 3000, 3001, 3002, 6001, 9000, 307_199])
+def test_blocked_transform_is_bit_identical_to_the_whole_product(n):
+    rng = np.random.default_rng(n)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rpy_to_matrix(rng.uniform(-3, 3, 3)), rng.normal(size=3)
+    pts = np.take(rng.normal(size=(n + 5, 3)), rng.permutation(n + 5)[:n], axis=0)
+    out = transform_points(T, pts)
+    assert out.dtype == np.float64 and np.array_equal(out, pts @ T[:3, :3].T + T[:3, 3])
+    strided = rng.normal(size=(2 * n, 3))[::2]  # not contiguous: the plain product
+    assert np.array_equal(transform_points(T, strided), strided @ T[:3, :3].T + T[:3, 3])
 
 
 @pytest.mark.parametrize("holes", [False, True])

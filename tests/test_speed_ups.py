@@ -117,13 +117,17 @@ def test_retiming_with_toppra_does_not_import_pyplot_and_pyplot_still_works() ->
         "q = np.linspace(0, 0.5, 3)[:, None] * np.ones(6)\n"
         "toppra_time_spline(np.linspace(0, 1, 3), q, Limits.uniform(1, 2, 10))\n"
         "print('pyplot loaded' if 'matplotlib.figure' in sys.modules else 'pyplot deferred')\n"
+        "print('matplotlib loaded' if 'matplotlib' in sys.modules else 'matplotlib deferred')\n"
         "import matplotlib\n"
         "matplotlib.use('Agg')\n"
+        "print(hasattr(matplotlib, '__path__'), hasattr(matplotlib, 'rcParams'))\n"
         "import matplotlib.pyplot as plt\n"
         "print(type(plt.figure()).__name__)\n"
+        "import toppra.parametrizer\n"
+        "print(type(toppra.parametrizer.plt.figure()).__name__)\n"  # TOPP-RA's own plotting
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
-    assert out == ["pyplot", "deferred", "Figure"]
+    assert out == ["pyplot", "deferred", "matplotlib", "deferred", "True", "True", "Figure", "Figure"]
 
 
 def test_open3d_loads_without_dash_and_its_plotly_drawing_still_works() -> None:
@@ -139,3 +143,56 @@ def test_open3d_loads_without_dash_and_its_plotly_drawing_still_works() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["dash", "deferred", "Figure", "True", "True", "module"]
+
+
+def _release_spot_reference(bin_, placed, obj_half_tcp, reach_half_tcp, grasp_yaw):
+    """The RoboCup release-spot search before issue 41, one candidate at a time (kept to compare)."""
+    import math
+
+    from twin.robot.kinematics import wrap_to_pi
+    from twin.tasks.robocup.task import _SPOT_STEP_M, _WALL_MARGIN_M, _Footprint, _turned
+
+    centre = (bin_.inner_lo[:2] + bin_.inner_hi[:2]) / 2.0
+    square = grasp_yaw - float(wrap_to_pi(4.0 * (grasp_yaw - bin_.yaw))) / 4.0
+    best = None
+    for turn in (0.0, math.pi / 2):
+        yaw = square + turn
+        reach = _turned(reach_half_tcp, yaw - bin_.yaw)
+        lo = bin_.inner_lo[:2] + reach + _WALL_MARGIN_M
+        hi = bin_.inner_hi[:2] - reach - _WALL_MARGIN_M
+        lo, hi = np.minimum(lo, centre), np.maximum(hi, centre)
+        xs = np.arange(lo[0], hi[0] + 1e-9, _SPOT_STEP_M) if hi[0] > lo[0] else np.array([centre[0]])
+        ys = np.arange(lo[1], hi[1] + 1e-9, _SPOT_STEP_M) if hi[1] > lo[1] else np.array([centre[1]])
+        for x in xs:
+            for y in ys:
+                p = np.array([x, y])
+                overlap = 0.0
+                for f in placed:
+                    d = f.half + reach + _WALL_MARGIN_M - np.abs(p - f.centre)
+                    overlap += float(max(d[0], 0.0) * max(d[1], 0.0))
+                key = (overlap, turn, -float(np.linalg.norm(p - centre)))
+                if best is None or key < best[0]:
+                    best = (key, p, yaw, _Footprint(p, _turned(obj_half_tcp, yaw - bin_.yaw)))
+    return best[1], best[2], best[3]
+
+
+def test_release_spot_search_on_the_whole_grid_picks_what_the_one_by_one_search_picked() -> None:
+    from twin.tasks.robocup.bins import bin_geometries
+    from twin.tasks.robocup.task import _release_spot
+
+    bins = list(bin_geometries(load_config("robocup")).values())
+    rng = np.random.default_rng(41)
+    for trial in range(60):
+        bin_ = bins[trial % len(bins)]
+        placed = []
+        for _ in range(int(rng.integers(0, 6))):  # what the task placed before: its own answers, as in a run
+            obj, reach = rng.uniform(0.01, 0.06, 2), rng.uniform(0.03, 0.14, 2)
+            if trial % 5 == 0:
+                obj, reach = np.array([0.03, 0.03]), np.array([0.05, 0.05])  # squares: mirror-image ties
+            spot, yaw, footprint = _release_spot(bin_, placed, obj, reach, float(rng.uniform(-3.2, 3.2)))
+            placed.append(footprint)
+        obj, reach, grasp_yaw = rng.uniform(0.01, 0.06, 2), rng.uniform(0.03, 0.2, 2), float(rng.uniform(-3.2, 3.2))
+        got = _release_spot(bin_, placed, obj, reach, grasp_yaw)
+        ref = _release_spot_reference(bin_, placed, obj, reach, grasp_yaw)
+        assert np.array_equal(got[0], ref[0]) and got[1] == ref[1]
+        assert np.array_equal(got[2].centre, ref[2].centre) and np.array_equal(got[2].half, ref[2].half)

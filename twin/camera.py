@@ -24,6 +24,7 @@ __all__ = [
     "look_at",
     "mount_error",
     "point_cloud",
+    "point_cloud_within",
     "true_camera_pose",
 ]
 
@@ -126,10 +127,24 @@ def point_cloud(frame: RGBDFrame, *, stride: int = 1) -> tuple[np.ndarray, np.nd
     indexing of (H, W, 3) arrays is several times slower); the arithmetic is the same as computing it
     all afresh, so the values are bit for bit the same.
     """
-    intr = frame.intrinsics
     d = frame.depth_m[::stride, ::stride]
+    return _back_project(frame, d, np.flatnonzero(d > 0), stride)
+
+
+def point_cloud_within(frame: RGBDFrame, min_depth_m: float, max_depth_m: float) -> tuple[np.ndarray, ...]:
+    """`point_cloud(frame)` of the pixels whose depth is within [min_depth_m, max_depth_m], and their flat
+    pixel indices (n,) (row-major): the points and colours of `point_cloud` at those rows, bit for bit, without
+    back-projecting and then dropping the rest (a RoboCup frame: ~20 ms of 300k rows taken again)."""
+    d = frame.depth_m
+    idx = np.flatnonzero((d > 0) & (d >= min_depth_m) & (d <= max_depth_m))
+    pts, colours = _back_project(frame, d, idx, 1)
+    return pts, colours, idx
+
+
+def _back_project(frame: RGBDFrame, d: np.ndarray, idx: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points (n, 3) and colours (n, 3) of the flat pixel indices `idx` into `d` (the depth at `stride`)."""
+    intr = frame.intrinsics
     du, dv = _pixel_offsets(intr.width, intr.height, stride, intr.cx, intr.cy)
-    idx = np.flatnonzero(d > 0)
     z = d.reshape(-1)[idx]
     pts = np.empty((len(idx), 3), dtype=np.result_type(du, z))
     pts[:, 0] = du[idx] * z / intr.fx

@@ -85,18 +85,21 @@ def execute(
     steps = 0
     if n:
         qs, qds, _ = traj.sample(np.minimum(np.arange(1, n + 1) * dt, traj.duration) + traj.t[0])
+        measured = np.empty((n, 6))  # the joints after each step: the tracking error is taken once, at the end
     for k in range(n):
         world.set_joint_targets(qs[k], qds[k])
         world.step()
         steps += 1
         if on_step is not None:
             on_step()
-        worst = max(worst, float(np.abs(world.joint_positions() - qs[k]).max()))
+        measured[k] = world.joint_positions()
         if stop_on_contact and (k + 1) % check_every == 0:
             hits = world.unexpected_contacts(ignore=ignore_bodies, fingers_may_touch_objects=fingers_may_touch_objects)
             if hits:
                 stopped = "unexpected contact: " + ", ".join(f"{a} with {b}" for a, b in hits)
                 break
+    if steps:
+        worst = max(worst, float(np.abs(measured[:steps] - qs[:steps]).max()))
     if stopped is not None:
         world.set_joint_targets(world.joint_positions())  # protective stop: hold where it is
         log.info("execution stopped: %s", stopped)

@@ -10,7 +10,6 @@ moving or stops dead jumps from rest. `LIMIT_TOLERANCE` absorbs float round-off 
 
 from __future__ import annotations
 
-import bisect
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,9 +76,11 @@ def _thinned(t: np.ndarray, min_dt: float) -> np.ndarray:
     n = t.shape[0]
     if n < 2 or float(np.diff(t).min()) >= min_dt:
         return np.arange(n)
-    ts = t.tolist()  # bisect on a list: a numpy searchsorted call per kept sample cost ~3 ms a judged motion
+    # each sample's successor (the first at least min_dt later) looked up for all at once, then followed from
+    # the first: the same samples as a search after each kept one (a judge looks at ~330 trajectories a run)
+    successor = np.searchsorted(t, t + min_dt, side="left").tolist()
     keep = [0]
-    while (j := bisect.bisect_left(ts, ts[keep[-1]] + min_dt)) < n:
+    while (j := successor[keep[-1]]) < n:
         keep.append(j)
     if keep[-1] != n - 1:  # the end, in place of the last kept sample when that is too close to it
         if len(keep) > 1 and t[-1] - t[keep[-1]] < min_dt:

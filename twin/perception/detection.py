@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.camera import RGBDFrame, point_cloud
+from twin.camera import RGBDFrame, point_cloud_within
 from twin.perception.cloud_geometry import Plane, fit_plane_ransac, transform_points
 from twin.timing import stage
 
@@ -154,12 +154,7 @@ def scene_cloud(
     """
     with stage("perception.cloud") as cloud_stage:
         H, W = frame.depth_m.shape
-        pts, rgb = point_cloud(frame)
-        v, u = np.nonzero(frame.depth_m > 0)
-        pixels = v * W + u
-        ok = (pts[:, 2] >= params.min_depth_m) & (pts[:, 2] <= params.max_depth_m)
-        keep = np.flatnonzero(ok)  # rows by index: the same rows as a boolean mask, several times faster
-        pts, rgb, pixels = np.take(pts, keep, axis=0), np.take(rgb, keep, axis=0), np.take(pixels, keep)
+        pts, rgb, pixels = point_cloud_within(frame, params.min_depth_m, params.max_depth_m)
         base = transform_points(T_base_camera, pts)
         sub = base[::4]
     with stage("perception.plane") as plane_stage:

@@ -33,6 +33,9 @@ if TYPE_CHECKING:
 
 __all__ = ["World", "WorldView"]
 
+_ZERO6 = np.zeros(6)
+_ZERO6.flags.writeable = False
+
 log = logging.getLogger("twin")
 
 
@@ -121,6 +124,10 @@ class World(GroundTruth):
         self.unmodelled_obstacle_centre = self._scene.unmodelled_obstacle_centre  # ground truth; it is static
         self.object_scales = self._scene.object_scales  # `world.objects.mass_scale` / `friction_scale` drawn
         self._tracking = FaultyTracking.from_settings(self.settings, self.seed, self.dt)
+        r = self.settings.robot
+        # the arm's motor settings as PyBullet takes them, converted once: the executor sends targets every step
+        self._arm_motors = [(j, float(f)) for j, f in zip(self._scene.arm, r.max_joint_force, strict=True)]
+        self._arm_gain, self._arm_max_vel = float(r.position_gain), float(r.max_joint_vel)
         self._apply_initial_commands()
         self._steps = 0
 
@@ -258,26 +265,27 @@ class World(GroundTruth):
         """
         self._check()
         q = as_vec(q, 6, "q")
-        qd = np.zeros(6) if qd is None else as_vec(qd, 6, "qd")
+        qd = _ZERO6 if qd is None else as_vec(qd, 6, "qd")
         if self._tracking is not None:  # the faulty controller passes them on step by step (`_track`)
             self._tracking.commanded = q.copy()
             return
         self._send_joint_targets(q, qd)
 
     def _send_joint_targets(self, q: np.ndarray, qd: np.ndarray) -> None:
-        c = self._cid
-        r = self.settings.robot
-        for k, j in enumerate(self._scene.arm):
+        # called every physics step while the arm moves: the per-joint settings are converted once
+        # (`_build_scene`), the targets in one `tolist` each (the same Python floats as float(q[k]))
+        c, body, gain, vmax = self._cid, self.robot_id, self._arm_gain, self._arm_max_vel
+        for (j, force), qk, qdk in zip(self._arm_motors, q.tolist(), qd.tolist(), strict=True):
             pb.setJointMotorControl2(
-                self.robot_id,
+                body,
                 j,
                 pb.POSITION_CONTROL,
-                targetPosition=float(q[k]),
-                targetVelocity=float(qd[k]),
-                force=float(r.max_joint_force[k]),
-                positionGain=r.position_gain,
+                targetPosition=qk,
+                targetVelocity=qdk,
+                force=force,
+                positionGain=gain,
                 velocityGain=1.0,
-                maxVelocity=r.max_joint_vel,
+                maxVelocity=vmax,
                 physicsClientId=c,
             )
 
