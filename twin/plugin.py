@@ -92,6 +92,7 @@ _LAZY: dict[str, str] = {
     "start_failure": "twin.planning.paths",
     "timed_and_checked": "twin.planning.paths",
     "trajectory_check_points": "twin.planning.paths",
+    "warm_up_checks": "twin.planning.paths",
     "goal_miss": "twin.planning",
     "jerk_limited": "twin.planning",
     "limits_from_settings": "twin.planning",
@@ -290,6 +291,7 @@ __all__ = [
     "top_down",
     "trajectory_check_points",
     "urdf_rgba",
+    "warm_up_checks",
     "with_object",
     "wrap_to_pi",
 ]
@@ -339,6 +341,7 @@ if TYPE_CHECKING:
         start_failure,
         timed_and_checked,
         trajectory_check_points,
+        warm_up_checks,
     )
     from twin.planning.proxy_spheres import (
         CHECK_TOL_M,
