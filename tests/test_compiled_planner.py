@@ -124,3 +124,4 @@ def test_compare_takes_it_like_any_planner(tmp_path) -> None:
     result = run_comparison(compare_spec_from_dict(data), out_dir=tmp_path / "out", workers=0, plots=False)
     assert len(result.rows) == 4 and all(r["success"] for r in result.rows), [r["reason"] for r in result.rows]
     assert {r["planner"] for r in result.rows} == {"compiled.rrtconnect", "c+ruckig"}
+    assert all(r["step_times_s"]["search"] > 0 and "final_check" in r["step_times_s"] for r in result.rows)

@@ -15,9 +15,9 @@ One `plan(request, scene)`:
 5. every segment of the path is then proven free continuously (conservative advancement); one that cannot be
    is planned again with continuous checks inside its box widened by 0.3 rad and spliced in (`max_repairs`),
    so what reaches the judge is free in FCL everywhere, not only where it was sampled;
-6. the retimer (`ruckig` by default, or the config block's `retimer:`); the timed trajectory (the polyline
-   through its samples) proven free continuously by the planning model, or else checked by FCL
-   (`twin.plugin.timed_and_checked`: a spline that cuts a corner is timed again through denser waypoints).
+6. the retimer (`ruckig` by default, or the config block's `retimer:`) and the check of the timed trajectory
+   (`twin.plugin.timed_and_checked`: proven free in one pass by the planning model, else checked by FCL; a
+   spline that cuts a corner is timed again through denser waypoints).
 
 Then `CheckedPlanner` judges the trajectory on the exact scene like every planner's.
 """
@@ -42,8 +42,6 @@ from twin.plugin import (
     Retimer,
     SphereModel,
     Status,
-    Trajectory,
-    TwinError,
     URArm,
     add_time,
     jerk_limited,
@@ -51,6 +49,7 @@ from twin.plugin import (
     path_length,
     query_ends,
     timed_and_checked,
+    warm_up_checks,
 )
 from twin_compiled.nearest import new_index
 from twin_compiled.params import CompiledParams
@@ -114,6 +113,7 @@ class CompiledRRTConnect(PathPlanner):
             shortcut(model.kernel, model.scratch, path, 1, 0.05, 1e-4, new_trees(1, 0)[3])
             first_uncertified(model.kernel, model.scratch, path, 1e-4)
             _COMPILED.append(True)
+        warm_up_checks(self.context.robot)  # the timed trajectory's proof (`timed_and_checked`)
         retimer = self._timer()
         try:
             retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
@@ -180,36 +180,15 @@ class CompiledRRTConnect(PathPlanner):
         path = np.vstack([head[:-1], middle, tails[goal_index][1:]])
         path[0] = start
         info.update(waypoints=int(path.shape[0]), path_length_rad=path_length(path), goal_index=goal_index)
-        traj = self._proven_timing(path, request, model, timings)
-        if traj is None:  # the timing's corners are not proven free by the model: FCL checks them
-            traj, outcome, _ = timed_and_checked(
-                path, self._timer(), request, scene, kin, p.verify_resolution_rad, p.verify_resolution_m, timings
-            )
-            if traj is None:
-                status = Status.LIMIT_VIOLATION if outcome.startswith("retiming failed") else Status.COLLISION
-                return MotionResult(status, outcome, path=path, info=_with_times(info, timings))
+        traj, outcome, _ = timed_and_checked(
+            path, self._timer(), request, scene, kin, p.verify_resolution_rad, p.verify_resolution_m, timings
+        )
+        if traj is None:
+            status = Status.LIMIT_VIOLATION if outcome.startswith("retiming failed") else Status.COLLISION
+            return MotionResult(status, outcome, path=path, info=_with_times(info, timings))
         info = _with_times(info, timings)
         info.update(duration_s=traj.duration)
         return MotionResult(Status.SUCCESS, "ok", traj, path=path, info=info)
-
-    def _proven_timing(
-        self, path: np.ndarray, request: MotionRequest, model: SphereModel, timings: dict[str, float]
-    ) -> Trajectory | None:
-        """The path timed by the retimer, when the planning model proves the whole timed motion free (the
-        polyline through its samples, which is what the judge checks): then FCL agrees without being asked.
-        None when it cannot (a timing spline that cuts a corner near something; or retiming failed: the
-        caller's `timed_and_checked` says why)."""
-        t = time.perf_counter()
-        try:
-            traj = self._timer().retime(path, request.limits)
-        except TwinError:
-            return None
-        finally:
-            add_time(timings, "retime", t)
-        t = time.perf_counter()
-        proven = model.first_unproven_segment(traj.q, self.params.floor_m) is None
-        add_time(timings, "prove", t)
-        return traj if proven else None
 
     def _certify(
         self, model: SphereModel, path: np.ndarray, bounds: np.ndarray, seed: int, deadline: float, limit: float

@@ -49,6 +49,7 @@ __all__ = [
     "finite_or_none",
     "limit_metrics",
     "path_smoothness",
+    "step_times",
     "task_metrics",
     "timing_metrics",
     "trajectory_metrics",
@@ -242,6 +243,17 @@ def limit_metrics(ratios: dict[str, float]) -> dict[str, float | None]:
     """`max_vel_ratio`, `max_acc_ratio`, `max_jerk_ratio` from the judge's limit ratios
     (`twin.planning.limit_ratios`; None where it measured nothing)."""
     return {key: finite_or_none(ratios.get(kind)) for kind, key in RATIO_METRICS.items()}
+
+
+def step_times(result: MotionResult) -> dict[str, float]:
+    """{step: seconds} of the planner's own steps, from its info's numeric `<step>_time_s` (the OMPL planners'
+    solve, simplify, retime, verify; compiled.rrtconnect's search, certify, ...; the judge's final_check)."""
+    info = result.info if isinstance(result.info, dict) else {}
+    return {
+        k.removesuffix("_time_s"): float(v)
+        for k, v in info.items()
+        if k.endswith("_time_s") and isinstance(v, (int, float)) and not isinstance(v, bool)
+    }
 
 
 def timing_metrics(result: MotionResult) -> tuple[dict[str, float | None], int | None]:

@@ -28,6 +28,7 @@ from twin.compare.metrics import (
     failure_of_plan,
     failure_of_task,
     limit_metrics,
+    step_times,
     task_metrics,
     timing_metrics,
     trajectory_metrics,
@@ -160,6 +161,7 @@ def _run_query(task: RunTask, row: dict[str, Any], rerun: str | None = None) -> 
     result = plan_with(planner, request, cell.scene, context)
     timing, solves = timing_metrics(result)
     row["timing"].update({k: v for k, v in timing.items() if v is not None})
+    row["step_times_s"] = step_times(result)
     row["status"] = result.status.value
     row["reason"] = result.reason
     row["success"] = result.success
@@ -309,6 +311,7 @@ def _new_row(task: RunTask) -> dict[str, Any]:
         "straight_free": None,
         "metrics": empty_metrics(),
         "timing": empty_timing(),
+        "step_times_s": {},  # a planner's own steps (its info's `<step>_time_s`: search, simplify, retime, ...)
         "clearance_pair": None,
         "contact_pairs": [],
         "task": None,
