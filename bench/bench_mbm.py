@@ -31,9 +31,8 @@ twin's re-check at the judge's resolution finds colliding, `roboplan_peer.rechec
 numbers, what differs from VAMP's setup, ratios, and the cover's price: problems valid in the exact model whose
 start or goal the planning model (0 clearance) calls touching.
 
-To get compiled.rrtconnect's step times (`MotionResult.info["search_time_s"]` ...) into the comparison's rows,
-this script wraps `twin.compare.worker.timing_metrics` in its own process and in the workers (they import this
-script as `__mp_main__`): every numeric `*_time_s` of a result's info is copied into the row's `timing`.
+compiled.rrtconnect's step times come from the comparison's rows (`step_times_s`: each planner's own
+`<step>_time_s` from its result's info).
 """
 
 from __future__ import annotations
@@ -95,7 +94,7 @@ def _validity_lines(rows: list[dict[str, Any]], numbers: dict[str, list[int]], s
 REFUSED = "final_check_collision"  # twin's FCL judge turned down a trajectory the planner called a success
 JUDGE_OTHER = ("final_check_goal", "limit_violation")  # the judge's other verdicts on a planner's success
 COMPILED = "compiled.rrtconnect"
-SEARCH_KEY = "search_time_s"  # compiled.rrtconnect's "planning": the compiled search alone (MotionResult.info)
+SEARCH_KEY = "search"  # compiled.rrtconnect's "planning": the compiled search alone (row["step_times_s"])
 ROBOPLAN = "roboplan"
 # planner words of --planners that are not a registered planner's name: a labelled block of one
 ALIASES: dict[str, dict[str, Any]] = {
@@ -106,30 +105,6 @@ ALIASES: dict[str, dict[str, Any]] = {
     },
 }
 DEFAULT_PLANNERS = f"{COMPILED},ompl.rrtconnect,rrtconnect-spheres,{ROBOPLAN}"
-
-
-def _report_step_times() -> None:
-    """Wrap `twin.compare.worker.timing_metrics` so that every numeric `*_time_s` of a result's info (the
-    planners' step times: compiled.rrtconnect's search_time_s, simplify_time_s, ...) lands in the row's
-    `timing` beside planning_time_s and final_check_time_s. Runs in this process and, through the workers'
-    import of this script as `__mp_main__`, in every worker."""
-    from twin.compare import worker
-
-    if getattr(worker.timing_metrics, "bench_step_times", False):
-        return
-    original = worker.timing_metrics
-
-    def timing_metrics(result: Any) -> tuple[dict[str, float | None], int | None]:
-        out, solves = original(result)
-        info = result.info if isinstance(result.info, dict) else {}
-        for key, value in info.items():
-            numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
-            if key.endswith("_time_s") and key not in out and numeric:
-                out[key] = float(value)
-        return out, solves
-
-    timing_metrics.bench_step_times = True  # type: ignore[attr-defined]
-    worker.timing_metrics = timing_metrics
 
 
 def planner_blocks(text: str) -> tuple[list[Any], list[str], list[str]]:
@@ -153,10 +128,10 @@ def planner_blocks(text: str) -> tuple[list[Any], list[str], list[str]]:
 
 def _plan_time(row: dict[str, Any]) -> float:
     """A row's "planning" time: compiled.rrtconnect's search alone, the others' whole plan() call."""
-    t = row["timing"]
-    if row["planner"] == COMPILED and t.get(SEARCH_KEY) is not None:
-        return float(t[SEARCH_KEY])
-    return float(t["planning_time_s"])
+    steps = row.get("step_times_s") or {}
+    if row["planner"] == COMPILED and steps.get(SEARCH_KEY) is not None:
+        return float(steps[SEARCH_KEY])
+    return float(row["timing"]["planning_time_s"])
 
 
 def _total_time(row: dict[str, Any]) -> float:
@@ -597,7 +572,7 @@ def main() -> int:
         solved = [r for r in rows if r["planner"] == COMPILED and r.get("success")]
         parts = []
         for step in steps + ("final_check",):
-            v = [r["timing"][f"{step}_time_s"] for r in solved if r["timing"].get(f"{step}_time_s") is not None]
+            v = [r["step_times_s"][step] for r in solved if (r.get("step_times_s") or {}).get(step) is not None]
             if v:
                 parts.append(f"{step} {1e3 * float(np.median(v)):.3f}")
         if parts:
@@ -618,7 +593,5 @@ def main() -> int:
     return 0
 
 
-if __name__ in ("__main__", "__mp_main__"):  # this process, and every worker of the comparison
-    _report_step_times()
 if __name__ == "__main__":
     sys.exit(main())
