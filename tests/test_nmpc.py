@@ -714,7 +714,7 @@ def test_warm_solves_of_a_lagging_arm_take_a_few_iterations(nmpc, scenes, settin
     so from a measured state off the commanded knot (the controller's lag). From `warm_mu_init` (1e-5) a lagging
     arm's warm solves take a few: median <= 3 (1e-3: 12 here; a kinematic arm: 1-2)."""
     ts = scenes[7]
-    segs, res = _lagging_loop(nmpc, ts, build_scene(settings, ts), 0.1)
+    _segs, res = _lagging_loop(nmpc, ts, build_scene(settings, ts), 0.1)
     assert res.success, res.reason
     warm = [e for e in res.info["nmpc_solve_log"] if e["warm"]]
     assert len(warm) >= 5 and max(e["off_commanded_rad"] for e in warm) > 0.005

@@ -205,7 +205,7 @@ def test_back_projection_is_bit_identical(holes):
 @pytest.mark.parametrize("holes", [False, True])
 def test_back_projection_within_depth_limits_is_the_cloud_filtered(holes):
     frame = depth_frame(np.random.default_rng(4), holes=holes)
-    H, W = frame.depth_m.shape
+    _H, W = frame.depth_m.shape
     pts, rgb = point_cloud(frame)
     v, u = np.nonzero(frame.depth_m > 0)
     for lo, hi in ((0.0, 10.0), (0.3, 0.9), (0.65, 0.7), (5.0, 6.0)):

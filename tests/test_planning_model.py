@@ -5,6 +5,7 @@ do, and the exact escape from a start it refuses must be judged by FCL."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -159,7 +160,7 @@ def test_a_polyline_proven_free_is_free_in_fcl_everywhere(
     rng = np.random.default_rng(seed)
     a = random_configs(scene, 1, seed)[0]
     qs = a + np.cumsum(rng.uniform(-0.05, 0.05, (60, 6)), axis=0)
-    dense = np.vstack([p + np.linspace(0.0, 1.0, 20)[:, None] * (q - p) for p, q in zip(qs[:-1], qs[1:], strict=True)])
+    dense = np.vstack([p + np.linspace(0.0, 1.0, 20)[:, None] * (q - p) for p, q in itertools.pairwise(qs)])
     exact = fcl_only(scene, dense)
     first = model.first_unproven_segment(qs)
     if first is None:

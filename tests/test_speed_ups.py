@@ -189,7 +189,7 @@ def test_release_spot_search_on_the_whole_grid_picks_what_the_one_by_one_search_
             obj, reach = rng.uniform(0.01, 0.06, 2), rng.uniform(0.03, 0.14, 2)
             if trial % 5 == 0:
                 obj, reach = np.array([0.03, 0.03]), np.array([0.05, 0.05])  # squares: mirror-image ties
-            spot, yaw, footprint = _release_spot(bin_, placed, obj, reach, float(rng.uniform(-3.2, 3.2)))
+            _spot, _yaw, footprint = _release_spot(bin_, placed, obj, reach, float(rng.uniform(-3.2, 3.2)))
             placed.append(footprint)
         obj, reach, grasp_yaw = rng.uniform(0.01, 0.06, 2), rng.uniform(0.03, 0.2, 2), float(rng.uniform(-3.2, 3.2))
         got = _release_spot(bin_, placed, obj, reach, grasp_yaw)
