@@ -332,6 +332,7 @@ def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) 
     qk, gap_now, obj_gap = S[_QK], S[_GAP_NOW], S[_OBJ_GAP]
     n_obj, n_pairs = obj_gap.shape[0], gap_now.shape[0]
     budget = np.empty(n_obj + n_pairs)
+    speed = np.empty(n_obj + n_pairs)
     i, t = 0, 0.0
     while i < Q.shape[0] - 1:
         for j in range(6):
@@ -345,28 +346,25 @@ def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) 
             budget[n_obj + p] = gap_now[p] - touch
         moved = False  # whether this evaluation's bounds carried the walk forward at all
         while i < Q.shape[0] - 1:
-            # the fraction of the rest of segment i the budgets allow
+            # how far each part moves per unit of segment i, and the fraction of its rest the budgets allow
             f = 1.0 - t
             spent = False  # a moving part's budget is below the floor
             for o in range(n_obj + n_pairs):
-                speed = 0.0
+                v = 0.0
                 for k in range(6):
                     r = obj_reach[o, k] if o < n_obj else pair_reach[o - n_obj, k]
-                    speed += r * abs(Q[i + 1, k] - Q[i, k])
-                if speed > 0.0:
+                    v += r * abs(Q[i + 1, k] - Q[i, k])
+                speed[o] = v
+                if v > 0.0:
                     if budget[o] < floor:
                         spent = True
                         break
-                    f = min(f, budget[o] / speed)
+                    f = min(f, budget[o] / v)
             if spent:
                 break  # evaluate again here (or give up below, if these bounds carried nothing)
             if f >= 1.0 - t:  # the whole rest of the segment: spend and go on to the next
                 for o in range(n_obj + n_pairs):
-                    speed = 0.0
-                    for k in range(6):
-                        r = obj_reach[o, k] if o < n_obj else pair_reach[o - n_obj, k]
-                        speed += r * abs(Q[i + 1, k] - Q[i, k])
-                    budget[o] -= (1.0 - t) * speed
+                    budget[o] -= (1.0 - t) * speed[o]
                 i += 1
                 t = 0.0
                 moved = True
