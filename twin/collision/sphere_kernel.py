@@ -30,9 +30,14 @@ _MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost
 # conservative advancement (`first_touch_on_motion`) refines the distance bounds below this, m: coarser bounds
 # (bounding spheres) make its steps short, finer ones cost more per configuration
 _ADVANCE_REFINE_M = 0.03
+# Every kernel but `new_scratch` is compiled without numba's runtime (`_nrt=False`, the switch numba's own
+# developers use to show its cost): they allocate nothing, and with the runtime each array taken out of the model
+# and scratch tuples is reference-counted by an atomic call, which was 60 % of a configuration's cost
+# (3.3 -> 1.3 us on MBM scenes). Callers with the runtime call them as any compiled function.
+_KERNEL = {"cache": True, "nogil": True, "_nrt": False}
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL, inline="always")
 def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float, z: float) -> float:
     """Signed distance of the world point (x, y, z) from one primitive (negative inside)."""
     px = M[0, 0] * x + M[0, 1] * y + M[0, 2] * z + M[0, 3]
@@ -71,18 +76,20 @@ TOUCH_SLOT = _TOUCH  # where the model tuple holds the touch distance (`SphereMo
 KERNEL_FINGERPRINT = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 # the scratch tuple (`new_scratch`)
 _F, _L, _OC, _INV, _SC, _PLACED, _POSED, _GAP_NOW, _ANCHOR_GAP, _W, _ANCHOR_Q, _QK, _OBJ_GAP = range(13)
+_BUDGET, _SPEED = 13, 14
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)  # allocates: the one function with numba's runtime
 def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[type-arg]
     """Work arrays of one caller: link frames, a joint transform, object centres, inverted object poses,
     placed sphere centres, which objects are placed and posed, the self pairs' gaps now and at the anchor,
     the joints' share of a motion, the anchor configuration, a configuration on a motion, each object's
-    distance bound. Made once per model, reused by every call (one caller at a time)."""
+    distance bound, each part's and pair's budget and speed along a polyline. Made once per model, reused by
+    every call (one caller at a time)."""
     return (
         np.empty((7, 4, 4)),
         np.empty((4, 4)),
-        np.empty((n_obj, 3)),
+        np.empty((3, n_obj)),
         np.empty((n_obj, 3, 4)),
         np.empty((n_sph, 3)),
         np.zeros(n_obj, dtype=np.bool_),
@@ -93,10 +100,12 @@ def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[
         np.zeros(6),
         np.zeros(6),
         np.zeros(n_obj),
+        np.zeros(n_obj + n_pairs),
+        np.zeros(n_obj + n_pairs),
     )
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def sphere_evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: ignore[type-arg]
     """(flagged, env bound) of configuration q (6,): flagged unless the spheres prove it free (see the
     module docstring); when free, a lower bound on every robot-environment distance (capped at
@@ -105,7 +114,7 @@ def sphere_evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  #
     return sphere_bounds(K, S, q, K[_TOUCH])
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[bool, float]:  # type: ignore[type-arg]
     """`sphere_evaluate`, with every distance bound below `refine` m made as tight as the model allows.
 
@@ -120,27 +129,33 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
     F, oc, sc, placed, posed, gap_now = S[_F], S[_OC], S[_SC], S[_PLACED], S[_POSED], S[_GAP_NOW]
     _link_frames(q, K[_REVOLUTE], K[_A], K[_B], K[_C], K[_CHAIN], F, S[_L])
     _object_centres(F, obj_frame, K[_OBJ_CONST], oc, placed, posed)
-    m = _MARGIN_CAP_M
+    n_obj = obj_frame.shape[0]
+    cx, cy, cz = oc[0], oc[1], oc[2]
     obj_gap = S[_OBJ_GAP]
-    # robot (and held box) against the environment: bounding spheres first, then the object's spheres
-    for o in range(obj_frame.shape[0]):
-        mo = _MARGIN_CAP_M  # this object's distance bound
-        if obj_env[o]:
-            for e in range(env_kind.shape[0]):
-                dx, dy, dz = oc[o, 0] - env_bound[e, 0], oc[o, 1] - env_bound[e, 1], oc[o, 2] - env_bound[e, 2]
-                far = obj_radius[o] + env_bound[e, 3] + mo
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 > far * far:
-                    continue  # farther than the bound so far: changes nothing
-                gap = math.sqrt(d2) - obj_radius[o] - env_bound[e, 3]
-                if gap > refine:
-                    mo = min(mo, gap)
-                    continue
-                gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], oc[o, 0], oc[o, 1], oc[o, 2])
-                gap -= obj_radius[o]
-                if gap > refine:
-                    mo = min(mo, gap)
-                    continue
+    for o in range(n_obj):
+        obj_gap[o] = _MARGIN_CAP_M
+    # robot (and held box) against the environment, one primitive at a time: every object's bounding sphere
+    # against the primitive's in one branch-free pass over the objects (SIMD), then the few within `refine`
+    # again, tighter: the bounding sphere against the exact primitive, then the object's spheres
+    for e in range(env_kind.shape[0]):
+        ex, ey, ez, er = env_bound[e, 0], env_bound[e, 1], env_bound[e, 2], env_bound[e, 3]
+        near = 0
+        for o in range(n_obj):
+            dx, dy, dz = cx[o] - ex, cy[o] - ey, cz[o] - ez
+            gap = math.sqrt(dx * dx + dy * dy + dz * dz) - obj_radius[o] - er
+            tested = obj_env[o]
+            near += tested and gap <= refine
+            obj_gap[o] = min(obj_gap[o], gap if tested and gap > refine else _MARGIN_CAP_M)
+        if near == 0:
+            continue
+        for o in range(n_obj):
+            if not obj_env[o]:
+                continue
+            dx, dy, dz = cx[o] - ex, cy[o] - ey, cz[o] - ez
+            if math.sqrt(dx * dx + dy * dy + dz * dz) - obj_radius[o] - er > refine:
+                continue
+            gap = _point_distance(env_kind[e], env_to_local[e], env_dims[e], cx[o], cy[o], cz[o]) - obj_radius[o]
+            if gap <= refine:
                 if not placed[o]:
                     _place(F, sph_start[o], sph_start[o + 1], K[_SPH_FRAME], sph, sc)
                     placed[o] = True
@@ -150,23 +165,27 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
                 )
                 if gap < touch:
                     return True, 0.0
-                mo = min(mo, gap)
-        obj_gap[o] = mo
-        m = min(m, mo)
-    # self pairs, each with its own bound (the joints between its parts move them apart)
-    obj_kind, obj_dims, obj_const, inv = K[_OBJ_KIND], K[_OBJ_DIMS], K[_OBJ_CONST], S[_INV]
+            obj_gap[o] = min(obj_gap[o], gap)
+    m = _MARGIN_CAP_M
+    for o in range(n_obj):
+        m = min(m, obj_gap[o])
+    # self pairs, each with its own bound (the joints between its parts move them apart): bounding spheres in
+    # one branch-free pass, then the pairs within `refine` again, tighter
+    near = 0
     for p in range(pair_a.shape[0]):
         a, b = pair_a[p], pair_b[p]
-        dx, dy, dz = oc[a, 0] - oc[b, 0], oc[a, 1] - oc[b, 1], oc[a, 2] - oc[b, 2]
-        far = obj_radius[a] + obj_radius[b] + _MARGIN_CAP_M
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 > far * far:
-            gap_now[p] = _MARGIN_CAP_M
-            continue
-        best = math.sqrt(d2) - obj_radius[a] - obj_radius[b]
+        dx, dy, dz = cx[a] - cx[b], cy[a] - cy[b], cz[a] - cz[b]
+        gap = math.sqrt(dx * dx + dy * dy + dz * dz) - obj_radius[a] - obj_radius[b]
+        near += gap <= refine
+        gap_now[p] = min(gap, _MARGIN_CAP_M)
+    if near == 0:
+        return False, m
+    obj_kind, obj_dims, obj_const, inv = K[_OBJ_KIND], K[_OBJ_DIMS], K[_OBJ_CONST], S[_INV]
+    for p in range(pair_a.shape[0]):
+        best = gap_now[p]
         if best > refine:
-            gap_now[p] = best
             continue
+        a, b = pair_a[p], pair_b[p]
         if sph_start[a + 1] - sph_start[a] > sph_start[b + 1] - sph_start[b]:
             a, b = b, a  # the part with fewer spheres against the other's primitive first: cheaper, as exact
         for a2, b2 in ((a, b), (b, a)):
@@ -174,7 +193,7 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
                 _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
                 placed[a2] = True
             if not posed[b2]:
-                _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2])
+                _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2], S[_L])
                 posed[b2] = True
             gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
             best = max(best, gap)
@@ -186,7 +205,7 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
     return False, m
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(**_KERNEL, inline="always")
 def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> tuple[bool, float]:  # type: ignore[type-arg]
     """`sphere_evaluate`, skipped when q is clear by the anchor's bounds (anchor_env < 0: no anchor yet); a newly
     cleared q becomes the anchor. Returns (flagged, the anchor's env bound now)."""
@@ -197,12 +216,15 @@ def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> t
     flagged, m = sphere_evaluate(K, S, q)
     if flagged:
         return True, anchor_env
-    S[_ANCHOR_Q][:] = q
-    S[_ANCHOR_GAP][:] = S[_GAP_NOW]
+    anchor_q, anchor_gap, gap_now = S[_ANCHOR_Q], S[_ANCHOR_GAP], S[_GAP_NOW]
+    for j in range(6):
+        anchor_q[j] = q[j]
+    for p in range(gap_now.shape[0]):
+        anchor_gap[p] = gap_now[p]
     return False, m
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> None:  # type: ignore[type-arg]
     """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring). Along a
     sequence, configurations close to the last cleared one are cleared by its bounds (`_near_anchor`)."""
@@ -211,7 +233,7 @@ def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> 
         out[i], anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def first_flagged(K: tuple, S: tuple, qs: np.ndarray) -> int:  # type: ignore[type-arg]
     """The index of the first configuration of qs (n, 6) the spheres do not prove free, or -1."""
     anchor_env = -1.0
@@ -222,7 +244,7 @@ def first_flagged(K: tuple, S: tuple, qs: np.ndarray) -> int:  # type: ignore[ty
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float) -> int:  # type: ignore[type-arg]
     """The straight joint motion a -> b in n = ceil(max |b - a| / resolution) steps: configurations
     a + k/n (b - a), k = 1..n (a itself is not checked), evaluated coarse to fine (b first, then the
@@ -257,7 +279,7 @@ def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resol
             k = step
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
     """The straight joint motion a -> b, checked continuously by conservative advancement: -1.0 when the
     spheres prove every configuration of it free (a and b included), else the fraction t in [0, 1] of the
@@ -280,7 +302,7 @@ def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floo
     return _advance(K, S, a, b, floor)
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
     """`first_touch_on_motion` from a to b."""
     touch = K[_TOUCH]
@@ -320,7 +342,7 @@ def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> 
             return -1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL)
 def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) -> int:  # type: ignore[type-arg]
     """The polyline through the configurations Q (n, 6) (a timed trajectory's samples: what a judge that
     interpolates between them checks), checked continuously by conservative advancement as
@@ -331,8 +353,7 @@ def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) 
     obj_reach, pair_reach = K[_OBJ_REACH], K[_PAIR_REACH]
     qk, gap_now, obj_gap = S[_QK], S[_GAP_NOW], S[_OBJ_GAP]
     n_obj, n_pairs = obj_gap.shape[0], gap_now.shape[0]
-    budget = np.empty(n_obj + n_pairs)
-    speed = np.empty(n_obj + n_pairs)
+    budget, speed = S[_BUDGET], S[_SPEED]
     i, t = 0, 0.0
     while i < Q.shape[0] - 1:
         for j in range(6):
@@ -377,7 +398,7 @@ def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) 
     return -1
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(**_KERNEL, inline="always")
 def _near_anchor(
     q: np.ndarray,
     anchor_q: np.ndarray,
@@ -411,7 +432,7 @@ def _near_anchor(
     return clear
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(**_KERNEL, inline="always")
 def _link_frames(
     q: np.ndarray,
     revolute: np.ndarray,
@@ -448,15 +469,15 @@ def _link_frames(
                 )
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(**_KERNEL, inline="always")
 def _object_centres(
     F: np.ndarray, obj_frame: np.ndarray, obj_const: np.ndarray, oc: np.ndarray, placed: np.ndarray, posed: np.ndarray
 ) -> None:
-    """oc[o]: the world centre of object o's bounding sphere; no object's spheres placed or pose inverted yet."""
+    """oc[:, o]: the world centre of object o's bounding sphere; no object's spheres placed or pose inverted yet."""
     for o in range(obj_frame.shape[0]):
         fr = obj_frame[o]
         for r in range(3):
-            oc[o, r] = (
+            oc[r, o] = (
                 F[fr, r, 0] * obj_const[o, 0, 3]
                 + F[fr, r, 1] * obj_const[o, 1, 3]
                 + F[fr, r, 2] * obj_const[o, 2, 3]
@@ -466,7 +487,7 @@ def _object_centres(
         posed[o] = False
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL, inline="always")
 def _spheres_gap(sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M: np.ndarray, d: np.ndarray) -> float:
     """Smallest distance between the placed spheres lo..hi-1 and the primitive (kind, M, d), negative inside."""
     gap = np.inf
@@ -475,10 +496,9 @@ def _spheres_gap(sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M
     return gap
 
 
-@njit(cache=True, nogil=True)
-def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray) -> None:
+@njit(**_KERNEL, inline="always")
+def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray, P: np.ndarray) -> None:
     """World-to-local (3, 4) of the object at Ff @ const."""
-    P = np.empty((3, 4))
     for r in range(3):
         for s in range(4):
             P[r, s] = Ff[r, 0] * const[0, s] + Ff[r, 1] * const[1, s] + Ff[r, 2] * const[2, s] + Ff[r, 3] * const[3, s]
@@ -488,7 +508,7 @@ def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray) -> None:
         out[r, 3] = -(P[0, r] * P[0, 3] + P[1, r] * P[1, 3] + P[2, r] * P[2, 3])
 
 
-@njit(cache=True, nogil=True)
+@njit(**_KERNEL, inline="always")
 def _place(F: np.ndarray, lo: int, hi: int, sph_frame: np.ndarray, sph: np.ndarray, sc: np.ndarray) -> None:
     """World centres of spheres lo..hi-1 into sc."""
     for s in range(lo, hi):
