@@ -86,8 +86,10 @@ def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[
     the joints' share of a motion, the anchor configuration, a configuration on a motion, each object's
     distance bound, each part's and pair's budget and speed along a polyline. Made once per model, reused by
     every call (one caller at a time)."""
+    F = np.zeros((7, 4, 4))
+    F[:, 3, 3] = 1.0
     return (
-        np.empty((7, 4, 4)),
+        F,
         np.empty((4, 4)),
         np.empty((3, n_obj)),
         np.empty((n_obj, 3, 4)),
@@ -120,8 +122,10 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
 
     A bound comes from the cheapest level that exceeds `refine`: bounding sphere against bounding sphere, then
     the bounding sphere against the exact primitive, then the object's cover against the exact primitive (a
-    self pair: each part's cover against the other's primitive, the larger). Refining further costs more per
-    configuration and buys larger steps where a motion is checked by the bounds (`first_touch_on_motion`)."""
+    self pair: each part's bounding sphere, then its cover, against the other's primitive, the larger). A
+    bounding sphere encloses its primitive (not its cover), so every level is a lower bound on the exact
+    distance; only the covers call a configuration touching. Refining further costs more per configuration
+    and buys larger steps where a motion is checked by the bounds (`first_touch_on_motion`)."""
     obj_frame, obj_radius, obj_env = K[_OBJ_FRAME], K[_OBJ_RADIUS], K[_OBJ_ENV]
     sph_start, sph = K[_SPH_START], K[_SPH]
     env_kind, env_to_local, env_dims, env_bound = K[_ENV_KIND], K[_ENV_TO_LOCAL], K[_ENV_DIMS], K[_ENV_BOUND]
@@ -188,13 +192,21 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
         a, b = pair_a[p], pair_b[p]
         if sph_start[a + 1] - sph_start[a] > sph_start[b + 1] - sph_start[b]:
             a, b = b, a  # the part with fewer spheres against the other's primitive first: cheaper, as exact
-        for a2, b2 in ((a, b), (b, a)):
-            if not placed[a2]:
-                _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
-                placed[a2] = True
+        for a2, b2 in ((a, b), (b, a)):  # each part's bounding sphere against the other's primitive
             if not posed[b2]:
                 _pose_inverse(F[obj_frame[b2]], obj_const[b2], inv[b2], S[_L])
                 posed[b2] = True
+            gap = _point_distance(obj_kind[b2], inv[b2], obj_dims[b2], cx[a2], cy[a2], cz[a2]) - obj_radius[a2]
+            best = max(best, gap)
+            if best > refine:
+                break
+        if best > refine:
+            gap_now[p] = best
+            continue
+        for a2, b2 in ((a, b), (b, a)):  # each part's cover against the other's primitive
+            if not placed[a2]:
+                _place(F, sph_start[a2], sph_start[a2 + 1], K[_SPH_FRAME], sph, sc)
+                placed[a2] = True
             gap = _spheres_gap(sc, sph, sph_start[a2], sph_start[a2 + 1], obj_kind[b2], inv[b2], obj_dims[b2])
             best = max(best, gap)
             if best > refine:
@@ -445,10 +457,11 @@ def _link_frames(
 ) -> None:
     """The link frames at configuration q (6,): F[0] = identity, F[k + 1] = F[chain[k, 1]] @ (A[k] + u B[k]
     + v C[k]) for the joints in chain order (chain[:, 0] = joint index), u = sin q, v = 1 - cos q
-    (revolute) or u = q, v = 0. L (4, 4): scratch."""
-    F[0] = 0.0
-    for k in range(4):
-        F[0, k, k] = 1.0
+    (revolute) or u = q, v = 0. Rigid transforms: only the top three rows are computed (the last stays
+    0 0 0 1, as `new_scratch` made it). L (4, 4): scratch."""
+    for r in range(3):
+        for s in range(4):
+            F[0, r, s] = 1.0 if r == s else 0.0
     for c in range(chain.shape[0]):
         j = chain[c, 0]
         f = chain[c, 1]
@@ -459,14 +472,13 @@ def _link_frames(
         else:
             u = qj
             v = 0.0
-        for r in range(4):
+        for r in range(3):
             for s in range(4):
                 L[r, s] = A[j, r, s] + u * B[j, r, s] + v * C[j, r, s]
-        for r in range(4):
-            for s in range(4):
-                F[j + 1, r, s] = (
-                    F[f, r, 0] * L[0, s] + F[f, r, 1] * L[1, s] + F[f, r, 2] * L[2, s] + F[f, r, 3] * L[3, s]
-                )
+        for r in range(3):
+            for s in range(3):
+                F[j + 1, r, s] = F[f, r, 0] * L[0, s] + F[f, r, 1] * L[1, s] + F[f, r, 2] * L[2, s]
+            F[j + 1, r, 3] = F[f, r, 0] * L[0, 3] + F[f, r, 1] * L[1, 3] + F[f, r, 2] * L[2, 3] + F[f, r, 3]
 
 
 @njit(**_KERNEL, inline="always")
