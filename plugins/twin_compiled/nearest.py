@@ -8,7 +8,9 @@ exceeds a quarter of the indexed nodes (and 64) costs O(log n) per node added, a
 
 Layout: one `Index` per search, arrays with a leading axis for the two trees: idx (2, capacity) the node order
 of the build; per k-d node lo, hi (range of idx), dim, split, left, right (-1: a leaf); built (2,) how many nodes
-of each tree the index holds.
+of each tree the index holds; then work arrays (the build's and the query's stacks, the build's bounds), so that
+`nearest` and `refresh` allocate nothing and run without numba's runtime (`_nrt=False`, as the sphere kernels:
+with it, every array taken out of the index tuple was reference-counted by an atomic call, per query).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ _STACK = 256  # deepest query stack: far more than the depth of a tree of 2^40 n
 
 
 def new_index(capacity: int) -> tuple[np.ndarray, ...]:
-    """An empty index for trees of up to `capacity` nodes: (idx, lo, hi, dim, split, left, right, built)."""
+    """An empty index for trees of up to `capacity` nodes: (idx, lo, hi, dim, split, left, right, built, and the
+    work arrays: the build's stack (3, m) and bounds (2, 6), the query's stack of nodes and distances)."""
     m = 4 * (capacity // LEAF + 2)
     return (
         np.zeros((2, capacity), dtype=np.int64),
@@ -34,25 +37,29 @@ def new_index(capacity: int) -> tuple[np.ndarray, ...]:
         np.full((2, m), -1, dtype=np.int64),
         np.full((2, m), -1, dtype=np.int64),
         np.zeros(2, dtype=np.int64),
+        np.zeros((3, m), dtype=np.int64),
+        np.zeros((2, 6)),
+        np.zeros(_STACK, dtype=np.int64),
+        np.zeros(_STACK),
     )
 
 
-@njit(cache=True, nogil=True)
+_COMPILED = {"cache": True, "nogil": True, "_nrt": False}
+
+
+@njit(**_COMPILED)
 def _build(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ignore[type-arg]
     """Index the first n points (columns of pts (6, capacity)) of tree t: split at the middle of the widest
     coordinate's spread until leaves hold at most LEAF points."""
-    idx, lo_, hi_, dim_, split_, left_, right_, built = index
+    idx, lo_, hi_, dim_, split_, left_, right_, built = index[:8]
     idx, lo_, hi_, dim_, split_, left_, right_ = idx[t], lo_[t], hi_[t], dim_[t], split_[t], left_[t], right_[t]
     for i in range(n):
         idx[i] = i
-    st_node = np.empty(lo_.shape[0], dtype=np.int64)
-    st_lo = np.empty(lo_.shape[0], dtype=np.int64)
-    st_hi = np.empty(lo_.shape[0], dtype=np.int64)
+    stack, bounds = index[8], index[9]
+    st_node, st_lo, st_hi, mn, mx = stack[0], stack[1], stack[2], bounds[0], bounds[1]
     sp = 1
     st_node[0], st_lo[0], st_hi[0] = 0, 0, n
     count = 1
-    mn = np.empty(6)
-    mx = np.empty(6)
     while sp > 0:
         sp -= 1
         node, lo, hi = st_node[sp], st_lo[sp], st_hi[sp]
@@ -90,7 +97,7 @@ def _build(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: igno
     built[t] = n
 
 
-@njit(cache=True, nogil=True)
+@njit(**_COMPILED)
 def refresh(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ignore[type-arg]
     """Rebuild tree t's index when the nodes added since its build outnumber a quarter of it (and 64)."""
     built = index[7][t]
@@ -98,10 +105,10 @@ def refresh(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ign
         _build(pts, n, index, t)
 
 
-@njit(cache=True, nogil=True)
+@njit(**_COMPILED)
 def nearest(pts: np.ndarray, n: int, index: tuple, t: int, q: np.ndarray) -> int:  # type: ignore[type-arg]
     """The node of tree t (the first n columns of pts (6, capacity)) nearest to q (6,), joint-space L2."""
-    idx, lo_, hi_, dim_, split_, left_, right_, built = index
+    idx, lo_, hi_, dim_, split_, left_, right_, built = index[:8]
     idx, lo_, hi_, dim_, split_, left_, right_ = idx[t], lo_[t], hi_[t], dim_[t], split_[t], left_[t], right_[t]
     nb = built[t]
     best, best_d = -1, np.inf
@@ -114,8 +121,7 @@ def nearest(pts: np.ndarray, n: int, index: tuple, t: int, q: np.ndarray) -> int
             best, best_d = i, d
     if nb == 0:
         return best
-    st_node = np.empty(_STACK, dtype=np.int64)
-    st_d = np.empty(_STACK)
+    st_node, st_d = index[10], index[11]
     sp = 1
     st_node[0], st_d[0] = 0, 0.0
     while sp > 0:

@@ -313,6 +313,7 @@ class CompiledRRTConnect(PathPlanner):
         lo = np.ascontiguousarray(bounds[:, 0])
         hi = np.ascontiguousarray(bounds[:, 1])
         turn = np.zeros(1, dtype=np.int64)
+        work = np.empty((4, 6))
         calls = 0
         while True:
             status, a, b = rrt_connect(
@@ -331,6 +332,7 @@ class CompiledRRTConnect(PathPlanner):
                 index,
                 rng,
                 turn,
+                work,
             )
             calls += 1
             if status == 1:

@@ -37,9 +37,13 @@ from twin_compiled.nearest import nearest, refresh
 __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
 
 _START, _GOAL = 0, 1
+# the search's inner functions allocate nothing and run without numba's runtime (`_nrt=False`, as the sphere
+# kernels and `twin_compiled.nearest`): with it, each array taken out of a tuple or sliced was
+# reference-counted by an atomic call, every iteration
+_NO_RUNTIME = {"cache": True, "nogil": True, "_nrt": False}
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def _next(rng: np.ndarray) -> float:
     """A uniform number in [0, 1) from the xorshift64* state rng[0] (uint64), advanced."""
     x = rng[0]
@@ -69,7 +73,7 @@ def grown(nodes: np.ndarray, parents: np.ndarray, capacity: int) -> tuple[np.nda
     return n, p
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float, out: np.ndarray) -> bool:
     """out = the node i of `tree` moved toward target by at most `step` (L2); True when it reaches target."""
     d = 0.0
@@ -78,7 +82,8 @@ def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float
         d += e * e
     d = math.sqrt(d)
     if d <= step:
-        out[:] = target
+        for j in range(6):
+            out[j] = target[j]
         return True
     f = step / d
     for j in range(6):
@@ -86,7 +91,7 @@ def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def _add(nodes: np.ndarray, parents: np.ndarray, counts: np.ndarray, tree: int, q: np.ndarray, parent: int) -> int:
     i = counts[tree]
     for j in range(6):
@@ -96,7 +101,7 @@ def _add(nodes: np.ndarray, parents: np.ndarray, counts: np.ndarray, tree: int, 
     return i
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def motion_free(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float, floor: float) -> bool:  # type: ignore[type-arg]
     """Is the straight motion a -> b free in the planning model? resolution > 0: its configurations that far
     apart (max-abs joint step), coarse to fine, a assumed free; resolution <= 0: continuously (conservative
@@ -106,7 +111,7 @@ def motion_free(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: fl
     return first_touch_on_motion(K, S, a, b, floor) < 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def _free(
     K: tuple,  # type: ignore[type-arg]
     S: tuple,  # type: ignore[type-arg]
@@ -124,7 +129,7 @@ def _free(
     return motion_free(K, S, a, q, resolution, floor)
 
 
-@njit(cache=True, nogil=True)
+@njit(**_NO_RUNTIME)
 def rrt_connect(
     K: tuple,  # type: ignore[type-arg]
     S: tuple,  # type: ignore[type-arg]
@@ -141,17 +146,15 @@ def rrt_connect(
     index: tuple,  # type: ignore[type-arg]
     rng: np.ndarray,
     turn: np.ndarray,
+    work: np.ndarray,
 ) -> tuple[int, int, int]:
     """Grow the trees (start tree 0 and goal tree 1, roots already added) for at most `max_iterations`
     iterations or until they connect. Returns (status, start-tree node, goal-tree node): status 1 connected
     (at those nodes, equal configurations), 0 not yet, -1 a tree has fewer than `room` free slots (what one
     iteration can add at most: the caller grows the arrays and calls again, and the search goes on exactly
-    as it would have). `turn[0]` is the tree extended next, carried between calls."""
+    as it would have). `turn[0]` is the tree extended next, carried between calls; `work` (4, 6): scratch."""
     capacity = nodes.shape[2]
-    q_rand = np.empty(6)
-    q_new = np.empty(6)
-    q_next = np.empty(6)
-    a = np.empty(6)
+    q_rand, q_new, q_next, a = work[0], work[1], work[2], work[3]
     for _ in range(max_iterations):
         if counts[0] + room > capacity or counts[1] + room > capacity:
             return -1, -1, -1
