@@ -14,11 +14,11 @@ class CompiledParams(PathPlannerParams):
     clearance is kept in the planning model, the retimer is ruckig by default) and its search's."""
 
     range_rad: float | None = Field(
-        None,
+        2.0,
         gt=0,
         le=20,
-        description="longest motion added to a tree in one step (joint-space L2, rad); None = 20% of the "
-        "sampling bounds' diagonal (OMPL's default)",
+        description="longest motion added to a tree in one step (joint-space L2, rad; 2.0: VAMP's default); None = "
+        "20% of the sampling bounds' diagonal (OMPL's default)",
     )
     resolution_rad: float = Field(
         0.05,
@@ -46,6 +46,28 @@ class CompiledParams(PathPlannerParams):
         gt=0,
         le=0.01,
         description="a motion whose spheres come this close to touching counts as touching (the continuous check)",
+    )
+    dynamic_domain_rad: float | None = Field(
+        4.0,
+        gt=0,
+        le=100,
+        description=(
+            "dynamic domain (VAMP's default): a node whose extension failed draws only samples within this "
+            "joint-space distance (rad), shrinking on each further failure; None: off (OMPL's RRTConnect)"
+        ),
+    )
+    domain_min_radius_rad: float = Field(1.0, gt=0, le=100, description="the dynamic domain's smallest radius, rad")
+    domain_alpha: float = Field(
+        1e-4, ge=0, lt=1, description="a dynamic domain shrinks by (1 - alpha) on a failure, grows by (1 + alpha)"
+    )
+    tree_ratio: float = Field(
+        1.0,
+        ge=0,
+        le=100,
+        description=(
+            "tree balance (VAMP's default): a tree with at most 1/(1 + tree_ratio) of the other's nodes is "
+            "extended again; 0: the trees take strict turns (OMPL's RRTConnect)"
+        ),
     )
     max_nodes: int = Field(200_000, ge=100, le=5_000_000, description="capacity of each tree")
     iterations_per_call: int = Field(

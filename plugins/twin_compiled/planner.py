@@ -110,7 +110,7 @@ class CompiledRRTConnect(PathPlanner):
             q = np.zeros(6)
             found = self._search(model, q, (q + 0.1)[None], np.array([[-1.0, 1.0]] * 6), 0, math.inf, 0.05)
             path = found[0] if isinstance(found[0], np.ndarray) else np.stack([q, q + 0.1])
-            shortcut(model.kernel, model.scratch, path, 1, 0.05, 1e-4, new_trees(1, 0)[3])
+            shortcut(model.kernel, model.scratch, path, 1, 0.05, 1e-4, new_trees(1, 0)[4])
             first_uncertified(model.kernel, model.scratch, path, 1e-4)
             _COMPILED.append(True)
         warm_up_checks(self.context.robot)  # the timed trajectory's proof (`timed_and_checked`)
@@ -304,7 +304,7 @@ class CompiledRRTConnect(PathPlanner):
         step = self._step(bounds)
         room = math.ceil(span / step) + 2
         capacity = min(p.max_nodes, max(_FIRST_CAPACITY, 4 * room, goals.shape[0] + room))
-        nodes, parents, counts, rng = new_trees(capacity, seed)
+        nodes, parents, radii, counts, rng = new_trees(capacity, seed)
         index = new_index(capacity)
         nodes[0, :, 0] = start
         counts[0] = 1
@@ -312,8 +312,20 @@ class CompiledRRTConnect(PathPlanner):
         counts[1] = goals.shape[0]
         lo = np.ascontiguousarray(bounds[:, 0])
         hi = np.ascontiguousarray(bounds[:, 1])
-        turn = np.zeros(1, dtype=np.int64)
+        turn = np.ones(1, dtype=np.int64)  # the tree extended last: the start tree goes first
         work = np.empty((4, 6))
+        domain = p.dynamic_domain_rad
+        settings = np.array(
+            [
+                step,
+                resolution,
+                p.floor_m,
+                np.inf if domain is None else domain,
+                p.domain_min_radius_rad,
+                p.domain_alpha,
+                p.tree_ratio,
+            ]
+        )
         calls = 0
         while True:
             status, a, b = rrt_connect(
@@ -321,13 +333,12 @@ class CompiledRRTConnect(PathPlanner):
                 model.scratch,
                 lo,
                 hi,
-                step,
-                resolution,
-                p.floor_m,
+                settings,
                 p.iterations_per_call,
                 room,
                 nodes,
                 parents,
+                radii,
                 counts,
                 index,
                 rng,
@@ -345,7 +356,7 @@ class CompiledRRTConnect(PathPlanner):
                 if capacity >= p.max_nodes:
                     return Status.NO_SOLUTION, f"a tree reached max_nodes ({p.max_nodes}) without connecting"
                 capacity = min(p.max_nodes, 2 * capacity)
-                nodes, parents = grown(nodes, parents, capacity)
+                nodes, parents, radii = grown(nodes, parents, radii, capacity)
                 index = new_index(capacity)  # built again at the next node added
                 continue
             if time.perf_counter() >= deadline:

@@ -6,9 +6,16 @@ microseconds an iteration in Python and nothing here; with the motion checks com
 proven free continuously by conservative advancement), one query is one call with no Python in its loop.
 
 The search (`rrt_connect`): two trees, the start's and the goals' (every goal configuration a root); each
-iteration samples a configuration uniformly inside the bounds, extends the tree whose turn it is by at most
-`step` (joint-space L2) toward it and, when that extension is free, connects the other tree to the new node
-greedily (steps of at most `step` while they are free). It alternates the trees, like OMPL's RRTConnect.
+iteration samples a configuration uniformly inside the bounds, extends one tree by at most `step` (joint-space
+L2) toward it and, when that extension is free, connects the other tree to the new node greedily (steps of at
+most `step` while they are free). Two refinements VAMP's RRT-Connect uses (its defaults), both optional:
+- tree balance: the trees take turns, except that a tree with at most 1/(1 + tree_ratio) of the other's
+  nodes is extended again (tree_ratio 0: strict turns, as OMPL's RRTConnect);
+- dynamic domain (Yershova, Sim and LaValle, 2005): a node whose extension failed gets a radius, and a sample
+  farther from its nearest node than that radius is dropped before any check. Nodes on an obstacle's boundary
+  stop drawing the samples of the whole Voronoi region behind them, which is what makes narrow passages
+  (MotionBenchMaker's cage) slow. The radius starts at `radius`, shrinks by (1 - alpha) on each failure down
+  to `min_radius`, and grows by (1 + alpha) on each success.
 Nearest neighbour: a k-d tree over each tree's nodes, rebuilt as it grows (`twin_compiled.nearest`). The random
 numbers are a xorshift64* stream seeded by the request's seed, so the same query and seed give the same path.
 
@@ -37,6 +44,8 @@ from twin_compiled.nearest import nearest, refresh
 __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
 
 _START, _GOAL = 0, 1
+# the search's settings vector (`rrt_connect`)
+_STEP, _RESOLUTION, _FLOOR, _RADIUS, _MIN_RADIUS, _ALPHA, _TREE_RATIO = range(7)
 # the search's inner functions allocate nothing and run without numba's runtime (`_nrt=False`, as the sphere
 # kernels and `twin_compiled.nearest`): with it, each array taken out of a tuple or sliced was
 # reference-counted by an atomic call, every iteration
@@ -54,23 +63,28 @@ def _next(rng: np.ndarray) -> float:
     return float((x * np.uint64(2685821657736338717)) >> np.uint64(11)) / 9007199254740992.0
 
 
-def new_trees(capacity: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def new_trees(capacity: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Empty trees for `rrt_connect`: nodes (2, 6, capacity) (per tree a column per joint), parents
-    (2, capacity), counts (2,), and the random state seeded from `seed` (never zero)."""
+    (2, capacity), the nodes' dynamic-domain radii (2, capacity; inf: none yet), counts (2,), and the random
+    state seeded from `seed` (never zero)."""
     nodes = np.empty((2, 6, capacity))
     parents = np.full((2, capacity), -1, dtype=np.int64)
+    radii = np.full((2, capacity), np.inf)
     counts = np.zeros(2, dtype=np.int64)
     mixed = (int(seed) * 0x9E3779B97F4A7C15 + 0x2545F4914F6CDD1D) % (1 << 64)
     rng = np.array([mixed or 1], dtype=np.uint64)
-    return nodes, parents, counts, rng
+    return nodes, parents, radii, counts, rng
 
 
-def grown(nodes: np.ndarray, parents: np.ndarray, capacity: int) -> tuple[np.ndarray, np.ndarray]:
+def grown(
+    nodes: np.ndarray, parents: np.ndarray, radii: np.ndarray, capacity: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The trees' arrays with room for `capacity` nodes each, their nodes kept."""
-    n, p = np.empty((2, 6, capacity)), np.full((2, capacity), -1, dtype=np.int64)
+    n, p, r = np.empty((2, 6, capacity)), np.full((2, capacity), -1, dtype=np.int64), np.full((2, capacity), np.inf)
     n[:, :, : nodes.shape[2]] = nodes
     p[:, : parents.shape[1]] = parents
-    return n, p
+    r[:, : radii.shape[1]] = radii
+    return n, p, r
 
 
 @njit(**_NO_RUNTIME)
@@ -135,13 +149,12 @@ def rrt_connect(
     S: tuple,  # type: ignore[type-arg]
     lo: np.ndarray,
     hi: np.ndarray,
-    step: float,
-    resolution: float,
-    floor: float,
+    settings: np.ndarray,
     max_iterations: int,
     room: int,
     nodes: np.ndarray,
     parents: np.ndarray,
+    radii: np.ndarray,
     counts: np.ndarray,
     index: tuple,  # type: ignore[type-arg]
     rng: np.ndarray,
@@ -152,21 +165,40 @@ def rrt_connect(
     iterations or until they connect. Returns (status, start-tree node, goal-tree node): status 1 connected
     (at those nodes, equal configurations), 0 not yet, -1 a tree has fewer than `room` free slots (what one
     iteration can add at most: the caller grows the arrays and calls again, and the search goes on exactly
-    as it would have). `turn[0]` is the tree extended next, carried between calls; `work` (4, 6): scratch."""
+    as it would have). settings: step, resolution (motions as `motion_free`), floor, the dynamic domain's
+    radius (inf: off), min_radius and alpha, tree_ratio (module docstring). `turn[0]` is the tree extended
+    last, carried between calls (1 before the first: the start tree goes first); `work` (4, 6): scratch."""
     capacity = nodes.shape[2]
+    step, resolution, floor = settings[_STEP], settings[_RESOLUTION], settings[_FLOOR]
+    radius, min_radius, alpha, ratio = settings[_RADIUS], settings[_MIN_RADIUS], settings[_ALPHA], settings[_TREE_RATIO]
     q_rand, q_new, q_next, a = work[0], work[1], work[2], work[3]
     for _ in range(max_iterations):
         if counts[0] + room > capacity or counts[1] + room > capacity:
             return -1, -1, -1
-        t = turn[0]
+        last = turn[0]
+        t = 1 - last
+        if ratio > 0.0 and counts[last] * (1.0 + ratio) <= counts[t]:
+            t = last  # the last tree is the smaller by far: extend it again
         o = 1 - t
-        turn[0] = o
+        turn[0] = t
         for j in range(6):
             q_rand[j] = lo[j] + _next(rng) * (hi[j] - lo[j])
         near = nearest(nodes[t], counts[t], index, t, q_rand)
+        r = radii[t, near]
+        if r < np.inf:
+            d = 0.0
+            for j in range(6):
+                e = q_rand[j] - nodes[t, j, near]
+                d += e * e
+            if d > r * r:
+                continue  # outside the node's dynamic domain: no check spent on it
         _steer(nodes, t, near, q_rand, step, q_new)
         if not _free(K, S, nodes, t, near, q_new, resolution, floor, a):
+            if radius < np.inf:
+                radii[t, near] = radius if r == np.inf else max(r * (1.0 - alpha), min_radius)
             continue
+        if r < np.inf:
+            radii[t, near] = r * (1.0 + alpha)
         new = _add(nodes, parents, counts, t, q_new, near)
         refresh(nodes[t], counts[t], index, t)
         # connect the other tree to the new node, step by step while free
