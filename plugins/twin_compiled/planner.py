@@ -140,7 +140,10 @@ class CompiledRRTConnect(PathPlanner):
 
         t = time.perf_counter()
         model, clearance = self._model(scene, start, goals)
-        way_out = self._leave_the_cover(model, scene, start, goals, bounds, request.seed)
+        # the search keeps search_margin_m from touching, and its ends too: an end closer than that (where the
+        # continuous proof, which refuses within floor_m, could not leave it) is left along an FCL-checked way
+        search_model = model.with_touch(p.search_margin_m)
+        way_out = self._leave_the_cover(search_model, scene, start, goals, bounds, request.seed)
         add_time(timings, "model", t)
         if isinstance(way_out, str):
             return MotionResult(Status.NO_SOLUTION, way_out, info=_with_times(info, timings))
@@ -148,7 +151,6 @@ class CompiledRRTConnect(PathPlanner):
         info.update(goal_count=int(goals.shape[0]), clearance_m=clearance, escapes=int(head.shape[0] > 1))
 
         t = time.perf_counter()
-        search_model = model.with_touch(p.search_margin_m)
         found = self._search(search_model, first, lasts, bounds, request.seed, deadline, p.resolution_rad)
         add_time(timings, "search", t)
         if isinstance(found[0], Status):

@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 from numba.core.caching import NullCache
 
-from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion
+from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion, sphere_evaluate
 from twin_compiled.nearest import nearest, refresh
 
 __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
@@ -314,7 +314,9 @@ def shortcut(
         old = math.sqrt(d_a) + _length(cur, s1 + 1, s2) + math.sqrt(d_b)
         if math.sqrt(d_ab) >= old - 1e-9:
             continue
-        if not motion_free(K, S, a, b, resolution, floor):
+        # a lies between the configurations checked on its segment: checked itself (the motion check takes its
+        # start as free), or a later proof of the path could start from a configuration it cannot leave
+        if sphere_evaluate(K, S, a)[0] or not motion_free(K, S, a, b, resolution, floor):
             continue
         # cur[: s1 + 1], a, b, cur[s2 + 1 :] (a or b dropped where it is a waypoint already)
         keep_a = f1 > 1e-12
