@@ -56,6 +56,9 @@ __all__ = [
 
 log = logging.getLogger("twin")
 _OK = (ruckig.Result.Working, ruckig.Result.Finished)
+# a pass-through segment is first sampled this far apart: where it strays from its chord there, the velocities
+# are halved without sampling it finely (most segments a halving redoes are refused so)
+_COARSE_DT_S = 0.01
 
 
 class RetimingFailed(PlanningError):
@@ -178,6 +181,14 @@ def ruckig_samples(traj: ruckig.Trajectory, ts: np.ndarray) -> tuple[np.ndarray,
     return q, qd, qdd
 
 
+def _strays(traj: ruckig.Trajectory, q0: np.ndarray, q1: np.ndarray, limit: float, dt: float) -> bool:
+    """Whether the segment's samples `dt` apart already stray more than `limit` from its chord: a lower bound
+    on the deviation the fine samples have, so a segment it refuses is refused by them too (the answer for a
+    segment it passes comes from the fine samples)."""
+    q, _, _ = ruckig_samples(traj, _sample_times(traj.duration, dt))
+    return _chord_deviation(q, q0, q1) > limit
+
+
 def _chord_deviation(q: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> float:
     """Largest joint-space distance (rad) of the samples `q` (n, 6) from the segment q0 -> q1."""
     u = q1 - q0
@@ -242,6 +253,9 @@ class RuckigRetimer:
                     if not moving:
                         raise
                     bad.add(i)
+                    continue
+                if moving and _strays(traj, P[i], P[i + 1], p.max_deviation_rad, _COARSE_DT_S):
+                    bad.add(i)  # already beyond the chord at a coarse sampling: no need to sample it finely
                     continue
                 ts = _sample_times(traj.duration, p.sample_dt_s)
                 q, qd, qdd = ruckig_samples(traj, ts)
