@@ -125,3 +125,50 @@ def test_compare_takes_it_like_any_planner(tmp_path) -> None:
     assert len(result.rows) == 4 and all(r["success"] for r in result.rows), [r["reason"] for r in result.rows]
     assert {r["planner"] for r in result.rows} == {"compiled.rrtconnect", "c+ruckig"}
     assert all(r["step_times_s"]["search"] > 0 and "final_check" in r["step_times_s"] for r in result.rows)
+
+
+def test_ompls_search_shape_also_solves_and_passes_the_judge(cells) -> None:
+    """With the dynamic domain and the tree balance off and OMPL's range (the search OMPL's RRTConnect does),
+    blocked queries are still solved and judged free: the refinements are options, not what makes it work."""
+    settings, scene = cells["robocup"]
+    block = PlannerBlock(
+        name="compiled.rrtconnect", params={"dynamic_domain_rad": None, "tree_ratio": 0.0, "range_rad": None}
+    )
+    planner = make_planner(block, make_context(settings))
+    limits = limits_from_settings(settings)
+    for i, (a, b) in enumerate(queries(settings, scene, 3, seed=13)):
+        r = planner.plan(MotionRequest(start=a, goal=JointGoal(b), limits=limits, time_limit_s=10.0, seed=i), scene)
+        assert r.status is Status.SUCCESS, (i, r.status, r.reason)
+        assert scene.check_path(r.trajectory.q, resolution_rad=0.002).free
+
+
+def test_an_end_closer_than_the_search_margin_is_left_along_an_fcl_checked_way(cells) -> None:
+    """A goal FCL frees and the model (touching at 0.01 mm) frees, but within the search's margin of touching:
+    the search could not prove a motion out of it, so the planner leaves it along a way FCL checks and plans
+    from there; the trajectory still ends on the goal and passes the judge."""
+    settings, scene = cells["robocup"]
+    planner = make_planner("compiled.rrtconnect", make_context(settings))
+    margin = planner.params.search_margin_m
+    model = scene.sphere_model()
+    near_model = model.with_touch(margin)
+    (a, b), *_ = queries(settings, scene, 1, seed=21)
+    rng = np.random.default_rng(4)
+    goal = None
+    for _ in range(200):  # bisect from the free goal toward a colliding configuration to the margin's band
+        hit = rng.uniform(-np.pi, np.pi, 6)
+        if not scene.in_collision(hit):
+            continue
+        lo, hi = b, hit
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if not near_model.in_collision(mid) else (lo, mid)
+        if not model.in_collision(hi) and not scene.in_collision(hi):
+            goal = hi
+            break
+    assert goal is not None, "no configuration within the search margin that the model and FCL free"
+    limits = limits_from_settings(settings)
+    r = planner.plan(MotionRequest(start=a, goal=JointGoal(goal), limits=limits, time_limit_s=10.0, seed=1), scene)
+    assert r.status is Status.SUCCESS, r.reason
+    assert r.info["escapes"] == 1
+    assert np.allclose(r.trajectory.q[-1], goal, atol=1e-6)
+    assert scene.check_path(r.trajectory.q, resolution_rad=0.002).free

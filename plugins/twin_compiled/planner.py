@@ -148,7 +148,11 @@ class CompiledRRTConnect(PathPlanner):
         if isinstance(way_out, str):
             return MotionResult(Status.NO_SOLUTION, way_out, info=_with_times(info, timings))
         head, first, lasts, tails = way_out
-        info.update(goal_count=int(goals.shape[0]), clearance_m=clearance, escapes=int(head.shape[0] > 1))
+        info.update(
+            goal_count=int(goals.shape[0]),
+            clearance_m=clearance,
+            escapes=int(head.shape[0] > 1) + sum(t.shape[0] > 1 for t in tails),
+        )
 
         t = time.perf_counter()
         found = self._search(search_model, first, lasts, bounds, request.seed, deadline, p.resolution_rad)
