@@ -7,11 +7,12 @@ One `plan(request, scene)`:
 2. the planning model: the robot's sphere cover against the scene's primitives inflated by `clearance_m`
    (`PlanningScene.sphere_model`), touching = in collision, every motion proven free continuously; without
    the clearance when the start or every goal lies closer than it;
-3. a start (or goal) FCL calls free but the model calls touching (closer to something than the cover's
-   overshoot) is left along a straight way checked by FCL (`twin.plugin.leave_cover`), toward the other end
-   first, then toward seeded random configurations; the search starts (ends) beyond it;
-4. the search and the shortcutting, compiled (`twin_compiled.search`), in calls of `iterations_per_call`
-   iterations until they connect or the time limit, motions checked every `resolution_rad`;
+3. a start (or goal) FCL calls free but the search would not (closer to something than the cover's overshoot
+   plus `search_margin_m`) is left along a straight way checked by FCL (`twin.plugin.leave_cover`), toward the
+   other end first, then toward seeded random configurations; the search starts (ends) beyond it;
+4. the search (with VAMP's tree balance and dynamic domain, `twin_compiled.search`) and the shortcutting,
+   compiled, in calls of `iterations_per_call` iterations until they connect or the time limit, motions
+   checked every `resolution_rad`;
 5. every segment of the path is then proven free continuously (conservative advancement); one that cannot be
    is planned again with continuous checks inside its box widened by 0.3 rad and spliced in (`max_repairs`),
    so what reaches the judge is free in FCL everywhere, not only where it was sampled;
@@ -275,8 +276,8 @@ class CompiledRRTConnect(PathPlanner):
         first = way_out(start, goals[0])
         if first is None:
             return (
-                f"the start lies within the sphere cover's overshoot ({model.overshoot_bound_m * 1e3:.1f} mm) of "
-                f"something and no straight way of {self.params.escape_rad:g} rad leaves it"
+                f"the start lies within the sphere cover's overshoot ({model.overshoot_bound_m * 1e3:.1f} mm) and the "
+                f"search margin of something and no straight way of {self.params.escape_rad:g} rad leaves it"
             )
         lasts, tails = [], []
         for g in goals:
@@ -286,8 +287,8 @@ class CompiledRRTConnect(PathPlanner):
                 tails.append(np.vstack([last, g]) if last is not g else g[None])
         if not lasts:
             return (
-                f"every goal lies within the sphere cover's overshoot ({model.overshoot_bound_m * 1e3:.1f} mm) of "
-                f"something and no straight way of {self.params.escape_rad:g} rad leaves it"
+                f"every goal lies within the sphere cover's overshoot ({model.overshoot_bound_m * 1e3:.1f} mm) and the "
+                f"search margin of something and no straight way of {self.params.escape_rad:g} rad leaves it"
             )
         head = np.vstack([start, first]) if first is not start else start[None]
         return head, first, np.array(lasts), tails
