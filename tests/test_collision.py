@@ -464,6 +464,31 @@ def test_clearance_ignores_the_shoulder_and_follows_the_arm():
     np.testing.assert_allclose(scene.clearance_batch(np.stack([home, lower])), [c_home.distance, c_low.distance])
 
 
+@pytest.mark.parametrize("held", [False, True])
+def test_min_clearance_is_the_exact_minimum_of_the_clearances(held):
+    """`min_clearance` measures with FCL only where the sphere bounds allow a smaller clearance than found so
+    far; its answer must be `clearance_batch`'s minimum and argmin, on paths that sweep near the table and the
+    bins (clearances from centimetres to decimetres), with a held cube too, and where some configurations
+    collide (their bound is none: they are measured)."""
+    from twin.config import load_config
+
+    scene = PlanningScene.from_settings(load_config(PROJECT_ROOT / "configs/robocup.yaml"))
+    if held:
+        T = np.eye(4)
+        T[2, 3] = 0.03
+        scene.attach_box("cube", [0.05, 0.05, 0.05], T)
+    rng = np.random.default_rng(5)
+    home = np.array([0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+    for _ in range(12):
+        ends = home + rng.uniform(-1.2, 1.2, (3, 6))
+        qs = np.vstack([np.linspace(ends[k], ends[k + 1], 150) for k in range(2)])
+        d = scene.clearance_batch(qs)
+        least, where = scene.min_clearance(qs)
+        assert least == d.min() and d[where] == d.min()
+    with pytest.raises(InvalidRequestError):
+        scene.min_clearance(np.empty((0, 6)))
+
+
 def test_clearance_is_not_capped_by_a_shape_the_shoulder_lift_turns_in_place():
     """The upper arm's cylinder around the shoulder-lift axis is 0.1025 m from the robocup table in every
     configuration (the lift turns it about its own axis): it once capped every clearance at that value. Left

@@ -257,7 +257,9 @@ class RobotBody:
         m = self.model
         turning = {ln for ln in m.link_names if m.rigid_parent(ln) in (m.root, m.joints[m.arm_joints[0]].child)}
         in_place = {i for i, sh in enumerate(self.shapes) if _round_about_its_joint(m, sh, turning)}
-        self.clear_objects = [objects[i] for i in self._moving if nodes[i] not in turning and i not in in_place]
+        clear = [i for i in self._moving if nodes[i] not in turning and i not in in_place]
+        self.clear_objects = [objects[i] for i in clear]
+        self.clear_index = np.array(clear, dtype=np.int64)  # the same objects, as the sphere kernels number them
         self.clear_manager = fcl.DynamicAABBTreeCollisionManager()
         self.clear_manager.registerObjects(self.clear_objects)
         self.clear_manager.setup()
@@ -451,6 +453,15 @@ class RobotBody:
         if getattr(self, "_scratch_size", None) != size:
             self._kernel_scratch, self._scratch_size = new_scratch(*size), size
         return self._kernel_scratch
+
+    def clearance_lower_bounds(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
+        """(n,) lower bounds on the clearance (`PlanningScene.clearance`) at qs[i] (n, 6) from the sphere model
+        (-inf where its covers touch; capped at 0.25 m)."""
+        from twin.collision.sphere_kernel import clearance_bounds  # lazy: numba (compiled on first use)
+
+        out = np.empty(qs.shape[0])
+        clearance_bounds(self.kernel_model(env), self.kernel_scratch(), qs, self.clear_index, out)
+        return out
 
     def sphere_flags(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
         """(n,) bool: False where the sphere model proves qs[i] (n, 6) clear of `env` and of itself, True

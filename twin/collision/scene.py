@@ -59,6 +59,9 @@ __all__ = ["DistanceResult", "FixtureSpec", "PathCheck", "PlanningScene", "Unkno
 # how a scene holds the fixtures marked `known: false`: as boxes at their true poses (what a perfect detector
 # reports), or not at all (a task's cell, which perceives them)
 UnknownFixtures = Literal["box", "ignore"]
+# `min_clearance` skips a configuration only when its sphere bound exceeds the smallest clearance measured by
+# this much: FCL's distances are exact to far less, so a skipped one is never the minimum
+_BOUND_SLACK_M = 1e-4
 
 
 @dataclass(frozen=True)
@@ -330,6 +333,25 @@ class PlanningScene:
         for i in self._body.iter_prepared(qs):
             out[i] = self._clearance_now().distance
         return out
+
+    def min_clearance(self, qs: np.ndarray) -> tuple[float, int]:
+        """(the smallest clearance over the (n, 6) configurations qs, the index of one where it is), exactly as
+        `clearance_batch(qs)`'s minimum and argmin, ties aside. FCL measures only where it can matter: the
+        sphere model bounds every configuration's clearance from below, and the configurations are measured
+        in the order of their bounds until the next bound exceeds the smallest clearance measured."""
+        qs = _as_qs(qs)
+        if qs.shape[0] == 0:
+            raise InvalidRequestError("min_clearance needs at least one configuration")
+        bounds = self._body.clearance_lower_bounds(qs, self._obstacles.primitives())
+        best, where = math.inf, 0
+        for i in np.argsort(bounds, kind="stable").tolist():
+            if bounds[i] - _BOUND_SLACK_M >= best:
+                break
+            self._body.prepare(qs[i])
+            d = self._clearance_now().distance
+            if d < best:
+                best, where = d, i
+        return best, where
 
     def in_collision_batch(self, qs: np.ndarray) -> np.ndarray:
         """(n,) bool for (n, 6) configurations (link poses computed vectorised)."""

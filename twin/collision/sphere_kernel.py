@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "clearance_bounds",
     "first_flagged",
     "first_flagged_motion",
     "first_touch_on_motion",
@@ -243,6 +244,24 @@ def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> 
     anchor_env = -1.0
     for i in range(qs.shape[0]):
         out[i], anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
+
+
+@njit(**_KERNEL)
+def clearance_bounds(K: tuple, S: tuple, qs: np.ndarray, objects: np.ndarray, out: np.ndarray) -> None:  # type: ignore[type-arg]
+    """out[i] = a lower bound on the distance from the objects `objects` (indices) to the environment at
+    configuration qs[i], as tight as the model allows within `_MARGIN_CAP_M` (capped there); -inf where the
+    covers touch (no bound). Every level of `sphere_bounds` is a lower bound on the exact distance between
+    the primitives, so what FCL measures is never below it."""
+    for i in range(qs.shape[0]):
+        flagged, _ = sphere_bounds(K, S, qs[i], _MARGIN_CAP_M)
+        if flagged:
+            out[i] = -np.inf
+            continue
+        obj_gap = S[_OBJ_GAP]
+        b = _MARGIN_CAP_M
+        for k in range(objects.shape[0]):
+            b = min(b, obj_gap[objects[k]])
+        out[i] = b
 
 
 @njit(**_KERNEL)

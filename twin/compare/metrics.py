@@ -226,8 +226,8 @@ def trajectory_metrics(
         max_jerk = 0.0
     col = settings.collision
     qs = densify(traj, kin, max_step_rad=col.check_resolution_rad, max_step_m=col.check_resolution_m)
-    d = scene.clearance_batch(qs)
-    closest = scene.clearance(qs[int(np.argmin(d))])
+    least, where = scene.min_clearance(qs)
+    closest = scene.clearance(qs[where])
     pair = f"{closest.robot_part}->{closest.other}" if closest.robot_part else ""
     return {
         "duration_s": traj.duration,
@@ -235,7 +235,7 @@ def trajectory_metrics(
         "tcp_path_length_m": tcp_len,
         "smoothness": path_smoothness(fine.q),
         "max_jerk": max_jerk,
-        "min_clearance_m": finite_or_none(float(d.min())),
+        "min_clearance_m": finite_or_none(least),
     }, pair
 
 

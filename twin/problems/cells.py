@@ -52,6 +52,26 @@ _CellKey = tuple[str, tuple[str, ...], str, str | None, int | None]
 _CELLS: dict[_CellKey, QueryCell] = {}
 _OWN_WORLD_CELLS = 2  # cells of problems with their own world kept at once (each may hold a PyBullet world)
 _SETS: dict[str, ProblemSet] = {}  # problem sets read in this process, by path
+# what the cells of one problem set share (MotionBenchMaker's 700 problems each have a world of their own, and
+# reading the config again and building the robot again cost more than planning a problem): the config as
+# read, and the robot, per robot model and URDF
+_CONFIGS: dict[tuple[str, tuple[str, ...]], Settings] = {}
+_ROBOTS: dict[tuple[str, str], Robot] = {}
+
+
+def _config(config: str, overrides: tuple[str, ...]) -> Settings:
+    s = _CONFIGS.get((config, overrides))
+    if s is None:
+        s = _CONFIGS[(config, overrides)] = load_config(config, overrides)
+    return s
+
+
+def _robot(settings: Settings) -> Robot:
+    key = (settings.robot.model, str(settings.resolve(settings.robot.urdf)))
+    robot = _ROBOTS.get(key)
+    if robot is None:
+        robot = _ROBOTS[key] = Robot.from_settings(settings)
+    return robot
 
 
 def _problem_set(path: str) -> ProblemSet:
@@ -92,23 +112,23 @@ def cell_for(
     cell = _CELLS.get(key)
     if cell is None and problems is not None:
         ps = _problem_set(problems)
-        s = load_config(config, overrides)
+        s = _config(config, overrides)
         check_robot(ps, s, source=problems)
         world = ps.world_of(own) if own is not None else None
         s = settings_for(ps, s, world=world)
-        robot = Robot.from_settings(s)
+        robot = _robot(s)
         cell = _keep(key, QueryCell(s, robot, planning_scene(ps, s, world=world, robot=robot)))
     if cell is None:
         from twin.collision import PlanningScene  # lazy: fcl
 
-        s = load_config(config, overrides)
+        s = _config(config, overrides)
         # loose objects are unknown to the planning scene; leaving them out of the physics as well keeps
         # "contacts seen in physics" a measure of the trajectory, not of objects the planner never saw
         no_objects = s.world.objects.model_copy(update={"items": []})
         s = s.model_copy(update={"world": s.world.model_copy(update={"objects": no_objects})})
         # no perception step in a motion query: with "box", fixtures marked `known: false` are in the scene
         # as a perfect detector reports them (the default scene of `PlanningScene.from_settings`)
-        robot = Robot.from_settings(s)
+        robot = _robot(s)
         scene = PlanningScene.from_settings(s, robot=robot, unknown_fixtures=unknown_fixtures)
         cell = _keep(key, QueryCell(s, robot, scene))
     return cell
