@@ -93,6 +93,7 @@ _LAZY: dict[str, str] = {
     "timed_and_checked": "twin.planning.paths",
     "trajectory_check_points": "twin.planning.paths",
     "warm_up_checks": "twin.planning.paths",
+    "warm_up_retimer": "twin.planning.paths",
     "goal_miss": "twin.planning",
     "jerk_limited": "twin.planning",
     "limits_from_settings": "twin.planning",
@@ -292,6 +293,7 @@ __all__ = [
     "trajectory_check_points",
     "urdf_rgba",
     "warm_up_checks",
+    "warm_up_retimer",
     "with_object",
     "wrap_to_pi",
 ]
@@ -342,6 +344,7 @@ if TYPE_CHECKING:
         timed_and_checked,
         trajectory_check_points,
         warm_up_checks,
+        warm_up_retimer,
     )
     from twin.planning.proxy_spheres import (
         CHECK_TOL_M,

@@ -25,7 +25,6 @@ Then `CheckedPlanner` judges the trajectory on the exact scene like every planne
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from dataclasses import replace
@@ -34,7 +33,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from twin.plugin import (
-    Limits,
     MotionRequest,
     MotionResult,
     PathPlanner,
@@ -51,6 +49,7 @@ from twin.plugin import (
     query_ends,
     timed_and_checked,
     warm_up_checks,
+    warm_up_retimer,
 )
 from twin_compiled.nearest import new_index
 from twin_compiled.params import CompiledParams
@@ -61,7 +60,6 @@ if TYPE_CHECKING:
 
 __all__ = ["CompiledRRTConnect"]
 
-log = logging.getLogger("twin")
 
 _ESCAPE_TRIES = 16  # random directions tried when the way toward the other end does not leave the cover
 _ESCAPE_STEP_RAD = 0.002  # FCL checks the way out of the cover this often (max-abs joint step)
@@ -115,11 +113,7 @@ class CompiledRRTConnect(PathPlanner):
             first_uncertified(model.kernel, model.scratch, path, 1e-4)
             _COMPILED.append(True)
         warm_up_checks(self.context.robot)  # the timed trajectory's proof (`timed_and_checked`)
-        retimer = self._timer()
-        try:
-            retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
-        except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
-            log.debug("%s: retimer warm-up failed: %r", self.name, e)
+        warm_up_retimer(self._timer())  # an unknown retimer name or bad retimer params fail here
 
     # ---- planning --------------------------------------------------------------------------------
     def plan(self, request: MotionRequest, scene: PlanningScene) -> MotionResult:

@@ -67,7 +67,6 @@ import ompl.geometric as og
 from twin.plugin import (
     ConfigError,
     DependencyMissing,
-    Limits,
     MotionRequest,
     MotionResult,
     PathPlanner,
@@ -85,6 +84,7 @@ from twin.plugin import (
     query_ends,
     timed_and_checked,
     warm_up_checks,
+    warm_up_retimer,
 )
 from twin_ompl.budget import Budget, search_roadmap, stop_at_first_path
 from twin_ompl.params import OMPL_PARAMS, PLANNER_SPECS, OmplParams, OptimizingOmplParams, PlannerSpec, params_model
@@ -211,11 +211,7 @@ class OmplPlanner(PathPlanner):
         """Time one tiny path now, so a retimer's first-use imports (TOPP-RA ~1 s) are paid at construction,
         not inside the first request's time limit; load the final check's compiled proof (`warm_up_checks`)."""
         warm_up_checks(self.context.robot)
-        retimer = self._timer()  # an unknown retimer name or bad retimer params fail here, at construction
-        try:
-            retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
-        except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
-            log.debug("%s: retimer warm-up failed: %r", self.name, e)
+        warm_up_retimer(self._timer())  # an unknown retimer name or bad retimer params fail here
 
     @property
     def jerk_limited(self) -> bool:

@@ -23,6 +23,7 @@ but must agree on everything else, or a comparison compares more than the search
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 import weakref
@@ -34,7 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from twin.errors import TwinError
 from twin.planning.checked import colliding_pair, densify_path
-from twin.types import JointGoal, MotionRequest, PoseGoal, Status
+from twin.types import JointGoal, Limits, MotionRequest, PoseGoal, Status
 
 if TYPE_CHECKING:
     from twin.collision import PlanningScene
@@ -56,7 +57,10 @@ __all__ = [
     "timed_and_checked",
     "trajectory_check_points",
     "warm_up_checks",
+    "warm_up_retimer",
 ]
+
+log = logging.getLogger("twin")
 
 
 class PathPlannerParams(BaseModel):
@@ -286,6 +290,22 @@ def warm_up_checks(robot: Robot) -> None:
     q = np.zeros(6)
     PlanningScene(robot).sphere_model().first_unproven_segment(np.stack([q, q + 0.1]))
     _WARM.append(True)
+
+
+_WARM_RETIMERS: set[type] = set()  # retimer classes that timed a path in this process
+
+
+def warm_up_retimer(retimer: Retimer) -> None:
+    """Time one tiny path with `retimer`, once per retimer class and process: its first-use imports (TOPP-RA
+    ~1 s) are then paid when a planner is built, not inside a request's time limit, and a sweep that builds a
+    planner per run pays them once."""
+    if type(retimer) in _WARM_RETIMERS:
+        return
+    try:
+        retimer.retime(np.array([np.zeros(6), np.full(6, 0.1)]), Limits.uniform(1.0, 1.0, 10.0))
+    except Exception as e:  # noqa: BLE001 - the real call reports problems with the request at hand
+        log.debug("retimer warm-up failed: %r", e)
+    _WARM_RETIMERS.add(type(retimer))
 
 
 def _proven_free(scene: PlanningScene, traj: Trajectory) -> bool:
