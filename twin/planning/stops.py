@@ -54,6 +54,7 @@ class WaysToStop:
     _plan: np.ndarray | None  # (N+1, 6) knots of the last feasible plan
     _plan_idx: int  # index of the knot the robot should be at now
     _ws_offset: int  # steps executed since the last accepted solve
+    _commanded: np.ndarray | None  # the knot the arm was last commanded to (None before the first segment)
     _safe_stop: np.ndarray | None  # a checked-free stop (knots) from the last segment's end
     _track: np.ndarray  # the point that goes to the goal, TCP frame
     _target: np.ndarray  # the goal position, base frame
@@ -73,6 +74,7 @@ class WaysToStop:
         self._dq_prev2, self._dq_prev = hist[-2].copy(), hist[-1].copy()
         self._plan_idx += m
         self._ws_offset += m
+        self._commanded = knots[-1].copy()
 
     def _moving(self) -> bool:
         """Whether the last commanded step moved (a stop ends with a zero step: the arm is declared at rest)."""
