@@ -500,6 +500,12 @@ class NMPCProblem:
         """Indices into g of the self rows, (N, self_slots)."""
         return self._self_rows
 
+    def with_knots(self, x: np.ndarray, q_knots: np.ndarray) -> np.ndarray:
+        """The decision vector `x` with the knots q_1..q_N (N, 6) `q_knots` (its slacks as they are)."""
+        out = np.array(x, dtype=float)
+        out[:-1].reshape(self.shape.horizon, self.block_x)[:, :6] = q_knots
+        return out
+
     def knots(self, x: np.ndarray) -> np.ndarray:
         """(N, 6) q_1..q_N of a decision vector."""
         return np.asarray(x[:-1]).reshape(self.shape.horizon, self.block_x)[:, :6].copy()

@@ -33,16 +33,34 @@ class NMPCParams(RecedingParams):
         description="self rows hold this much beyond twice the box margin (they hold at the knots; the loop's"
         " check judges between them too)",
     )
+    box_slots: int | None = Field(
+        None,
+        ge=0,
+        le=20,
+        description="box slots of the NLP: each solve puts the boxes near its plan in them (a slot left over holds a"
+        " box far away, whose rows are never active), so one NLP shape, built expanded when the planner is"
+        " constructed, serves every solve; a solve with more boxes near than slots adds one (that shape is built"
+        " mapped, inside the step). None: one per fixture perception reports (`known: false`; warehouse: the"
+        " wall), and one more where the config has objects (a placed object becomes a box beside the way to the"
+        " next drop)",
+    )
     prebuild_boxes: list[int] | None = Field(
         None,
-        description="obstacle-box counts whose NLPs are built when the planner is constructed; None: as many boxes as"
-        " the config has fixtures that perception reports (`known: false`; warehouse: the wall). Another count is"
-        " built on first use, inside that (slower) step",
+        description="box-slot counts whose NLPs are built when the planner is constructed; None: `box_slots`. Another"
+        " count is built on first use, inside that (slower) step",
     )
     ipopt_tol: float = Field(
         1e-3, gt=0, description="IPOPT tol of warm-started solves (the shifted plan is usually 1-5 iterations away)"
     )
     ipopt_max_iter: int = Field(100, ge=1, description="IPOPT iteration limit of warm-started solves")
+    warm_mu_init: float = Field(
+        1e-5,
+        gt=0,
+        description="IPOPT mu_init of warm-started solves: the barrier parameter they start from. Inside warehouse"
+        " runs (rows of the wall, the table and the step bounds near active) 1e-3 first pulled the shifted plan,"
+        " already near the optimum, out to that barrier's central path and back: 11-18 iterations a solve, ~2"
+        " from 1e-5 (1e-7: outliers of 40-108)",
+    )
     solve_time_limit_s: float | None = Field(
         None,
         gt=0,

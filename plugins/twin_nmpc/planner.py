@@ -13,11 +13,12 @@ declares the latter), and two spheres guard the wrist links.
 Why these choices:
 * Building an NLP costs ~1.5 s expanded (fastest solves) or ~0.1 s mapped, a solve ~15 ms: NLPs are built
   once per process and problem shape (number of boxes, number of held-object spheres) and shared by every
-  planner instance with the same parameters (`twin_nmpc.nlp.cached_problem`); the shapes a run expects
-  (`prebuild_boxes`) are built expanded when the planner is constructed, not inside a timed step, and a
-  shape first met inside a step is built mapped (a RoboCup run meets one per count of objects left on
-  the table: 57 s of building became 2 s). Each solve only changes parameters and is
-  warm-started from the previous solution shifted by the executed steps, primal and dual.
+  planner instance with the same parameters (`twin_nmpc.nlp.cached_problem`); the shape a run uses (`box_slots`
+  box slots: by default the fixtures perception reports and one placed object) is built expanded when the
+  planner is constructed, not inside a timed step, and a shape first met inside a step is built mapped (a
+  RoboCup run meets one per count of objects left on the table: 57 s of building became 2 s). Each solve only
+  changes parameters and is warm-started from the previous solution shifted by the executed steps (and carried
+  on past its horizon within the bounds), primal and dual, from a small barrier (`warm_mu_init`).
 * An NLP holds only the boxes a proxy sphere comes within `box_screen_m` (0.1 m) of along the plan the solve
   starts from (the shifted last plan, or the initial guess): rows of a box far away are inactive at the
   solution and only cost evaluations (a RoboCup table holds up to 7 boxes: x 11 spheres x 2 check points x
@@ -97,10 +98,8 @@ class NMPCPlanner(RecedingHorizonMPC):
 
     def __init__(self, params: NMPCParams | None, context: PluginContext):
         P = params if params is not None else NMPCParams()
-        expected = P.prebuild_boxes
-        if expected is None:  # perception reports one box per fixture the planners do not know
-            expected = [sum(not f.known for f in context.settings.world.fixtures)]
-        self._expected_slots = max(expected, default=0)
+        self._expected_slots = P.box_slots if P.box_slots is not None else self.default_box_slots(context)
+        expected = P.prebuild_boxes if P.prebuild_boxes is not None else [self._expected_slots]
         self._problems: dict[ProblemShape, NMPCProblem] = {}
         super().__init__(P, context)
         # the self set (croc's: whole-arm spheres covering each link within the box margin) and, per count of
@@ -110,6 +109,15 @@ class NMPCPlanner(RecedingHorizonMPC):
         self._self_pairs: dict[int, np.ndarray] = {}
         for nb in sorted(set(expected)):  # built here, not in the first (timed) step
             self.problem(ProblemShape(P.horizon, nb, 0, P.constraint_substeps, P.self_slots), expand=True)
+
+    @staticmethod
+    def default_box_slots(context: PluginContext) -> int:
+        """The box slots a config's runs need (`box_slots` None): perception reports one box per fixture the
+        planners do not know, and a task that places objects adds each placed one as a box, beside the way to the
+        next drop (warehouse: the wall and a placed cube, so 2; with 1, transfers 2-4 built a second slot inside a
+        step, mapped, whose iterations cost ~3x the expanded ones)."""
+        world = context.settings.world
+        return sum(not f.known for f in world.fixtures) + int(any(item.count for item in world.objects.items))
 
     def _start_goal(self) -> None:
         super()._start_goal()
@@ -180,7 +188,7 @@ class NMPCPlanner(RecedingHorizonMPC):
                     "ipopt.warm_start_init_point": "yes",
                     "ipopt.warm_start_bound_push": 1e-6,
                     "ipopt.warm_start_mult_bound_push": 1e-6,
-                    "ipopt.mu_init": 1e-3,
+                    "ipopt.mu_init": P.warm_mu_init,
                 }
             )
         opts.update({f"ipopt.{k}": v for k, v in P.ipopt_options.items()})
@@ -200,8 +208,8 @@ class NMPCPlanner(RecedingHorizonMPC):
 
         guess: np.ndarray | None = None
         if self._ws is not None:
-            last = self._problems[self._ws[0]]
-            ref = last.knots(last.shift(self._ws[1].x, last.block_x, self._ws_offset))
+            # the last plan, shifted by the steps executed since and carried on past its horizon (`_shifted`)
+            ref = self._shifted(self._ws[1].q, min(self._ws_offset, P.horizon - 1))[1:]
         else:
             ref = guess = cold_guess()
         near = self._near_boxes(np.vstack([q[None], ref]), sph, boxes, P.box_screen_m)
@@ -217,7 +225,7 @@ class NMPCPlanner(RecedingHorizonMPC):
             slotted, moved = self._fill_slots(near, boxes)
             shape = ProblemShape(P.horizon, len(slotted), obj.shape[0], P.constraint_substeps, P.self_slots)
             if shape not in self._problems:
-                log.info("nmpc: building the NLP for %s inside a step (not prebuilt: `prebuild_boxes`)", shape)
+                log.info("nmpc: building the NLP for %s inside a step (more boxes near than `box_slots`)", shape)
             prob = self.problem(shape)
             if srows is None or self_again:
                 srows = self._self_rows(q, ref if restart is None else restart.q[1:], own, pairs)
@@ -231,7 +239,7 @@ class NMPCPlanner(RecedingHorizonMPC):
             elif self._ws is not None and self._ws[0] == shape:
                 prev = self._ws[1]
                 k = self._ws_offset
-                x0 = prob.shift(prev.x, prob.block_x, k)
+                x0 = prob.with_knots(prob.shift(prev.x, prob.block_x, k), ref)
                 lam_x0 = prob.shift(prev.lam_x, prob.block_x, k)
                 lam_g0 = prob.shift(prev.lam_g, prob.block_g, k)
                 lam_g0[prob.box_rows(moved)] = 0.0  # a slot that now holds another box starts without multipliers
@@ -270,6 +278,7 @@ class NMPCPlanner(RecedingHorizonMPC):
             "boxes": len(near),
             "rounds": rounds,
             "self_rounds": self_rounds,
+            "slots": shape.n_boxes,
         }
         problem = None if sol.converged else f"IPOPT: {sol.status}"
         return Solved(

@@ -20,7 +20,7 @@ import math
 import numpy as np
 from scipy.optimize import linprog
 
-__all__ = ["can_stop_now", "stopping_steps"]
+__all__ = ["can_stop_now", "slowing_steps", "stopping_steps"]
 
 _TOL = 1e-9
 
@@ -62,6 +62,31 @@ def stopping_steps(
         if x is not None:
             return np.vstack([x, np.zeros((1, 6))])
     return None
+
+
+def slowing_steps(
+    d2: np.ndarray,
+    d1: np.ndarray,
+    n: int,
+    step: np.ndarray,
+    dstep: np.ndarray | None,
+    jstep: np.ndarray | None,
+) -> np.ndarray:
+    """(n, 6) steps that go on from the last two steps `d2`, `d1` (6,), each the one nearest zero that its
+    acceleration (`dstep`) and jerk (`jstep`) bounds allow after the two before it, within the step bound: how a
+    warm start carries a plan past its horizon. Greedy, so not necessarily a stop within n steps (that is
+    `stopping_steps`, an LP); but every step keeps the bounds the two before it kept, where a repeated last
+    knot (a zero step) broke the acceleration and jerk rows of a plan still moving at its horizon."""
+    A, J, S = _bound(dstep), _bound(jstep), np.asarray(step, dtype=float)
+    d2, d1 = np.asarray(d2, dtype=float).copy(), np.asarray(d1, dtype=float).copy()
+    out = np.zeros((n, 6))
+    for i in range(n):
+        lo = np.maximum(d1 - A, 2 * d1 - d2 - J)
+        hi = np.minimum(d1 + A, 2 * d1 - d2 + J)
+        d = np.clip(np.clip(0.0, lo, hi), -S, S)
+        out[i] = d
+        d2, d1 = d1, d
+    return out
 
 
 def _solve(d2: np.ndarray, d1: np.ndarray, S: np.ndarray, A: np.ndarray, J: np.ndarray, n: int) -> np.ndarray | None:
