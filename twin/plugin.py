@@ -139,6 +139,7 @@ _LAZY: dict[str, str] = {
     "first_touch_on_motion": "twin.collision.sphere_kernel",
     "first_flagged_motion": "twin.collision.sphere_kernel",
     "KERNEL_FINGERPRINT": "twin.collision.sphere_kernel",
+    "no_runtime_njit": "twin.collision.sphere_kernel",
     # settings
     "Settings": "twin.config",
     "load_config": "twin.config",
@@ -267,6 +268,7 @@ __all__ = [
     "make_planner",
     "matrix_to_quat",
     "matrix_to_rpy",
+    "no_runtime_njit",
     "padded_scene",
     "pair_gaps",
     "palette",
@@ -306,6 +308,7 @@ if TYPE_CHECKING:
         KERNEL_FINGERPRINT,
         first_flagged_motion,
         first_touch_on_motion,
+        no_runtime_njit,
         sphere_evaluate,
     )
     from twin.config import Settings, load_config

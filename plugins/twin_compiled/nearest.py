@@ -16,7 +16,8 @@ with it, every array taken out of the index tuple was reference-counted by an at
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from twin.plugin import no_runtime_njit
 
 __all__ = ["LEAF", "nearest", "new_index", "refresh"]
 
@@ -44,10 +45,7 @@ def new_index(capacity: int) -> tuple[np.ndarray, ...]:
     )
 
 
-_COMPILED = {"cache": True, "nogil": True, "_nrt": False}
-
-
-@njit(**_COMPILED)
+@no_runtime_njit()
 def _build(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ignore[type-arg]
     """Index the first n points (columns of pts (6, capacity)) of tree t: split at the middle of the widest
     coordinate's spread until leaves hold at most LEAF points."""
@@ -97,7 +95,7 @@ def _build(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: igno
     built[t] = n
 
 
-@njit(**_COMPILED)
+@no_runtime_njit()
 def refresh(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ignore[type-arg]
     """Rebuild tree t's index when the nodes added since its build outnumber a quarter of it (and 64)."""
     built = index[7][t]
@@ -105,7 +103,7 @@ def refresh(pts: np.ndarray, n: int, index: tuple, t: int) -> None:  # type: ign
         _build(pts, n, index, t)
 
 
-@njit(**_COMPILED)
+@no_runtime_njit()
 def nearest(pts: np.ndarray, n: int, index: tuple, t: int, q: np.ndarray) -> int:  # type: ignore[type-arg]
     """The node of tree t (the first n columns of pts (6, capacity)) nearest to q (6,), joint-space L2."""
     idx, lo_, hi_, dim_, split_, left_, right_, built = index[:8]

@@ -23,6 +23,9 @@ Shortcutting (`shortcut`): greedy vertex reduction (from each kept waypoint, the
 reached by a free straight motion), then `tries` random shortcuts between two points on the path (a point
 anywhere on a segment, not only a waypoint), each kept when free and shorter.
 
+The search loop allocates nothing and is compiled without numba's runtime (`twin.plugin.no_runtime_njit`, as
+the kernels it calls and `twin_compiled.nearest`), so no array it touches is reference-counted per iteration.
+
 Work is bounded by `max_iterations` per call: the Python side (`twin_compiled.planner`) calls again until
 its deadline, and the trees carry over, so where a search ends depends on the work done, not on the clock,
 except at the time limit.
@@ -30,6 +33,7 @@ except at the time limit.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
 from pathlib import Path
@@ -38,7 +42,13 @@ import numpy as np
 from numba import njit
 from numba.core.caching import NullCache
 
-from twin.plugin import KERNEL_FINGERPRINT, first_flagged_motion, first_touch_on_motion, sphere_evaluate
+from twin.plugin import (
+    KERNEL_FINGERPRINT,
+    first_flagged_motion,
+    first_touch_on_motion,
+    no_runtime_njit,
+    sphere_evaluate,
+)
 from twin_compiled.nearest import nearest, refresh
 
 __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connect", "shortcut", "tree_path"]
@@ -46,13 +56,9 @@ __all__ = ["first_uncertified", "grown", "motion_free", "new_trees", "rrt_connec
 _START, _GOAL = 0, 1
 # the search's settings vector (`rrt_connect`)
 _STEP, _RESOLUTION, _FLOOR, _RADIUS, _MIN_RADIUS, _ALPHA, _TREE_RATIO = range(7)
-# the search's inner functions allocate nothing and run without numba's runtime (`_nrt=False`, as the sphere
-# kernels and `twin_compiled.nearest`): with it, each array taken out of a tuple or sliced was
-# reference-counted by an atomic call, every iteration
-_NO_RUNTIME = {"cache": True, "nogil": True, "_nrt": False}
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def _next(rng: np.ndarray) -> float:
     """A uniform number in [0, 1) from the xorshift64* state rng[0] (uint64), advanced."""
     x = rng[0]
@@ -87,7 +93,7 @@ def grown(
     return n, p, r
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float, out: np.ndarray) -> bool:
     """out = the node i of `tree` moved toward target by at most `step` (L2); True when it reaches target."""
     d = 0.0
@@ -105,7 +111,7 @@ def _steer(nodes: np.ndarray, tree: int, i: int, target: np.ndarray, step: float
     return False
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def _add(nodes: np.ndarray, parents: np.ndarray, counts: np.ndarray, tree: int, q: np.ndarray, parent: int) -> int:
     i = counts[tree]
     for j in range(6):
@@ -115,7 +121,7 @@ def _add(nodes: np.ndarray, parents: np.ndarray, counts: np.ndarray, tree: int, 
     return i
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def motion_free(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float, floor: float) -> bool:  # type: ignore[type-arg]
     """Is the straight motion a -> b free in the planning model? resolution > 0: its configurations that far
     apart (max-abs joint step), coarse to fine, a assumed free; resolution <= 0: continuously (conservative
@@ -125,7 +131,7 @@ def motion_free(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: fl
     return first_touch_on_motion(K, S, a, b, floor) < 0.0
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def _free(
     K: tuple,  # type: ignore[type-arg]
     S: tuple,  # type: ignore[type-arg]
@@ -143,7 +149,7 @@ def _free(
     return motion_free(K, S, a, q, resolution, floor)
 
 
-@njit(**_NO_RUNTIME)
+@no_runtime_njit()
 def rrt_connect(
     K: tuple,  # type: ignore[type-arg]
     S: tuple,  # type: ignore[type-arg]
@@ -350,16 +356,19 @@ def first_uncertified(K: tuple, S: tuple, path: np.ndarray, floor: float) -> int
 
 
 def _flush_stale_cache() -> None:
-    """Drop this module's numba cache when the planning model's kernels changed since it was compiled: numba
-    keys a cached function by its own file only, and these functions inline the kernels of another file."""
+    """Drop this module's numba cache when the planning model's kernels or the k-d tree changed since it was
+    compiled: numba keys a cached function by its own file only, and these functions inline the code of
+    those files."""
     functions = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
+    nearest_file = Path(__file__).with_name("nearest.py")
+    fingerprint = f"{KERNEL_FINGERPRINT}-{hashlib.sha256(nearest_file.read_bytes()).hexdigest()[:16]}"
     try:
         stamp = Path(rrt_connect._cache._cache_path) / "twin_compiled.kernel"  # type: ignore[attr-defined]
-        if stamp.exists() and stamp.read_text() == KERNEL_FINGERPRINT:
+        if stamp.exists() and stamp.read_text() == fingerprint:
             return
         for f in functions:
             f._cache.flush()
-        stamp.write_text(KERNEL_FINGERPRINT)
+        stamp.write_text(fingerprint)
     except (AttributeError, OSError) as e:  # a numba without these internals, a read-only cache: compile anew
         logging.getLogger("twin").debug("twin_compiled: cache check failed (%r); compiling without the cache", e)
         for f in functions:

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar, cast
 
 import numpy as np
 from numba import njit
@@ -23,6 +25,7 @@ __all__ = [
     "first_unproven_on_polyline",
     "flag_configurations",
     "new_scratch",
+    "no_runtime_njit",
     "sphere_bounds",
     "sphere_evaluate",
 ]
@@ -31,14 +34,24 @@ _MARGIN_CAP_M = 0.25  # margins are not measured beyond this (farther pairs cost
 # conservative advancement (`first_touch_on_motion`) refines the distance bounds below this, m: coarser bounds
 # (bounding spheres) make its steps short, finer ones cost more per configuration
 _ADVANCE_REFINE_M = 0.03
-# Every kernel but `new_scratch` is compiled without numba's runtime (`_nrt=False`, the switch numba's own
-# developers use to show its cost): they allocate nothing, and with the runtime each array taken out of the model
-# and scratch tuples is reference-counted by an atomic call, which was 60 % of a configuration's cost
-# (3.3 -> 1.3 us on MBM scenes). Callers with the runtime call them as any compiled function.
-_KERNEL = {"cache": True, "nogil": True, "_nrt": False}
+_Fn = TypeVar("_Fn", bound=Callable[..., Any])
 
 
-@njit(**_KERNEL, inline="always")
+def no_runtime_njit(*, inline: bool = False) -> Callable[[_Fn], _Fn]:
+    """numba's `njit` (cached, without the GIL) for compiled code that allocates nothing, compiled without
+    numba's runtime (`_nrt=False`, the switch numba's own developers use to show its cost): with the runtime,
+    each array taken out of a tuple or sliced is reference-counted by an atomic call, which was 60 % of a
+    configuration's cost here (3.3 -> 1.3 us on MBM scenes). Callers with the runtime call such functions as
+    any compiled function. Every kernel here but `new_scratch` is one; so is `twin_compiled`'s search loop."""
+
+    def wrap(fn: _Fn) -> _Fn:
+        jit = njit(cache=True, nogil=True, _nrt=False, inline="always" if inline else "never")  # type: ignore[call-overload]
+        return cast(_Fn, jit(fn))
+
+    return wrap
+
+
+@no_runtime_njit(inline=True)
 def _point_distance(kind: int, M: np.ndarray, d: np.ndarray, x: float, y: float, z: float) -> float:
     """Signed distance of the world point (x, y, z) from one primitive (negative inside)."""
     px = M[0, 0] * x + M[0, 1] * y + M[0, 2] * z + M[0, 3]
@@ -108,7 +121,7 @@ def new_scratch(n_obj: int, n_sph: int, n_pairs: int) -> tuple:  # type: ignore[
     )
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def sphere_evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  # type: ignore[type-arg]
     """(flagged, env bound) of configuration q (6,): flagged unless the spheres prove it free (see the
     module docstring); when free, a lower bound on every robot-environment distance (capped at
@@ -117,7 +130,7 @@ def sphere_evaluate(K: tuple, S: tuple, q: np.ndarray) -> tuple[bool, float]:  #
     return sphere_bounds(K, S, q, K[_TOUCH])
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[bool, float]:  # type: ignore[type-arg]
     """`sphere_evaluate`, with every distance bound below `refine` m made as tight as the model allows.
 
@@ -218,7 +231,7 @@ def sphere_bounds(K: tuple, S: tuple, q: np.ndarray, refine: float) -> tuple[boo
     return False, m
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> tuple[bool, float]:  # type: ignore[type-arg]
     """`sphere_evaluate`, skipped when q is clear by the anchor's bounds (anchor_env < 0: no anchor yet); a newly
     cleared q becomes the anchor. Returns (flagged, the anchor's env bound now)."""
@@ -237,7 +250,7 @@ def _flag_with_anchor(K: tuple, S: tuple, q: np.ndarray, anchor_env: float) -> t
     return False, m
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> None:  # type: ignore[type-arg]
     """out[i] = True unless the spheres prove configuration qs[i] free (see the module docstring). Along a
     sequence, configurations close to the last cleared one are cleared by its bounds (`_near_anchor`)."""
@@ -246,7 +259,7 @@ def flag_configurations(K: tuple, S: tuple, qs: np.ndarray, out: np.ndarray) -> 
         out[i], anchor_env = _flag_with_anchor(K, S, qs[i], anchor_env)
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def clearance_bounds(K: tuple, S: tuple, qs: np.ndarray, objects: np.ndarray, out: np.ndarray) -> None:  # type: ignore[type-arg]
     """out[i] = a lower bound on the distance from the objects `objects` (indices) to the environment at
     configuration qs[i], as tight as the model allows within `_MARGIN_CAP_M` (capped there); -inf where the
@@ -264,7 +277,7 @@ def clearance_bounds(K: tuple, S: tuple, qs: np.ndarray, objects: np.ndarray, ou
         out[i] = b
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def first_flagged(K: tuple, S: tuple, qs: np.ndarray) -> int:  # type: ignore[type-arg]
     """The index of the first configuration of qs (n, 6) the spheres do not prove free, or -1."""
     anchor_env = -1.0
@@ -275,7 +288,7 @@ def first_flagged(K: tuple, S: tuple, qs: np.ndarray) -> int:  # type: ignore[ty
     return -1
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resolution: float) -> int:  # type: ignore[type-arg]
     """The straight joint motion a -> b in n = ceil(max |b - a| / resolution) steps: configurations
     a + k/n (b - a), k = 1..n (a itself is not checked), evaluated coarse to fine (b first, then the
@@ -310,7 +323,7 @@ def first_flagged_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, resol
             k = step
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
     """The straight joint motion a -> b, checked continuously by conservative advancement: -1.0 when the
     spheres prove every configuration of it free (a and b included), else the fraction t in [0, 1] of the
@@ -333,7 +346,7 @@ def first_touch_on_motion(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floo
     return _advance(K, S, a, b, floor)
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> float:  # type: ignore[type-arg]
     """`first_touch_on_motion` from a to b."""
     touch = K[_TOUCH]
@@ -373,7 +386,7 @@ def _advance(K: tuple, S: tuple, a: np.ndarray, b: np.ndarray, floor: float) -> 
             return -1.0
 
 
-@njit(**_KERNEL)
+@no_runtime_njit()
 def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) -> int:  # type: ignore[type-arg]
     """The polyline through the configurations Q (n, 6) (a timed trajectory's samples: what a judge that
     interpolates between them checks), checked continuously by conservative advancement as
@@ -429,7 +442,7 @@ def first_unproven_on_polyline(K: tuple, S: tuple, Q: np.ndarray, floor: float) 
     return -1
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _near_anchor(
     q: np.ndarray,
     anchor_q: np.ndarray,
@@ -463,7 +476,7 @@ def _near_anchor(
     return clear
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _link_frames(
     q: np.ndarray,
     revolute: np.ndarray,
@@ -500,7 +513,7 @@ def _link_frames(
             F[j + 1, r, 3] = F[f, r, 0] * L[0, 3] + F[f, r, 1] * L[1, 3] + F[f, r, 2] * L[2, 3] + F[f, r, 3]
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _object_centres(
     F: np.ndarray, obj_frame: np.ndarray, obj_const: np.ndarray, oc: np.ndarray, placed: np.ndarray, posed: np.ndarray
 ) -> None:
@@ -518,7 +531,7 @@ def _object_centres(
         posed[o] = False
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _spheres_gap(sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M: np.ndarray, d: np.ndarray) -> float:
     """Smallest distance between the placed spheres lo..hi-1 and the primitive (kind, M, d), negative inside."""
     gap = np.inf
@@ -527,7 +540,7 @@ def _spheres_gap(sc: np.ndarray, sph: np.ndarray, lo: int, hi: int, kind: int, M
     return gap
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray, P: np.ndarray) -> None:
     """World-to-local (3, 4) of the object at Ff @ const."""
     for r in range(3):
@@ -539,7 +552,7 @@ def _pose_inverse(Ff: np.ndarray, const: np.ndarray, out: np.ndarray, P: np.ndar
         out[r, 3] = -(P[0, r] * P[0, 3] + P[1, r] * P[1, 3] + P[2, r] * P[2, 3])
 
 
-@njit(**_KERNEL, inline="always")
+@no_runtime_njit(inline=True)
 def _place(F: np.ndarray, lo: int, hi: int, sph_frame: np.ndarray, sph: np.ndarray, sc: np.ndarray) -> None:
     """World centres of spheres lo..hi-1 into sc."""
     for s in range(lo, hi):
