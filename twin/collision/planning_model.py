@@ -57,6 +57,7 @@ class SphereModel:
         self._motion = sphere_kernel.first_flagged_motion
         self._continuous = sphere_kernel.first_touch_on_motion
         self._polyline = sphere_kernel.first_unproven_on_polyline
+        self._distance_bounds = sphere_kernel.clearance_bounds
 
     def with_touch(self, touch_m: float) -> SphereModel:
         """The same model calling a sphere touching within `touch_m` of anything (default `TOUCH_M`, 10 um):
@@ -107,6 +108,15 @@ class SphereModel:
     def motion_free(self, a: np.ndarray, b: np.ndarray, resolution_rad: float) -> bool:
         """True when every configuration of a -> b, `resolution_rad` apart, is free in the model."""
         return self.first_collision_on_motion(a, b, resolution_rad) is None
+
+    def distance_bounds(self, qs: np.ndarray, parts: np.ndarray) -> np.ndarray:
+        """(n,) lower bounds on the distance from the robot's parts `parts` (int64 indices, as the kernels number
+        them) to the environment at each configuration of (n, 6) qs, capped at 0.25 m; -inf where the covers
+        touch. Exact distances (FCL's) are never below them."""
+        qs = np.array(qs, dtype=float, order="C", ndmin=2)
+        out = np.empty(qs.shape[0])
+        self._distance_bounds(self.kernel, self.scratch, qs, np.asarray(parts, dtype=np.int64), out)
+        return out
 
     def first_unproven_segment(self, qs: np.ndarray, floor_m: float = CONTINUOUS_FLOOR_M) -> int | None:
         """The polyline through (n, 6) configurations (a timed trajectory's samples) checked continuously in

@@ -454,15 +454,6 @@ class RobotBody:
             self._kernel_scratch, self._scratch_size = new_scratch(*size), size
         return self._kernel_scratch
 
-    def clearance_lower_bounds(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
-        """(n,) lower bounds on the clearance (`PlanningScene.clearance`) at qs[i] (n, 6) from the sphere model
-        (-inf where its covers touch; capped at 0.25 m)."""
-        from twin.collision.sphere_kernel import clearance_bounds  # lazy: numba (compiled on first use)
-
-        out = np.empty(qs.shape[0])
-        clearance_bounds(self.kernel_model(env), self.kernel_scratch(), qs, self.clear_index, out)
-        return out
-
     def sphere_flags(self, qs: np.ndarray, env: EnvPrimitives) -> np.ndarray:
         """(n,) bool: False where the sphere model proves qs[i] (n, 6) clear of `env` and of itself, True
         where FCL must decide."""

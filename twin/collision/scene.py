@@ -339,15 +339,15 @@ class PlanningScene:
         `clearance_batch(qs)`'s minimum and argmin, ties aside. FCL measures only where it can matter: the
         sphere model bounds every configuration's clearance from below, and the configurations are measured
         in the order of their bounds until the next bound exceeds the smallest clearance measured."""
-        qs = _as_qs(qs)
+        qs, body = _as_qs(qs), self._body
         if qs.shape[0] == 0:
             raise InvalidRequestError("min_clearance needs at least one configuration")
-        bounds = self._body.clearance_lower_bounds(qs, self._obstacles.primitives())
+        bounds = self.sphere_model().distance_bounds(qs, body.clear_index)
         best, where = math.inf, 0
         for i in np.argsort(bounds, kind="stable").tolist():
             if bounds[i] - _BOUND_SLACK_M >= best:
                 break
-            self._body.prepare(qs[i])
+            body.prepare(qs[i])
             d = self._clearance_now().distance
             if d < best:
                 best, where = d, i
