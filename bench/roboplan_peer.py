@@ -60,6 +60,14 @@ __all__ = [
 ]
 
 
+def _required_python() -> Path:
+    """`roboplan_python()`, or RuntimeError saying why roboplan is not available."""
+    py = roboplan_python()
+    if isinstance(py, str):
+        raise RuntimeError(f"roboplan is not available: {py}")
+    return py
+
+
 def roboplan_python() -> Path | str:
     """The roboplan venv's python, created on first use; or a string saying why it is unavailable."""
     py = ROBOPLAN_VENV / "bin" / "python"
@@ -224,11 +232,7 @@ def plan_problem_set(
     `seed` replace the problems' own unless None. `rrt`: roboplan RRTOptions fields over the driver's
     defaults (RRT-Connect, roboplan's range 3.0 and 0.05 edge resolution). `shortcut`: roboplan's
     PathShortcutter after a plan (timed apart, in shortcut_s). RuntimeError when roboplan is not available."""
-    if python is None:
-        py = roboplan_python()
-        if isinstance(py, str):
-            raise RuntimeError(f"roboplan is not available: {py}")
-        python = py
+    python = python or _required_python()
     with tempfile.TemporaryDirectory() as tmp:
         path = _set_path(problem_set, Path(tmp))
         robot = robot_spec(path, urdf, robot_model=robot_model)
@@ -259,11 +263,7 @@ def check_cost(
     twin's planning scene's verdict on the same configurations (a check of the model handed to roboplan:
     frames, shapes, excluded pairs), and "twin_median_us", twin's own per-check cost there (in_collision,
     one configuration per call)."""
-    if python is None:
-        py = roboplan_python()
-        if isinstance(py, str):
-            raise RuntimeError(f"roboplan is not available: {py}")
-        python = py
+    python = python or _required_python()
     with tempfile.TemporaryDirectory() as tmp:
         path = _set_path(problem_set, Path(tmp))
         spec = driver_spec(path, robot_spec(path, urdf, robot_model=robot_model), first=first)
