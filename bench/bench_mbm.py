@@ -2,12 +2,13 @@
 twin's planners through twin's judge, beside the numbers VAMP publishes for it (issues 30, 41). A plain script:
 it prints tables and asserts nothing.
 
-    python bench/bench_mbm.py [--planners compiled.rrtconnect,ompl.rrtconnect,rrtconnect-spheres,roboplan]
+    python bench/bench_mbm.py [--planners compiled.rrtconnect,ompl.rrtconnect,rrtconnect-exact,roboplan]
                               [--time-limit 10] [--workers N] [--scenes box,cage] [--problems N]
                               [--out out/bench-mbm] [--robot-urdf twin|spherized]
 
-`--planners`: twin planner names (as `twin compare` takes them), `rrtconnect-spheres` (ompl.rrtconnect with
-`collision_model: spheres`, searching on twin's planning model) and `roboplan` (roboplan 0.7.0's C++
+`--planners`: twin planner names (as `twin compare` takes them; `ompl.rrtconnect` searches on twin's planning
+model, its default `collision_model: spheres`), `rrtconnect-exact` (ompl.rrtconnect with `collision_model: exact`,
+searching on the FCL scene) and `roboplan` (roboplan 0.7.0's C++
 RRT-Connect as a peer, in its own venv, bench/roboplan_peer.py; skipped with a one-line reason when that venv
 cannot be made). Default: all four, in ONE run on the same problems.
 
@@ -98,13 +99,13 @@ SEARCH_KEY = "search"  # compiled.rrtconnect's "planning": the compiled search a
 ROBOPLAN = "roboplan"
 # planner words of --planners that are not a registered planner's name: a labelled block of one
 ALIASES: dict[str, dict[str, Any]] = {
-    "rrtconnect-spheres": {
+    "rrtconnect-exact": {
         "name": "ompl.rrtconnect",
-        "params": {"collision_model": "spheres"},
-        "label": "rrtconnect-spheres",
+        "params": {"collision_model": "exact"},
+        "label": "rrtconnect-exact",
     },
 }
-DEFAULT_PLANNERS = f"{COMPILED},ompl.rrtconnect,rrtconnect-spheres,{ROBOPLAN}"
+DEFAULT_PLANNERS = f"{COMPILED},ompl.rrtconnect,rrtconnect-exact,{ROBOPLAN}"
 
 
 def planner_blocks(text: str) -> tuple[list[Any], list[str], list[str]]:
@@ -221,7 +222,7 @@ def ratio_lines(overall: dict[str, dict[str, Any]]) -> list[str]:
         name = "planning median" if key == "plan" else "total median"
         ratio(COMPILED, ROBOPLAN, name, key)
         ratio(COMPILED, "ompl.rrtconnect", name, key)
-        ratio("rrtconnect-spheres", "ompl.rrtconnect", name, key)
+        ratio("ompl.rrtconnect", "rrtconnect-exact", name, key)
         if key == "plan" and COMPILED in overall:
             m = _median(overall[COMPILED]["plan"])
             if m:

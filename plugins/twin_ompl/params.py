@@ -38,7 +38,7 @@ class OmplParams(PathPlannerParams):
     planner's (`twin.plugin.PathPlannerParams`) and these."""
 
     collision_model: Literal["exact", "spheres"] = Field(
-        "exact",
+        "spheres",
         description=(
             "what the search checks states and motions on: 'exact' = the FCL scene (behind the sphere filter); "
             "'spheres' = the planning model (the robot's sphere cover, touching = in collision, compiled, no "
