@@ -230,11 +230,19 @@ class PlannerSpec:
 # samples without checking one, at 1.2-1.6 million iterations a second: 100k ends that after ~0.07 s and
 # never binds otherwise. The budgets are per second of the request's time limit (`_work_budget`): a 2 s limit
 # buys twice the work, still counted, so still deterministic; the share of the limit spent stays ~20 %.
+# BIT*'s own work grows faster than its checks: each batch of samples is wired into a graph that keeps every
+# earlier one. On MotionBenchMaker's UR5 problems (10 s limit) it checked ~60k of its 80k configurations in the
+# full 10 s, ~8k iterations a second, so the clock ended it and a run's result depended on the machine's load
+# (the same problem twice: 79 318 and 77 255 iterations). 2 000 iterations a second of the limit end those runs
+# by count after ~1.5 s with the same paths (table_pick #0-#24: every length equal); on the reference cells'
+# blocked queries (1 s) BIT* needs 380-820 (median; max 2 831) before its checks run out: 39 of their 40
+# paths stayed the same, the one capped is 1.28 rad long instead of 1.16.
 _ITERATIONS = 100_000
+_BITSTAR_ITERATIONS = 2_000
 
 
-def _budget(max_state_checks: int) -> dict[str, Any]:
-    return {"max_state_checks": max_state_checks, "max_iterations": _ITERATIONS}
+def _budget(max_state_checks: int, max_iterations: int = _ITERATIONS) -> dict[str, Any]:
+    return {"max_state_checks": max_state_checks, "max_iterations": max_iterations}
 
 
 PLANNER_SPECS: dict[str, PlannerSpec] = {
@@ -258,7 +266,7 @@ PLANNER_SPECS: dict[str, PlannerSpec] = {
     "PRM": PlannerSpec("PRM", ("max_nearest_neighbors",), single_goal=True, solution_thread=True),
     "PRMstar": PlannerSpec("PRMstar", (), True, single_goal=True, solution_thread=True, **_budget(12_000)),
     "LazyPRMstar": PlannerSpec("LazyPRMstar", ("range",), True, single_goal=True, **_budget(12_000)),
-    "BITstar": PlannerSpec("BITstar", tuple(_BITSTAR), True, **_budget(8_000)),
+    "BITstar": PlannerSpec("BITstar", tuple(_BITSTAR), True, **_budget(8_000, _BITSTAR_ITERATIONS)),
     "AORRTC": PlannerSpec("AORRTC", ("range",), True, **_budget(30_000)),
     "KPIECE1": PlannerSpec("KPIECE1", ("goal_bias", *_KPIECE)),
     "BKPIECE1": PlannerSpec("BKPIECE1", tuple(_KPIECE)),
