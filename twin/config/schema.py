@@ -210,6 +210,11 @@ class WorldSettings(ConfigModel):
         ]
     )
     objects: ObjectSettings = Field(default_factory=ObjectSettings)
+    # how the objects look to the camera (`twin.object_visuals`): 'flat' = each class one single-colour
+    # primitive; 'realistic' = textured meshes (a bottle with shoulder, neck, cap and label; a can with a
+    # printed label; a spam tin with lid and label; a marker with cap and clip), one of several looks per object
+    # drawn from the scene seed. Collision shapes and physics are the same either way.
+    visuals: Literal["flat", "realistic"] = "flat"
     unmodelled_obstacle: UnmodelledObstacleSettings | None = None  # a fault model: off when None
 
     @model_validator(mode="after")

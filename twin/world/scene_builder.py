@@ -13,12 +13,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from twin.assets import marker_quad_obj
 from twin.config import Settings
 from twin.errors import ConfigError, WorldError
+from twin.object_visuals import REALISTIC_CLASSES, VARIANTS, realistic_urdf
 from twin.robot import Robot
 from twin.scene_layout import (
     PLATE_SIZE_M,
@@ -102,8 +104,9 @@ class _SceneBuilder:
         wants_boxes = any(spec.count for spec in objects.items) or self.settings.world.unmodelled_obstacle is not None
         boxes = self._obstacle_boxes() if wants_boxes else []
         placements = sample_layout(objects, self.seed, boxes)
+        looks = self._looks(placements)
         for sp in placements:
-            self._load_object(sp)
+            self._load_object(sp, looks.get(sp.name))
         centre = place_unmodelled_obstacle(self.settings.world, self.seed, placements, boxes)
         if centre is not None:
             self._add_unmodelled_obstacle(centre)
@@ -231,14 +234,26 @@ class _SceneBuilder:
             )
         return boxes
 
-    def _load_object(self, sp: Placement) -> None:
+    def _looks(self, placements: Sequence[Placement]) -> dict[str, int]:
+        """With `world.visuals: realistic`, each object of a class with realistic looks gets one of
+        `VARIANTS`, drawn from the scene seed in config order (a stream of its own: the layout's draws and the
+        physics do not change); {} when the visuals are flat."""
+        if self.settings.world.visuals != "realistic":
+            return {}
+        rng = np.random.default_rng([self.seed, 42])
+        return {sp.name: int(rng.integers(VARIANTS)) for sp in placements if sp.template.cls in REALISTIC_CLASSES}
+
+    def _load_object(self, sp: Placement, look: int | None) -> None:
         c = self._cid
         R = rpy_to_matrix((0.0, 0.0, sp.yaw))
         if sp.lying:
             R = R @ rpy_to_matrix(sp.template.lying_rpy)
+        urdf = self._urdf(sp.template.urdf)
+        if look is not None:
+            urdf = str(realistic_urdf(sp.template.cls, look, Path(urdf)))
         try:
             bid = pb.loadURDF(
-                self._urdf(sp.template.urdf),
+                urdf,
                 list(sp.position),
                 matrix_to_quat(R).tolist(),
                 flags=URDF_FLAGS,
