@@ -127,3 +127,36 @@ def test_an_unknown_visual_style_is_a_config_error_naming_the_allowed_ones(tmp_p
     cfg.write_text("world:\n  visuals: photoreal\n")
     with pytest.raises(ConfigError, match=r"flat.*realistic"):
         load_config(cfg)
+
+
+def test_the_scene_light_is_off_by_default_and_drawn_per_seed_within_its_cone() -> None:
+    from twin.config import LightSettings
+    from twin.world.rendering import scene_light
+
+    assert scene_light(LightSettings(), 3) is None  # PyBullet's own light: images as before
+    cfg = LightSettings(direction=(0.0, 0.0, 2.0), direction_jitter_deg=30.0, color_jitter=0.2)
+    lights = [scene_light(cfg, s) for s in range(50)]
+    dirs = np.array([li.direction for li in lights if li is not None])
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    tilt = np.degrees(np.arccos(np.clip(dirs[:, 2], -1, 1)))
+    assert tilt.max() <= 30.0 + 1e-9 and tilt.max() > 20.0  # fills the cone, never beyond it
+    colors = np.array([li.color for li in lights if li is not None])
+    assert colors.min() >= 0.8 - 1e-12 and colors.max() <= 1.2 + 1e-12 and np.ptp(colors) > 0.2
+    again = scene_light(cfg, 7)
+    assert again is not None and np.array_equal(again.direction, dirs[7])
+
+
+def test_a_light_from_the_side_renders_other_pixels_than_one_from_above() -> None:
+    from twin.camera import Intrinsics, look_at
+    from twin.world.rendering import Light
+
+    settings = load_config(ROOT / "configs/robocup.yaml")
+    with World(settings, seed=1) as world:
+        T = look_at((-0.45, 0.0, 0.8), (-0.45, 0.0, 0.0))
+        K = Intrinsics(96, 72, 90.0, 90.0)
+        above = Light(np.array([0.0, 0.0, 1.0]), np.ones(3))
+        side = Light(np.array([1.0, 0.0, 0.2]) / np.hypot(1.0, 0.2), np.array([1.0, 0.8, 0.6]))
+        a, a2 = (world.render(T, K, near_m=0.05, far_m=3.0, light=above).rgb for _ in range(2))
+        b = world.render(T, K, near_m=0.05, far_m=3.0, light=side).rgb
+    assert np.array_equal(a, a2)
+    assert np.abs(a.astype(float) - b).mean() > 5.0

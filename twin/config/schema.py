@@ -39,6 +39,7 @@ __all__ = [
     "DetectorBlock",
     "FixtureSettings",
     "GripperSettings",
+    "LightSettings",
     "ObjectSettings",
     "ObjectSpec",
     "PerceptionSettings",
@@ -185,6 +186,30 @@ class UnmodelledObstacleSettings(ConfigModel):
         return v
 
 
+class LightSettings(ConfigModel):
+    """The light the camera images are rendered under. Off (no direction, white, no jitter): PyBullet's own
+    light, as before. `direction` points from the scene towards the light (world frame, any length); per
+    scene seed the direction is tilted by up to `direction_jitter_deg` (uniform over the cone) and each colour
+    channel scaled by a factor drawn from [1 - color_jitter, 1 + color_jitter]: lighting that varies from
+    scene to scene, for realistic images and datasets (`twin.world.rendering.scene_light`)."""
+
+    direction: tuple[float, float, float] | None = None
+    color: tuple[
+        Annotated[float, Field(ge=0.0, le=3.0)],
+        Annotated[float, Field(ge=0.0, le=3.0)],
+        Annotated[float, Field(ge=0.0, le=3.0)],
+    ] = (1.0, 1.0, 1.0)
+    direction_jitter_deg: float = Field(0.0, ge=0.0, le=80.0)
+    color_jitter: float = Field(0.0, ge=0.0, le=0.5)
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if v is not None and math.hypot(*v) < 1e-9:
+            raise ValueError("a light direction must not be zero")
+        return v
+
+
 class WorldSettings(ConfigModel):
     """The PyBullet world: rate, gravity, fixtures and objects.
 
@@ -215,6 +240,7 @@ class WorldSettings(ConfigModel):
     # printed label; a spam tin with lid and label; a marker with cap and clip), one of several looks per object
     # drawn from the scene seed. Collision shapes and physics are the same either way.
     visuals: Literal["flat", "realistic"] = "flat"
+    light: LightSettings = Field(default_factory=LightSettings)
     unmodelled_obstacle: UnmodelledObstacleSettings | None = None  # a fault model: off when None
 
     @model_validator(mode="after")

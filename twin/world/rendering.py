@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from twin.camera import Intrinsics, RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix, look_at
+from twin.config import LightSettings
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_fds, quiet_stdout
 
-__all__ = ["EGL_WARM_UP_FRAMES", "load_egl_renderer", "render_rgbd", "warm_up_egl"]
+__all__ = ["EGL_WARM_UP_FRAMES", "Light", "load_egl_renderer", "render_rgbd", "scene_light", "warm_up_egl"]
 
 log = logging.getLogger("twin")
 
@@ -21,6 +24,42 @@ log = logging.getLogger("twin")
 # rendered before it: a recorder's frames made a run's first capture a shadowed one. `World.render` renders
 # these frames first, unseen, so every frame it returns depends on the scene and the camera alone.
 EGL_WARM_UP_FRAMES = 2
+
+
+# the direction a jittered light tilts from when `world.light.direction` is not set (up, a little from the side)
+_NOMINAL_LIGHT = (0.3, -0.2, 1.0)
+
+
+@dataclass(frozen=True)
+class Light:
+    """A frame's light: direction from the scene towards it (3,), world frame, unit; RGB colour (3,)."""
+
+    direction: np.ndarray
+    color: np.ndarray
+
+
+def scene_light(cfg: LightSettings, seed: int) -> Light | None:
+    """The light of scene `seed` under `world.light`: None (PyBullet's own light) when it is off; otherwise
+    its direction tilted by up to `direction_jitter_deg` (uniform over the cone) and its colour scaled per
+    channel by up to `color_jitter`, drawn from the seed (a stream of its own)."""
+    jitter = cfg.direction_jitter_deg > 0 or cfg.color_jitter > 0
+    if cfg.direction is None and not jitter and cfg.color == (1.0, 1.0, 1.0):
+        return None
+    d = np.asarray(cfg.direction if cfg.direction is not None else _NOMINAL_LIGHT, dtype=float)
+    d /= np.linalg.norm(d)
+    color = np.asarray(cfg.color, dtype=float)
+    if jitter:
+        rng = np.random.default_rng([seed, 43])
+        # uniform over the spherical cap: cos(tilt) uniform in [cos(max), 1], azimuth uniform
+        cos_t = rng.uniform(math.cos(math.radians(cfg.direction_jitter_deg)), 1.0)
+        az = rng.uniform(0.0, 2.0 * math.pi)
+        a = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(d, a)
+        sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+        d = cos_t * d + sin_t * (math.cos(az) * a + math.sin(az) * b)
+        color = np.clip(color * rng.uniform(1.0 - cfg.color_jitter, 1.0 + cfg.color_jitter, 3), 0.0, 3.0)
+    return Light(d, color)
 
 
 def load_egl_renderer(client_id: int) -> bool:
@@ -56,11 +95,18 @@ def warm_up_egl(client_id: int) -> None:
 
 
 def render_rgbd(
-    client_id: int, egl: bool, T_world_camera: np.ndarray, intrinsics: Intrinsics, near_m: float, far_m: float
+    client_id: int,
+    egl: bool,
+    T_world_camera: np.ndarray,
+    intrinsics: Intrinsics,
+    near_m: float,
+    far_m: float,
+    light: Light | None = None,
 ) -> RGBDFrame:
     """An RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, by the EGL
-    renderer (warmed up: `warm_up_egl`) or TinyRenderer. Depth is converted from PyBullet's non-linear
-    z-buffer to metres along the optical axis."""
+    renderer (warmed up: `warm_up_egl`) or TinyRenderer, under `light` (None: PyBullet's own). Depth is
+    converted from PyBullet's non-linear z-buffer to metres along the optical axis."""
+    lit = {} if light is None else {"lightDirection": light.direction.tolist(), "lightColor": light.color.tolist()}
     with stage("rendering"), quiet_stdout(egl):
         _, _, rgba, zbuf, _ = pb.getCameraImage(
             intrinsics.width,
@@ -70,6 +116,7 @@ def render_rgbd(
             renderer=pb.ER_BULLET_HARDWARE_OPENGL if egl else pb.ER_TINY_RENDERER,
             flags=pb.ER_NO_SEGMENTATION_MASK,
             physicsClientId=client_id,
+            **lit,
         )
     rgb = np.asarray(rgba, dtype=np.uint8).reshape(intrinsics.height, intrinsics.width, 4)[:, :, :3].copy()
     zb = np.asarray(zbuf, dtype=np.float64).reshape(intrinsics.height, intrinsics.width)

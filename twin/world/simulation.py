@@ -22,7 +22,7 @@ from twin.robot import Robot
 from twin.scene_layout import find_marker_plate
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_stdout
-from twin.world.rendering import load_egl_renderer, render_rgbd, warm_up_egl
+from twin.world.rendering import Light, load_egl_renderer, render_rgbd, scene_light, warm_up_egl
 from twin.world.scene_builder import BuiltScene, build_scene
 from twin.world.tracking import FaultyTracking
 from twin.world.truth import GroundTruth
@@ -76,6 +76,7 @@ class World(GroundTruth):
         self._cid = -1
         self._egl = False
         self._egl_warm = False  # the renderer has rendered its warm-up frames (see EGL_WARM_UP_FRAMES)
+        self.light = scene_light(settings.world.light, self.seed)  # the scene's light (None: PyBullet's)
         self._steps = 0
         # how many times `reset()` rebuilt the scene: per-world bookkeeping kept outside the world (the sensor
         # noise streams of `twin.perception.capture`) starts over when it changes, as for a new world
@@ -388,8 +389,17 @@ class World(GroundTruth):
         """Ground truth (tests): True when the fingers have stopped on an object that both of them touch."""
         return self.gripper_settled(tol_m_s=tol_m_s) and self.grasped_object() is not None
 
-    def render(self, T_world_camera: np.ndarray, intrinsics: Intrinsics, *, near_m: float, far_m: float) -> RGBDFrame:
-        """Render an RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics.
+    def render(
+        self,
+        T_world_camera: np.ndarray,
+        intrinsics: Intrinsics,
+        *,
+        near_m: float,
+        far_m: float,
+        light: Light | None = None,
+    ) -> RGBDFrame:
+        """Render an RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, under
+        `light` (None: the scene's, `self.light`).
 
         Depth is converted from PyBullet's non-linear z-buffer to metres along the optical axis.
         """
@@ -397,7 +407,7 @@ class World(GroundTruth):
         if self._egl and not self._egl_warm:
             warm_up_egl(c)  # every frame returned then depends on the scene and the camera alone
             self._egl_warm = True
-        return render_rgbd(c, self._egl, T_world_camera, intrinsics, near_m, far_m)
+        return render_rgbd(c, self._egl, T_world_camera, intrinsics, near_m, far_m, light or self.light)
 
 
 class WorldView:
