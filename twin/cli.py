@@ -129,6 +129,14 @@ def _position_vector(text: str) -> list[float]:
     return _floats(text, 3, "position x,y,z (m)")
 
 
+def _count(text: str) -> int:
+    """A positive integer argument (a count)."""
+    value = _seed(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return value
+
+
 def _seed(text: str) -> int:
     try:
         value = int(text)
@@ -222,6 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_calibrate_parser(sub)
     _add_replay_parser(sub)
     _add_check_planner_parser(sub)
+    _add_dataset_parser(sub)
     add_exchange_parsers(sub)
     for p in {id(p): p for p in sub.choices.values()}.values():  # `twin run X -v` as `twin -v run X`
         _add_verbosity(p, after_command=True)
@@ -385,6 +394,27 @@ def _add_perceive_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--json", dest="json_path", default=None, help="write objects, false_positives, calibration, timings here"
+    )
+
+
+def _add_dataset_parser(sub: Any) -> None:
+    """`twin dataset`."""
+    p = sub.add_parser(
+        "dataset",
+        help="labelled images from the task's camera (YOLO and COCO), labels from the renderer's segmentation",
+    )
+    _add_config_args(p)
+    p.add_argument("--images", type=_count, required=True, help="number of images")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (images, labels, coco, card)")
+    p.add_argument("--views", type=_count, default=4, help="camera poses per scene seed (default 4)")
+    p.add_argument(
+        "--min-visible",
+        type=float,
+        default=0.3,
+        help="label an object when at least this fraction of it is visible (default 0.3)",
+    )
+    p.add_argument(
+        "--clutter", type=_seed, default=4, help="up to this many extra objects per scene, from the seed (default 4)"
     )
 
 
@@ -868,6 +898,34 @@ def _cmd_perceive(args: argparse.Namespace) -> int:
 
 
 _COMMANDS["perceive"] = _cmd_perceive
+
+
+def _cmd_dataset(args: argparse.Namespace) -> int:
+    from twin.dataset import DatasetOptions, make_dataset  # lazy: cv2, the world
+    from twin.progress import ProgressClock  # lazy: cli start-up
+
+    settings = _settings(args)
+    opts = DatasetOptions(
+        images=args.images,
+        seed=settings.seed,
+        views=args.views,
+        min_visible=args.min_visible,
+        clutter=args.clutter,
+    )
+    out = Path(args.out)
+    watch = ProgressClock()
+
+    def tick(done: int, total: int) -> None:
+        if not args.quiet and (done % 10 == 0 or done == total):
+            print(f"[dataset {watch.stamp(done, total)}] {done}/{total} images", file=sys.stderr)
+
+    card = make_dataset(settings, out, opts, config_name=args.config, progress=tick)
+    print(card.markdown(), end="")
+    print(f"wrote {out}/ (images/, labels/, data.yaml, coco/, card.md, card.json)")
+    return EXIT_OK
+
+
+_COMMANDS["dataset"] = _cmd_dataset
 _COMMANDS["calibrate"] = _cmd_calibrate
 
 

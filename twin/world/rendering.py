@@ -14,7 +14,15 @@ from twin.config import LightSettings
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_fds, quiet_stdout
 
-__all__ = ["EGL_WARM_UP_FRAMES", "Light", "load_egl_renderer", "render_rgbd", "scene_light", "warm_up_egl"]
+__all__ = [
+    "EGL_WARM_UP_FRAMES",
+    "Light",
+    "load_egl_renderer",
+    "render_labelled",
+    "render_rgbd",
+    "scene_light",
+    "warm_up_egl",
+]
 
 log = logging.getLogger("twin")
 
@@ -106,18 +114,39 @@ def render_rgbd(
     """An RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, by the EGL
     renderer (warmed up: `warm_up_egl`) or TinyRenderer, under `light` (None: PyBullet's own). Depth is
     converted from PyBullet's non-linear z-buffer to metres along the optical axis."""
+    return render_labelled(client_id, egl, T_world_camera, intrinsics, near_m, far_m, light, segmentation=False)[0]
+
+
+def render_labelled(
+    client_id: int,
+    egl: bool,
+    T_world_camera: np.ndarray,
+    intrinsics: Intrinsics,
+    near_m: float,
+    far_m: float,
+    light: Light | None = None,
+    *,
+    segmentation: bool = True,
+) -> tuple[RGBDFrame, np.ndarray | None]:
+    """`render_rgbd` and, with `segmentation`, the renderer's segmentation: the body id seen at each pixel
+    (H, W) int32, -1 where no body is (a labelled dataset's ground truth: `twin.dataset`)."""
     lit = {} if light is None else {"lightDirection": light.direction.tolist(), "lightColor": light.color.tolist()}
     with stage("rendering"), quiet_stdout(egl):
-        _, _, rgba, zbuf, _ = pb.getCameraImage(
+        _, _, rgba, zbuf, seg = pb.getCameraImage(
             intrinsics.width,
             intrinsics.height,
             viewMatrix=gl_view_matrix(T_world_camera),
             projectionMatrix=gl_projection_matrix(intrinsics, near_m, far_m),
             renderer=pb.ER_BULLET_HARDWARE_OPENGL if egl else pb.ER_TINY_RENDERER,
-            flags=pb.ER_NO_SEGMENTATION_MASK,
+            flags=0 if segmentation else pb.ER_NO_SEGMENTATION_MASK,
             physicsClientId=client_id,
             **lit,
         )
-    rgb = np.asarray(rgba, dtype=np.uint8).reshape(intrinsics.height, intrinsics.width, 4)[:, :, :3].copy()
-    zb = np.asarray(zbuf, dtype=np.float64).reshape(intrinsics.height, intrinsics.width)
-    return RGBDFrame(rgb, depth_from_zbuffer(zb, near_m, far_m), intrinsics)
+    h, w = intrinsics.height, intrinsics.width
+    rgb = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)[:, :, :3].copy()
+    zb = np.asarray(zbuf, dtype=np.float64).reshape(h, w)
+    ids = None
+    if segmentation:
+        raw = np.asarray(seg, dtype=np.int64).reshape(h, w)
+        ids = np.where(raw < 0, -1, raw & ((1 << 24) - 1)).astype(np.int32)  # the body; the link sits above bit 24
+    return RGBDFrame(rgb, depth_from_zbuffer(zb, near_m, far_m), intrinsics), ids

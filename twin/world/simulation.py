@@ -22,7 +22,7 @@ from twin.robot import Robot
 from twin.scene_layout import find_marker_plate
 from twin.timing import stage
 from twin.world.bullet import pb, quiet_stdout
-from twin.world.rendering import Light, load_egl_renderer, render_rgbd, scene_light, warm_up_egl
+from twin.world.rendering import Light, load_egl_renderer, render_labelled, scene_light, warm_up_egl
 from twin.world.scene_builder import BuiltScene, build_scene
 from twin.world.tracking import FaultyTracking
 from twin.world.truth import GroundTruth
@@ -403,11 +403,27 @@ class World(GroundTruth):
 
         Depth is converted from PyBullet's non-linear z-buffer to metres along the optical axis.
         """
+        return self.render_labelled(T_world_camera, intrinsics, near_m=near_m, far_m=far_m, light=light, ids=False)[0]
+
+    def render_labelled(
+        self,
+        T_world_camera: np.ndarray,
+        intrinsics: Intrinsics,
+        *,
+        near_m: float,
+        far_m: float,
+        light: Light | None = None,
+        ids: bool = True,
+    ) -> tuple[RGBDFrame, np.ndarray | None]:
+        """`render`, and with `ids` the body id seen at each pixel (H, W), -1 for none: ground truth for
+        labelled images (`twin.dataset`), never for perception."""
         c = self._check()
         if self._egl and not self._egl_warm:
             warm_up_egl(c)  # every frame returned then depends on the scene and the camera alone
             self._egl_warm = True
-        return render_rgbd(c, self._egl, T_world_camera, intrinsics, near_m, far_m, light or self.light)
+        return render_labelled(
+            c, self._egl, T_world_camera, intrinsics, near_m, far_m, light or self.light, segmentation=ids
+        )
 
 
 class WorldView:
