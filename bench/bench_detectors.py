@@ -78,7 +78,10 @@ def _evaluate(
     context = make_context(settings)
     detector = make_detector(settings, name=name, params={}, context=context)
     cid = {c: i for i, c in enumerate(classes)}
-    images, gts, dets, ms = [], [], [], []
+    images: list[dict[str, Any]] = []
+    gts: list[dict[str, Any]] = []
+    dets: list[dict[str, Any]] = []
+    ms: list[float] = []
     for k, f in enumerate(frames):
         cap = f["cap"]
         h, w = cap.frame.rgb.shape[:2]
