@@ -19,7 +19,6 @@ __all__ = [
     "Light",
     "load_egl_renderer",
     "render_labelled",
-    "render_rgbd",
     "scene_light",
     "warm_up_egl",
 ]
@@ -102,21 +101,6 @@ def warm_up_egl(client_id: int) -> None:
             )
 
 
-def render_rgbd(
-    client_id: int,
-    egl: bool,
-    T_world_camera: np.ndarray,
-    intrinsics: Intrinsics,
-    near_m: float,
-    far_m: float,
-    light: Light | None = None,
-) -> RGBDFrame:
-    """An RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, by the EGL
-    renderer (warmed up: `warm_up_egl`) or TinyRenderer, under `light` (None: PyBullet's own). Depth is
-    converted from PyBullet's non-linear z-buffer to metres along the optical axis."""
-    return render_labelled(client_id, egl, T_world_camera, intrinsics, near_m, far_m, light, segmentation=False)[0]
-
-
 def render_labelled(
     client_id: int,
     egl: bool,
@@ -128,8 +112,11 @@ def render_labelled(
     *,
     segmentation: bool = True,
 ) -> tuple[RGBDFrame, np.ndarray | None]:
-    """`render_rgbd` and, with `segmentation`, the renderer's segmentation: the body id seen at each pixel
-    (H, W) int32, -1 where no body is (a labelled dataset's ground truth: `twin.dataset`)."""
+    """An RGB-D frame from an OpenCV-convention camera pose (4, 4) with pinhole intrinsics, by the EGL
+    renderer (warmed up: `warm_up_egl`) or TinyRenderer, under `light` (None: PyBullet's own), and with
+    `segmentation` the body id seen at each pixel (H, W) int32, -1 where no body is (a labelled dataset's
+    ground truth: `twin.dataset`). Depth is converted from PyBullet's non-linear z-buffer to metres along
+    the optical axis."""
     lit = {} if light is None else {"lightDirection": light.direction.tolist(), "lightColor": light.color.tolist()}
     with stage("rendering"), quiet_stdout(egl):
         _, _, rgba, zbuf, seg = pb.getCameraImage(
