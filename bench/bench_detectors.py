@@ -35,7 +35,7 @@ from pycocotools.cocoeval import COCOeval
 
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import Settings, load_config
-from twin.dataset import _boxes, _scene_world, class_names
+from twin.dataset import class_names, scene_world, visible_boxes
 from twin.perception.capture import capture_frame
 from twin.perception.detection import scene_cloud, with_ground_truth
 from twin.perception.pipeline import make_detector
@@ -59,14 +59,14 @@ def _frames(settings: Settings, seeds: list[int], clutter: int, min_visible: flo
     context = make_context(settings)
     out = []
     for seed in seeds:
-        with _scene_world(settings, seed, clutter, context.robot) as world:
+        with scene_world(settings, seed, clutter, context.robot) as world:
             cap = capture_frame(world, settings)
             T = true_camera_pose(cam, seed, world.link_matrix("tool0")) if cam.mount == "wrist" else None
             if T is None:
                 T = true_camera_pose(cam, seed)
             _, ids = world.render_labelled(T, intr, near_m=cam.near_m, far_m=cam.far_m)
             assert ids is not None
-            boxes, _ = _boxes(world, ids, T, intr, settings, min_visible)
+            boxes, _ = visible_boxes(world, ids, T, intr, settings, min_visible)
             out.append({"seed": seed, "cap": cap, "boxes": boxes, "truth": world.objects()})
     return out
 

@@ -12,7 +12,7 @@ from pycocotools.coco import COCO
 
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import load_config
-from twin.dataset import DatasetOptions, _boxes, class_names, make_dataset, split_of
+from twin.dataset import DatasetOptions, class_names, make_dataset, split_of, visible_boxes
 from twin.errors import ConfigError
 from twin.world import World
 
@@ -86,7 +86,7 @@ def test_labels_box_the_visible_pixels_of_objects_seen_enough_and_nothing_else()
         world.set_object_pose(by_name["cube_red_0"].id, edge, [0, 0, 0, 1])
         _, ids = world.render_labelled(T, intr, near_m=cam.near_m, far_m=cam.far_m)
         assert ids is not None
-        boxes, hidden = _boxes(world, ids, T, intr, settings, 0.6)
+        boxes, hidden = visible_boxes(world, ids, T, intr, settings, 0.6)
     got = {b["class"]: b for b in boxes}
     assert "marker" not in got and "can" not in got
     assert "cube_red" not in got and hidden >= 1  # about half of it shows: under 0.6

@@ -41,7 +41,16 @@ from twin.robot import Robot
 from twin.world import World
 from twin.world.rendering import Light
 
-__all__ = ["SEED_002", "DatasetCard", "DatasetOptions", "class_names", "make_dataset", "split_of"]
+__all__ = [
+    "SEED_002",
+    "DatasetCard",
+    "DatasetOptions",
+    "class_names",
+    "make_dataset",
+    "scene_world",
+    "split_of",
+    "visible_boxes",
+]
 
 SPLITS = ("train", "val", "test")
 # seed 002's hand-labelled set (its report): images, annotations, objects per image, classes, mAP@0.5
@@ -154,7 +163,7 @@ def _extras(settings: Settings, scene_seed: int, clutter: int) -> list[ObjectSpe
     ]
 
 
-def _scene_world(settings: Settings, scene_seed: int, clutter: int, robot: Robot) -> World:
+def scene_world(settings: Settings, scene_seed: int, clutter: int, robot: Robot) -> World:
     """The world of one scene seed with its extra objects; as many of them as the table's free space takes
     (the layout refuses a crowd it cannot place without overlaps: the last extra is dropped until it fits)."""
     extras = _extras(settings, scene_seed, clutter)
@@ -221,7 +230,7 @@ def _solo_pixels(world: World, oid: int, T: np.ndarray, intr: Intrinsics, near: 
     return int((ids == oid).sum())
 
 
-def _boxes(
+def visible_boxes(
     world: World, ids: np.ndarray, T: np.ndarray, intr: Intrinsics, settings: Settings, min_visible: float
 ) -> tuple[list[dict[str, Any]], int]:
     """The labelled boxes of one view (class, x0, y0, x1, y1 px, inclusive-exclusive; visible pixels and
@@ -282,14 +291,14 @@ def make_dataset(
     done, scene = 0, opts.seed
     while done < opts.images:
         split = split_of(scene)
-        with _scene_world(settings, scene, opts.clutter, robot) as world:
+        with scene_world(settings, scene, opts.clutter, robot) as world:
             world.step(round(opts.settle_s / world.dt))
             rng = np.random.default_rng([scene, 4244])
             for v in range(min(opts.views, opts.images - done)):
                 T = _view(world, settings, opts, rng)
                 clean, ids = world.render_labelled(T, intr, near_m=cam.near_m, far_m=cam.far_m, light=_light(rng, opts))
                 assert ids is not None
-                boxes, hidden = _boxes(world, ids, T, intr, settings, opts.min_visible)
+                boxes, hidden = visible_boxes(world, ids, T, intr, settings, opts.min_visible)
                 frame = apply_sensor_noise(clean, cam.noise, rng)
                 gain = rng.uniform(1.0 - opts.white_balance_jitter, 1.0 + opts.white_balance_jitter, 3)
                 rgb = np.clip(frame.rgb.astype(float) * gain, 0, 255).astype(np.uint8)
