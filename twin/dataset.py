@@ -55,7 +55,6 @@ __all__ = [
 SPLITS = ("train", "val", "test")
 # seed 002's hand-labelled set (its report): images, annotations, objects per image, classes, mAP@0.5
 SEED_002 = {"images": 1001, "annotations": 5915, "objects_per_image": 5.9, "classes": 8, "map50": 0.981}
-_NOMINAL_LIGHT = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
