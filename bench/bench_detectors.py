@@ -61,9 +61,7 @@ def _frames(settings: Settings, seeds: list[int], clutter: int, min_visible: flo
     for seed in seeds:
         with scene_world(settings, seed, clutter, context.robot) as world:
             cap = capture_frame(world, settings)
-            T = true_camera_pose(cam, seed, world.link_matrix("tool0")) if cam.mount == "wrist" else None
-            if T is None:
-                T = true_camera_pose(cam, seed)
+            T = true_camera_pose(cam, seed, world.link_matrix("tool0") if cam.mount == "wrist" else None)
             _, ids = world.render_labelled(T, intr, near_m=cam.near_m, far_m=cam.far_m)
             assert ids is not None
             boxes, _ = visible_boxes(world, ids, T, intr, settings, min_visible)

@@ -39,7 +39,7 @@ from twin.errors import ConfigError, WorldError
 from twin.perception.noise import apply_sensor_noise
 from twin.robot import Robot
 from twin.world import World
-from twin.world.rendering import Light
+from twin.world.rendering import Light, jittered_light
 
 __all__ = [
     "SEED_002",
@@ -202,12 +202,7 @@ def _view(world: World, settings: Settings, opts: DatasetOptions, rng: np.random
 
 def _light(rng: np.random.Generator, opts: DatasetOptions) -> Light:
     """A light within `light_cone_deg` of straight above, its colour within `light_color_jitter` of white."""
-    cos_t = rng.uniform(math.cos(math.radians(opts.light_cone_deg)), 1.0)
-    az = rng.uniform(0.0, 2.0 * math.pi)
-    s = math.sqrt(1.0 - cos_t * cos_t)
-    d = np.array([s * math.cos(az), s * math.sin(az), cos_t])
-    c = rng.uniform(1.0 - opts.light_color_jitter, 1.0 + opts.light_color_jitter, 3)
-    return Light(d, c)
+    return jittered_light((0.0, 0.0, 1.0), (1.0, 1.0, 1.0), opts.light_cone_deg, opts.light_color_jitter, rng)
 
 
 def _solo_pixels(world: World, oid: int, T: np.ndarray, intr: Intrinsics, near: float, far: float) -> int:

@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from twin.camera import Intrinsics, RGBDFrame, depth_from_zbuffer, gl_projection_matrix, gl_view_matrix, look_at
 from twin.config import LightSettings
@@ -17,6 +18,7 @@ from twin.world.bullet import pb, quiet_fds, quiet_stdout
 __all__ = [
     "EGL_WARM_UP_FRAMES",
     "Light",
+    "jittered_light",
     "load_egl_renderer",
     "render_labelled",
     "scene_light",
@@ -47,26 +49,34 @@ class Light:
 
 def scene_light(cfg: LightSettings, seed: int) -> Light | None:
     """The light of scene `seed` under `world.light`: None (PyBullet's own light) when it is off; otherwise
-    its direction tilted by up to `direction_jitter_deg` (uniform over the cone) and its colour scaled per
-    channel by up to `color_jitter`, drawn from the seed (a stream of its own)."""
+    `jittered_light` of its direction and colour, drawn from the seed (a stream of its own)."""
     jitter = cfg.direction_jitter_deg > 0 or cfg.color_jitter > 0
     if cfg.direction is None and not jitter and cfg.color == (1.0, 1.0, 1.0):
         return None
     d = np.asarray(cfg.direction if cfg.direction is not None else _NOMINAL_LIGHT, dtype=float)
-    d /= np.linalg.norm(d)
-    color = np.asarray(cfg.color, dtype=float)
-    if jitter:
-        rng = np.random.default_rng([seed, 43])
-        # uniform over the spherical cap: cos(tilt) uniform in [cos(max), 1], azimuth uniform
-        cos_t = rng.uniform(math.cos(math.radians(cfg.direction_jitter_deg)), 1.0)
-        az = rng.uniform(0.0, 2.0 * math.pi)
-        a = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
-        a /= np.linalg.norm(a)
-        b = np.cross(d, a)
-        sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
-        d = cos_t * d + sin_t * (math.cos(az) * a + math.sin(az) * b)
-        color = np.clip(color * rng.uniform(1.0 - cfg.color_jitter, 1.0 + cfg.color_jitter, 3), 0.0, 3.0)
-    return Light(d, color)
+    if not jitter:
+        return Light(d / np.linalg.norm(d), np.asarray(cfg.color, dtype=float))
+    rng = np.random.default_rng([seed, 43])
+    return jittered_light(d, cfg.color, cfg.direction_jitter_deg, cfg.color_jitter, rng)
+
+
+def jittered_light(
+    direction: ArrayLike, color: ArrayLike, tilt_deg: float, color_jitter: float, rng: np.random.Generator
+) -> Light:
+    """A light tilted from `direction` by up to `tilt_deg` (uniform over the spherical cap: cos(tilt)
+    uniform in [cos(max), 1], azimuth uniform) with each channel of `color` scaled by a factor drawn from
+    [1 - color_jitter, 1 + color_jitter]; drawn from `rng` in that order (scene lights, `twin.dataset`)."""
+    d = np.asarray(direction, dtype=float)
+    d = d / np.linalg.norm(d)
+    cos_t = rng.uniform(math.cos(math.radians(tilt_deg)), 1.0)
+    az = rng.uniform(0.0, 2.0 * math.pi)
+    a = np.cross([0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0], d)  # straight up: a = x, b = y
+    a /= np.linalg.norm(a)
+    b = np.cross(d, a)
+    sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    d = cos_t * d + sin_t * (math.cos(az) * a + math.sin(az) * b)
+    scale = rng.uniform(1.0 - color_jitter, 1.0 + color_jitter, 3)
+    return Light(d, np.clip(np.asarray(color, dtype=float) * scale, 0.0, 3.0))
 
 
 def load_egl_renderer(client_id: int) -> bool:
