@@ -4,7 +4,8 @@ it prints tables, writes a few frames with boxes drawn, and asserts nothing.
 
     python bench/bench_detectors.py [--config configs/robocup.yaml] [--seeds 900000-900019]
                                     [--detectors geometric,oracle] [--visuals flat,realistic]
-                                    [--noise 1,3] [--clutter 0] [--min-visible 0.3] [--out out/bench-detectors]
+                                    [--noise 1,3] [--clutter 0] [--min-objects N]
+                                    [--min-visible 0.3] [--out out/bench-detectors]
 
 Each scene is captured as a run captures it (`twin.perception.capture.capture_frame`: the arm at the capture
 pose, the settling pause, the sensor model at `camera.noise.scale` x the condition's factor, the depth filter)
@@ -12,7 +13,8 @@ and handed to the detector with the camera pose the robot's kinematics predicts.
 `twin dataset`'s: the box of each object's visible pixels in the renderer's segmentation of the same view,
 for the objects at least `--min-visible` of which shows (`twin.dataset`). A detection's score is its
 confidence. `oracle` reads the simulator: the ceiling. `--clutter N` adds up to N objects per scene as the
-dataset does (crowding and occlusion).
+dataset does (crowding and occlusion); `--min-objects N` keeps N..all of the config's objects per scene, as the
+dataset does (the nearly empty tables a run ends on).
 
 The default seeds lie far from the dataset's (`twin dataset --seed`, 0 upwards), so a model trained on a
 dataset made with default seeds never saw them.
@@ -52,14 +54,16 @@ def _condition(settings: Settings, visuals: str, noise: float) -> Settings:
     return settings.model_copy(update={"world": world, "camera": cam.model_copy(update={"noise": scaled})})
 
 
-def _frames(settings: Settings, seeds: list[int], clutter: int, min_visible: float) -> list[dict[str, Any]]:
+def _frames(
+    settings: Settings, seeds: list[int], clutter: int, min_objects: int | None, min_visible: float
+) -> list[dict[str, Any]]:
     """Per seed: the captured frame, the kinematic camera pose, the ground-truth boxes and objects."""
     cam = settings.camera
     intr = Intrinsics.from_settings(cam)
     context = make_context(settings)
     out = []
     for seed in seeds:
-        with scene_world(settings, seed, clutter, context.robot) as world:
+        with scene_world(settings, seed, clutter, context.robot, min_objects=min_objects) as world:
             cap = capture_frame(world, settings)
             T = true_camera_pose(cam, seed, world.link_matrix("tool0") if cam.mount == "wrist" else None)
             _, ids = world.render_labelled(T, intr, near_m=cam.near_m, far_m=cam.far_m)
@@ -166,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--visuals", default="flat,realistic")
     ap.add_argument("--noise", default="1,3", help="depth-noise factors (x camera.noise.scale)")
     ap.add_argument("--clutter", type=int, default=0)
+    ap.add_argument("--min-objects", type=int, default=None, help="keep N..all of the config's objects per scene")
     ap.add_argument("--min-visible", type=float, default=0.3)
     ap.add_argument("--out", default="out/bench-detectors")
     args = ap.parse_args(argv)
@@ -175,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     detectors = [d.strip() for d in args.detectors.split(",") if d.strip()]
     print(
         f"{args.config}: {len(seeds)} held-out seeds ({seeds[0]}..{seeds[-1]}), clutter {args.clutter}, "
+        f"objects {'all' if args.min_objects is None else f'{args.min_objects}..all'}, "
         f"ground truth = objects at least {args.min_visible:g} visible; COCOeval bbox"
     )
     header = f"{'visuals':10} {'noise':>5} {'detector':10} {'mAP50':>6} {'mAP50-95':>8} {'ms/frame':>8}  " + " ".join(
@@ -185,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         for noise in (float(x) for x in args.noise.split(",")):
             settings = _condition(base, visuals, noise)
             t = time.perf_counter()
-            frames = _frames(settings, seeds, args.clutter, args.min_visible)
+            frames = _frames(settings, seeds, args.clutter, args.min_objects, args.min_visible)
             print(
                 f"[{visuals}, noise x{noise:g}: {len(frames)} frames captured in {time.perf_counter() - t:.0f} s]",
                 file=sys.stderr,

@@ -12,7 +12,7 @@ from pycocotools.coco import COCO
 
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import load_config
-from twin.dataset import DatasetOptions, class_names, make_dataset, split_of, visible_boxes
+from twin.dataset import DatasetOptions, class_names, make_dataset, scene_items, split_of, visible_boxes
 from twin.errors import ConfigError
 from twin.world import World
 
@@ -105,3 +105,28 @@ def test_bad_dataset_options_are_config_errors() -> None:
         DatasetOptions(images=3, min_visible=0.0)
     with pytest.raises(ConfigError, match="at least 1 image"):
         DatasetOptions(images=0)
+    with pytest.raises(ConfigError, match="min_objects"):
+        DatasetOptions(images=3, min_objects=-1)
+
+
+def test_scenes_hold_from_a_few_to_all_of_the_configs_objects_plus_clutter() -> None:
+    """A run ends on a table with one or two objects left, so a dataset shows such tables too: each scene
+    keeps `min_objects`..all of the config's objects (distinct ones, a subset), obstacles always; extras come
+    on top. None keeps every object (the scene a run starts from)."""
+    s = load_config(ROOT / "configs/robocup.yaml")
+    own = [(i.cls, i.color) for i in s.world.objects.items]
+    counts = []
+    for seed in range(40):
+        kept = [(i.cls, i.color) for i in scene_items(s, seed, 0, 1)]
+        assert len(set(kept)) == len(kept) and set(kept) <= set(own)  # a subset of the 8 distinct objects
+        counts.append(len(kept))
+        assert scene_items(s, seed, 0, 1) == scene_items(s, seed, 0, 1)  # drawn from the seed
+        full = scene_items(s, seed, 3, None)
+        assert [(i.cls, i.color) for i in full[: len(own)]] == own and len(full) - len(own) <= 3
+        assert len(scene_items(s, seed, 0, 8)) == len(own)  # min_objects >= the count keeps all
+    assert min(counts) <= 2 and max(counts) == len(own)  # nearly empty and full tables both occur
+    items = "world.objects.items=[{class: obstacle}, {class: can, count: 2}, {class: bottle}]"
+    with_obstacle = load_config(ROOT / "configs/robocup.yaml", [items])
+    kinds = [tuple(i.cls for i in scene_items(with_obstacle, seed, 0, 0)) for seed in range(20)]
+    assert all(k[0] == "obstacle" and "obstacle" not in k[1:] for k in kinds)
+    assert {len(k) for k in kinds} == {1, 2, 3, 4}  # the obstacle and 0..3 of the objects (count 2: two cans)

@@ -416,6 +416,13 @@ def _add_dataset_parser(sub: Any) -> None:
     p.add_argument(
         "--clutter", type=_seed, default=4, help="up to this many extra objects per scene, from the seed (default 4)"
     )
+    p.add_argument(
+        "--min-objects",
+        type=_seed,
+        default=1,
+        help="each scene keeps from this many to all of the config's objects, from the seed, so tables with few"
+        " objects left are seen too (default 1; the config's object count or more keeps all)",
+    )
 
 
 def _add_calibrate_parser(sub: Any) -> None:
@@ -911,6 +918,7 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
         views=args.views,
         min_visible=args.min_visible,
         clutter=args.clutter,
+        min_objects=args.min_objects,
     )
     out = Path(args.out)
     watch = ProgressClock()

@@ -6,7 +6,8 @@ For each scene seed (`seed`, `seed + 1`, ...) the config's world is built and se
 `views` camera poses: the wrist camera at and around its capture pose (each joint moved by up to
 `joint_jitter_rad`), a fixed camera around its mount (`fixed_jitter_m`, `fixed_jitter_deg`). Everything varies
 with the seed (domain randomisation): where the objects lie and how they are turned (the layout, lying ones
-included), how crowded the table is (`clutter`: up to that many extra objects of the config's classes),
+included), how full the table is (`min_objects`: each scene keeps that many to all of the config's objects,
+so the few left as a run ends are seen too; `clutter`: up to that many extra objects of its classes),
 their looks (with `world.visuals: realistic`), the light (direction within `light_cone_deg` of above, colour
 within `light_color_jitter`), the camera's pose and white balance, and the config's sensor noise on the
 colour image.
@@ -66,6 +67,7 @@ class DatasetOptions:
     views: int = 4
     min_visible: float = 0.3
     clutter: int = 4
+    min_objects: int = 1
     joint_jitter_rad: float = 0.08
     fixed_jitter_m: float = 0.03
     fixed_jitter_deg: float = 3.0
@@ -79,8 +81,11 @@ class DatasetOptions:
             raise ConfigError(f"a dataset needs at least 1 image and 1 view per scene, got {self.images}, {self.views}")
         if not 0.0 < self.min_visible <= 1.0:
             raise ConfigError(f"min_visible must be in (0, 1], got {self.min_visible}")
-        if self.seed < 0 or self.clutter < 0:
-            raise ConfigError(f"seed and clutter must be non-negative, got {self.seed}, {self.clutter}")
+        if min(self.seed, self.clutter, self.min_objects) < 0:
+            raise ConfigError(
+                "seed, clutter and min_objects must be non-negative, got "
+                f"{self.seed}, {self.clutter}, {self.min_objects}"
+            )
 
 
 @dataclass
@@ -150,31 +155,45 @@ def _label(cls: str, color: str | None) -> str:
     return f"{cls}_{color}" if color else cls
 
 
-def _extras(settings: Settings, scene_seed: int, clutter: int) -> list[ObjectSpec]:
-    """Up to `clutter` extra objects of the config's own classes, drawn from the scene seed."""
-    items = [s for s in settings.world.objects.items if s.cls != "obstacle" and s.count > 0]
-    if clutter == 0 or not items:
-        return []
+def scene_items(settings: Settings, scene_seed: int, clutter: int, min_objects: int | None = None) -> list[ObjectSpec]:
+    """The objects of one scene seed: of the config's own (obstacles always kept), a random `min_objects`..all
+    of them (all: None), so a table with a few objects left, as a run ends, is seen too; then up to `clutter`
+    extra objects of the config's classes. Drawn from the scene seed."""
+    items = settings.world.objects.items
+    if min_objects is not None:
+        single = [ObjectSpec(cls=s.cls, color=s.color) for s in items if s.cls != "obstacle" for _ in range(s.count)]
+        rng = np.random.default_rng([scene_seed, 4245])
+        keep = int(rng.integers(min(min_objects, len(single)), len(single) + 1))
+        chosen = sorted(rng.choice(len(single), size=keep, replace=False).tolist())
+        items = [s for s in items if s.cls == "obstacle"] + [single[i] for i in chosen]
+    classes = [s for s in settings.world.objects.items if s.cls != "obstacle" and s.count > 0]
+    if clutter == 0 or not classes:
+        return list(items)
     rng = np.random.default_rng([scene_seed, 4243])
-    return [
-        ObjectSpec(cls=items[k].cls, color=items[k].color)
-        for k in (int(rng.integers(len(items))) for _ in range(int(rng.integers(clutter + 1))))
+    extras = [
+        ObjectSpec(cls=classes[k].cls, color=classes[k].color)
+        for k in (int(rng.integers(len(classes))) for _ in range(int(rng.integers(clutter + 1))))
     ]
+    return [*items, *extras]
 
 
-def scene_world(settings: Settings, scene_seed: int, clutter: int, robot: Robot) -> World:
-    """The world of one scene seed with its extra objects; as many of them as the table's free space takes
-    (the layout refuses a crowd it cannot place without overlaps: the last extra is dropped until it fits)."""
-    extras = _extras(settings, scene_seed, clutter)
+def scene_world(
+    settings: Settings, scene_seed: int, clutter: int, robot: Robot, *, min_objects: int | None = None
+) -> World:
+    """The world of one scene seed with its objects (`scene_items`); as many of the extras as the table's
+    free space takes (the layout refuses a crowd it cannot place without overlaps: the last extra is dropped
+    until it fits)."""
+    items = scene_items(settings, scene_seed, clutter, min_objects)
+    extras = len(items) - len(scene_items(settings, scene_seed, 0, min_objects))
     while True:
-        objects = settings.world.objects.model_copy(update={"items": [*settings.world.objects.items, *extras]})
+        objects = settings.world.objects.model_copy(update={"items": items})
         crowded = settings.model_copy(update={"world": settings.world.model_copy(update={"objects": objects})})
         try:
             return World(crowded, seed=scene_seed, robot=robot)
         except WorldError:
-            if not extras:
+            if extras == 0:
                 raise
-            extras = extras[:-1]
+            items, extras = items[:-1], extras - 1
 
 
 def _random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
@@ -285,7 +304,7 @@ def make_dataset(
     done, scene = 0, opts.seed
     while done < opts.images:
         split = split_of(scene)
-        with scene_world(settings, scene, opts.clutter, robot) as world:
+        with scene_world(settings, scene, opts.clutter, robot, min_objects=opts.min_objects) as world:
             world.step(round(opts.settle_s / world.dt))
             rng = np.random.default_rng([scene, 4244])
             for v in range(min(opts.views, opts.images - done)):
