@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from twin.camera import Intrinsics, true_camera_pose
 from twin.config import ObjectSpec, Settings
@@ -159,7 +160,15 @@ def scene_items(settings: Settings, scene_seed: int, clutter: int, min_objects: 
     """The objects of one scene seed: of the config's own (obstacles always kept), a random `min_objects`..all
     of them (all: None), so a table with a few objects left, as a run ends, is seen too; then up to `clutter`
     extra objects of the config's classes. Drawn from the scene seed."""
-    items = settings.world.objects.items
+    own, extras = _own_and_extras(settings, scene_seed, clutter, min_objects)
+    return [*own, *extras]
+
+
+def _own_and_extras(
+    settings: Settings, scene_seed: int, clutter: int, min_objects: int | None
+) -> tuple[list[ObjectSpec], list[ObjectSpec]]:
+    """`scene_items` in its two parts: the config's objects kept, and the extras."""
+    items = list(settings.world.objects.items)
     if min_objects is not None:
         single = [ObjectSpec(cls=s.cls, color=s.color) for s in items if s.cls != "obstacle" for _ in range(s.count)]
         rng = np.random.default_rng([scene_seed, 4245])
@@ -168,13 +177,13 @@ def scene_items(settings: Settings, scene_seed: int, clutter: int, min_objects: 
         items = [s for s in items if s.cls == "obstacle"] + [single[i] for i in chosen]
     classes = [s for s in settings.world.objects.items if s.cls != "obstacle" and s.count > 0]
     if clutter == 0 or not classes:
-        return list(items)
+        return items, []
     rng = np.random.default_rng([scene_seed, 4243])
     extras = [
         ObjectSpec(cls=classes[k].cls, color=classes[k].color)
         for k in (int(rng.integers(len(classes))) for _ in range(int(rng.integers(clutter + 1))))
     ]
-    return [*items, *extras]
+    return items, extras
 
 
 def scene_world(
@@ -183,26 +192,23 @@ def scene_world(
     """The world of one scene seed with its objects (`scene_items`); as many of the extras as the table's
     free space takes (the layout refuses a crowd it cannot place without overlaps: the last extra is dropped
     until it fits)."""
-    items = scene_items(settings, scene_seed, clutter, min_objects)
-    extras = len(items) - len(scene_items(settings, scene_seed, 0, min_objects))
+    own, extras = _own_and_extras(settings, scene_seed, clutter, min_objects)
     while True:
-        objects = settings.world.objects.model_copy(update={"items": items})
+        objects = settings.world.objects.model_copy(update={"items": [*own, *extras]})
         crowded = settings.model_copy(update={"world": settings.world.model_copy(update={"objects": objects})})
         try:
             return World(crowded, seed=scene_seed, robot=robot)
         except WorldError:
-            if extras == 0:
+            if not extras:
                 raise
-            items, extras = items[:-1], extras - 1
+            extras = extras[:-1]
 
 
 def _random_rotation(rng: np.random.Generator, max_deg: float) -> np.ndarray:
     """A rotation about a random axis by up to max_deg."""
     axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    a = math.radians(rng.uniform(0.0, max_deg))
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+    angle = math.radians(rng.uniform(0.0, max_deg))
+    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
 
 
 def _view(world: World, settings: Settings, opts: DatasetOptions, rng: np.random.Generator) -> np.ndarray:
