@@ -56,7 +56,7 @@ def test_the_depth_region_keeps_the_largest_connected_part_of_the_box() -> None:
     corner = [(r, c) for r in range(35, 38) for c in range(35, 38)]
     outside = [(r, c) for r in range(60, 70) for c in range(60, 70)]
     above = np.array(sorted(r * W + c for r, c in block + corner + outside))
-    got = _depth_region(above, W, (15, 15, 37, 37))
+    got = _depth_region(np.divmod(above, W), W, (15, 15, 37, 37))
     assert sorted(got.tolist()) == sorted(r * W + c for r, c in block)
 
 

@@ -137,7 +137,7 @@ class YoloDetector:
         t1 = time.perf_counter()
         cloud = cloud if cloud is not None else scene_cloud(frame, T_base_camera, self.settings.perception.robocup)
         W = frame.depth_m.shape[1]
-        above = cloud.pixels[cloud.height > cloud.table_threshold_m]
+        above = np.divmod(cloud.pixels[cloud.height > cloud.table_threshold_m], W)  # (rows, cols), once a frame
         found = []
         for k, score, (u0, v0, u1, v1) in boxes:
             pixels = _depth_region(above, W, (u0, v0, u1, v1))
@@ -150,10 +150,10 @@ class YoloDetector:
         return found
 
 
-def _depth_region(above: np.ndarray, width: int, box: tuple[int, int, int, int]) -> np.ndarray:
-    """Flat indices of the largest 4-connected region of the above-table pixels inside the box."""
+def _depth_region(above: tuple[np.ndarray, np.ndarray], width: int, box: tuple[int, int, int, int]) -> np.ndarray:
+    """Flat indices of the largest 4-connected region of the above-table pixels (their rows, cols) in the box."""
     u0, v0, u1, v1 = box
-    rows, cols = np.divmod(above, width)
+    rows, cols = above
     inside = (rows >= v0) & (rows <= v1) & (cols >= u0) & (cols <= u1)
     if not inside.any():
         return np.zeros(0, dtype=np.int64)
